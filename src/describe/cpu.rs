@@ -1,0 +1,177 @@
+//! The reference descriptor (see the parent module for the numeric contract).
+
+use rayon::prelude::*;
+
+use super::triplets::TRIPLETS;
+use super::{Described, DescriptorConfig, PATCH, SamplingFrame, SkipReason, Skipped, WINDOW};
+use crate::descriptor::{DescriptorSet, DescriptorWidth};
+use crate::image::GrayView;
+use crate::keypoint::KeyPoint;
+
+/// A sampled window, row-major `WINDOW x WINDOW`, widened to `i32` for the SSD loops.
+pub type Window = [i32; WINDOW * WINDOW];
+
+/// Samples the window of a frame that [`SamplingFrame::fits`] the image.
+pub fn sample_window(img: &GrayView, frame: &SamplingFrame, window: &mut Window) {
+    let (last_x, last_y) = (img.width() - 1, img.height() - 1);
+    for v in 0..WINDOW {
+        for u in 0..WINDOW {
+            let [px, py] = frame.sample_position(u, v);
+            let (x0, y0) = ((px >> 8) as usize, (py >> 8) as usize);
+            let (fx, fy) = ((px & 255) as i32, (py & 255) as i32);
+            let (x1, y1) = ((x0 + 1).min(last_x), (y0 + 1).min(last_y));
+            let (top, bottom) = (img.row(y0), img.row(y1));
+            let upper = top[x0] as i32 * (256 - fx) + top[x1] as i32 * fx;
+            let lower = bottom[x0] as i32 * (256 - fx) + bottom[x1] as i32 * fx;
+            window[v * WINDOW + u] = (upper * (256 - fy) + lower * fy + (1 << 15)) >> 16;
+        }
+    }
+}
+
+/// Weighted SSD difference `Σ w (A - B)² - Σ w (C - B)²` of one triplet.
+#[inline]
+fn triplet_difference(window: &Window, triplet: &[u8; 6], weights: &[i32; PATCH * PATCH]) -> i32 {
+    let [ax, ay, bx, by, cx, cy] = triplet.map(|v| v as usize);
+    let mut d = 0i32;
+    for r in 0..PATCH {
+        let a = &window[(ay + r) * WINDOW + ax..][..PATCH];
+        let b = &window[(by + r) * WINDOW + bx..][..PATCH];
+        let c = &window[(cy + r) * WINDOW + cx..][..PATCH];
+        let w = &weights[r * PATCH..][..PATCH];
+        for s in 0..PATCH {
+            let (da, dc) = (a[s] - b[s], c[s] - b[s]);
+            d += w[s] * (da * da - dc * dc);
+        }
+    }
+    d
+}
+
+/// The first `width` bits of the descriptor of a sampled window, packed least significant bit first.
+pub fn window_bits(window: &Window, width: DescriptorWidth, weights: &[i32; PATCH * PATCH], out: &mut [u64]) {
+    out.fill(0);
+    for (t, triplet) in TRIPLETS[..width.bits()].iter().enumerate() {
+        if triplet_difference(window, triplet, weights) < 0 {
+            out[t / 64] |= 1 << (t % 64);
+        }
+    }
+}
+
+/// Describes validated keypoints on the CPU, in parallel over keypoints.
+pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfig) -> Described {
+    let width = config.width;
+    let per = width.words();
+    let weights = config.weights.as_array().map(|w| w as i32);
+    let frames: Vec<Option<SamplingFrame>> = keypoints
+        .iter()
+        .map(|kp| Some(SamplingFrame::of(kp)).filter(|f| f.fits(img.width(), img.height())))
+        .collect();
+    let keypoint_index: Vec<usize> = (0..keypoints.len()).filter(|&i| frames[i].is_some()).collect();
+    let skipped = (0..keypoints.len())
+        .filter(|&i| frames[i].is_none())
+        .map(|keypoint| Skipped {
+            keypoint,
+            reason: SkipReason::WindowOutsideImage,
+        })
+        .collect();
+    let mut words = vec![0u64; keypoint_index.len() * per];
+    words
+        .par_chunks_mut(per)
+        .zip(keypoint_index.par_iter())
+        .for_each_init(
+            || Box::new([0i32; WINDOW * WINDOW]),
+            |window, (out, &i)| {
+                let frame = frames[i].as_ref().expect("only fitting frames are described");
+                sample_window(img, frame, window);
+                window_bits(window, width, &weights, out);
+            },
+        );
+    Described {
+        descriptors: DescriptorSet::from_words(width, words).expect("whole rows by construction"),
+        keypoint_index,
+        skipped,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::describe::PatchWeights;
+
+    #[test]
+    fn unit_frame_samples_pixels_exactly() {
+        // size 64, angle 0, integer position: window pixel (u, v) is image pixel (x + u - 32, y + v - 32).
+        let (w, h) = (100, 90);
+        let buf = crate::synthetic::noise(w, h, 3);
+        let img = GrayView::new(&buf, w, h, w).unwrap();
+        let frame = SamplingFrame::of(&KeyPoint::new(40.0, 45.0));
+        assert!(frame.fits(w, h));
+        let mut window = [0i32; WINDOW * WINDOW];
+        sample_window(&img, &frame, &mut window);
+        for v in 0..WINDOW {
+            for u in 0..WINDOW {
+                assert_eq!(window[v * WINDOW + u], img.at(40 + u - 32, 45 + v - 32) as i32);
+            }
+        }
+    }
+
+    #[test]
+    fn half_pixel_offset_averages_neighbours_rounding_half_up() {
+        // Columns alternate 10, 21: halfway between them the sample is (10 + 21) / 2 = 15.5 -> 16.
+        let (w, h) = (80, 80);
+        let buf: Vec<u8> = (0..w * h).map(|i| if i % 2 == 0 { 10 } else { 21 }).collect();
+        let img = GrayView::new(&buf, w, h, w).unwrap();
+        let frame = SamplingFrame::of(&KeyPoint::new(40.5, 40.0));
+        let mut window = [0i32; WINDOW * WINDOW];
+        sample_window(&img, &frame, &mut window);
+        assert!(window.iter().all(|&s| s == 16));
+    }
+
+    #[test]
+    fn a_crafted_triplet_decides_its_bit() {
+        // Triplet 0 compares patch a (top-left 41,22) and patch c (51,24) with anchor b (47,47). Make the
+        // window 0 except patch a = 0-ish anchor region: anchor 100, a = 100 (SSD 0), c = 0 (SSD > 0):
+        // bit 0 must be 1. Swap a and c: bit 0 must be 0. Equal SSDs: bit 0 is 0 (strict comparison).
+        let [ax, ay, bx, by, cx, cy] = TRIPLETS[0].map(|v| v as usize);
+        let paint = |window: &mut Window, x: usize, y: usize, value: i32| {
+            for r in 0..PATCH {
+                for s in 0..PATCH {
+                    window[(y + r) * WINDOW + x + s] = value;
+                }
+            }
+        };
+        let weights = PatchWeights::default().as_array().map(|w| w as i32);
+        let width = DescriptorWidth::from_bits(8).unwrap();
+        let mut bits = [0u64];
+        for (a, c, expected) in [(100, 0, 1), (0, 100, 0), (100, 100, 0)] {
+            let mut window = [0i32; WINDOW * WINDOW];
+            paint(&mut window, bx, by, 100);
+            paint(&mut window, ax, ay, a);
+            paint(&mut window, cx, cy, c);
+            window_bits(&window, width, &weights, &mut bits);
+            assert_eq!(bits[0] & 1, expected, "a = {a}, c = {c}");
+        }
+    }
+
+    #[test]
+    fn weights_decide_which_pixels_count() {
+        // Only pixel (row 0, column 0) of each patch differs; the default weights ignore it, uniform ones
+        // do not.
+        let [ax, ay, ..] = TRIPLETS[0].map(|v| v as usize);
+        let mut window = [50i32; WINDOW * WINDOW];
+        window[ay * WINDOW + ax] = 0;
+        let width = DescriptorWidth::from_bits(8).unwrap();
+        let mut bits = [0u64];
+        window_bits(&window, width, &PatchWeights::latch_7x7().as_array().map(|w| w as i32), &mut bits);
+        let ignored = bits[0] & 1;
+        window_bits(&window, width, &PatchWeights::uniform().as_array().map(|w| w as i32), &mut bits);
+        assert_eq!(ignored, 0, "equal SSDs give 0");
+        assert_eq!(bits[0] & 1, 0, "a differs from the anchor, so SSD(a, b) > SSD(c, b)");
+        window[ay * WINDOW + ax] = 50;
+        let [.., cx, cy] = TRIPLETS[0].map(|v| v as usize);
+        window[cy * WINDOW + cx] = 0;
+        window_bits(&window, width, &PatchWeights::uniform().as_array().map(|w| w as i32), &mut bits);
+        assert_eq!(bits[0] & 1, 1, "now c differs, so SSD(a, b) < SSD(c, b)");
+        window_bits(&window, width, &PatchWeights::latch_7x7().as_array().map(|w| w as i32), &mut bits);
+        assert_eq!(bits[0] & 1, 0, "and the 7x7 weights do not see it");
+    }
+}

@@ -1,0 +1,236 @@
+//! The reference detector (see the parent module for the numeric contract).
+
+use rayon::prelude::*;
+
+use super::{DetectorConfig, FAST_ARC, FAST_CIRCLE, ORIENTATION_RADIUS};
+use crate::angle::{bin_degrees, direction_bin};
+use crate::image::GrayView;
+use crate::keypoint::KeyPoint;
+
+/// FAST-9 score of the pixel at `(x, y)`, which must be at least 3 pixels from every border.
+pub fn fast_score(img: &GrayView, x: usize, y: usize) -> i32 {
+    let p = img.at(x, y) as i32;
+    let mut ring = [0i32; 16];
+    for (value, [dx, dy]) in ring.iter_mut().zip(FAST_CIRCLE) {
+        *value = img.at((x as i32 + dx) as usize, (y as i32 + dy) as usize) as i32 - p;
+    }
+    let mut best = i32::MIN;
+    for k in 0..16 {
+        let (mut brighter, mut darker) = (i32::MAX, i32::MAX);
+        for j in 0..FAST_ARC {
+            let d = ring[(k + j) % 16];
+            brighter = brighter.min(d);
+            darker = darker.min(-d);
+        }
+        best = best.max(brighter).max(darker);
+    }
+    best
+}
+
+/// Cheap necessary condition: nine contiguous circle pixels always include two adjacent compass pixels
+/// (0, 4, 8, 12) beyond the threshold on the same side.
+#[inline]
+fn may_be_corner(img: &GrayView, x: usize, y: usize, threshold: i32) -> bool {
+    let p = img.at(x, y) as i32;
+    let compass = [
+        img.at(x, y - 3) as i32,
+        img.at(x + 3, y) as i32,
+        img.at(x, y + 3) as i32,
+        img.at(x - 3, y) as i32,
+    ];
+    let bright = compass.map(|v| v - p > threshold);
+    let dark = compass.map(|v| p - v > threshold);
+    (0..4).any(|i| (bright[i] && bright[(i + 1) % 4]) || (dark[i] && dark[(i + 1) % 4]))
+}
+
+/// Score map: FAST score of each pixel inside the margin that is a corner, 0 elsewhere. Row-major,
+/// `width * height`.
+pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
+    let (w, h) = (img.width(), img.height());
+    let t = threshold as i32;
+    let mut scores = vec![0u8; w * h];
+    if w <= 2 * margin || h <= 2 * margin {
+        return scores;
+    }
+    scores
+        .par_chunks_mut(w)
+        .enumerate()
+        .skip(margin)
+        .take(h - 2 * margin)
+        .for_each(|(y, row)| {
+            for x in margin..w - margin {
+                if may_be_corner(img, x, y, t) {
+                    let s = fast_score(img, x, y);
+                    if s > t {
+                        row[x] = s as u8;
+                    }
+                }
+            }
+        });
+    scores
+}
+
+/// Corners that survive 3x3 non-maximum suppression (ties go to the first in raster order), as
+/// `(x, y, score)` in raster order.
+pub fn suppress_non_maxima(scores: &[u8], width: usize, height: usize) -> Vec<(u32, u32, u8)> {
+    (1..height.saturating_sub(1))
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            let above = &scores[(y - 1) * width..y * width];
+            let here = &scores[y * width..(y + 1) * width];
+            let below = &scores[(y + 1) * width..(y + 2) * width];
+            (1..width - 1).filter_map(move |x| {
+                let s = here[x];
+                let earlier = [above[x - 1], above[x], above[x + 1], here[x - 1]];
+                let later = [here[x + 1], below[x - 1], below[x], below[x + 1]];
+                let kept = s > 0 && earlier.iter().all(|&n| s > n) && later.iter().all(|&n| s >= n);
+                kept.then_some((x as u32, y as u32, s))
+            })
+        })
+        .collect()
+}
+
+/// Intensity-centroid moments `(m10, m01)` over the orientation disc around `(x, y)`.
+pub fn centroid_moments(img: &GrayView, x: usize, y: usize) -> (i64, i64) {
+    let r = ORIENTATION_RADIUS;
+    let (mut m10, mut m01) = (0i64, 0i64);
+    for dy in -r..=r {
+        let row = img.row((y as i32 + dy) as usize);
+        let mut dx_sum = 0i64;
+        let mut sum = 0i64;
+        for dx in -r..=r {
+            if dx * dx + dy * dy <= r * r {
+                let v = row[(x as i32 + dx) as usize] as i64;
+                dx_sum += dx as i64 * v;
+                sum += v;
+            }
+        }
+        m10 += dx_sum;
+        m01 += dy as i64 * sum;
+    }
+    (m10, m01)
+}
+
+/// Runs the whole detector on the CPU. The image must be larger than twice the margin in both
+/// directions (checked by the caller).
+pub fn detect(img: &GrayView, config: &DetectorConfig) -> Vec<KeyPoint> {
+    let margin = config.margin();
+    let scores = score_map(img, config.threshold, margin);
+    let mut corners = suppress_non_maxima(&scores, img.width(), img.height());
+    corners.sort_unstable_by(|a, b| b.2.cmp(&a.2).then(a.1.cmp(&b.1)).then(a.0.cmp(&b.0)));
+    corners.truncate(config.max_keypoints);
+    corners
+        .par_iter()
+        .map(|&(x, y, score)| {
+            let (m10, m01) = centroid_moments(img, x as usize, y as usize);
+            KeyPoint {
+                x: x as f32,
+                y: y as f32,
+                size: config.keypoint_size,
+                angle: bin_degrees(direction_bin(m10, m01)),
+                response: score as f32,
+                octave: 0,
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image(w: usize, h: usize, f: impl Fn(usize, usize) -> u8) -> Vec<u8> {
+        (0..w * h).map(|i| f(i % w, i / w)).collect()
+    }
+
+    #[test]
+    fn score_of_a_bright_dot_is_its_contrast() {
+        // A single pixel of 100 on 0: every circle pixel is 100 darker, so score = 100.
+        let buf = image(9, 9, |x, y| if (x, y) == (4, 4) { 100 } else { 0 });
+        let img = GrayView::new(&buf, 9, 9, 9).unwrap();
+        assert_eq!(fast_score(&img, 4, 4), 100);
+    }
+
+    #[test]
+    fn score_of_a_flat_patch_is_zero() {
+        let buf = vec![77u8; 81];
+        let img = GrayView::new(&buf, 9, 9, 9).unwrap();
+        assert_eq!(fast_score(&img, 4, 4), 0);
+    }
+
+    #[test]
+    fn exactly_nine_contiguous_is_a_corner_eight_is_not() {
+        // Centre 50; circle pixels k..k+n brighter (200), the rest equal to the centre.
+        for (run, expected) in [(9usize, 150), (8, 0)] {
+            for start in 0..16 {
+                let mut buf = vec![50u8; 81];
+                for j in 0..run {
+                    let [dx, dy] = FAST_CIRCLE[(start + j) % 16];
+                    buf[((4 + dy) * 9 + 4 + dx) as usize] = 200;
+                }
+                let img = GrayView::new(&buf, 9, 9, 9).unwrap();
+                assert_eq!(fast_score(&img, 4, 4), expected, "run {run} from {start}");
+                if run == 9 {
+                    assert!(may_be_corner(&img, 4, 4, 20), "the quick test must never reject a corner");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_weakest_arc_pixel_sets_the_score() {
+        // Nine darker pixels at 10, 30, ... on a 200 centre: score = 200 - max(arc) = 200 - 90 = 110.
+        let mut buf = vec![200u8; 81];
+        for j in 0..9 {
+            let [dx, dy] = FAST_CIRCLE[(5 + j) % 16];
+            buf[((4 + dy) * 9 + 4 + dx) as usize] = 10 + 10 * j as u8;
+        }
+        let img = GrayView::new(&buf, 9, 9, 9).unwrap();
+        assert_eq!(fast_score(&img, 4, 4), 110);
+    }
+
+    #[test]
+    fn finds_the_corner_of_a_bright_square_and_orients_it() {
+        // A 40x40 bright square in a 160x160 dark image; FAST must fire at its four corners only, and the
+        // intensity centroid of the top-left corner points into the square: down-right, 45 degrees.
+        let buf = image(160, 160, |x, y| if (60..100).contains(&x) && (60..100).contains(&y) { 200 } else { 20 });
+        let img = GrayView::new(&buf, 160, 160, 160).unwrap();
+        let config = DetectorConfig::default();
+        assert_eq!(config.margin(), 48);
+        let kps = detect(&img, &config);
+        let positions: Vec<(f32, f32)> = kps.iter().map(|k| (k.x, k.y)).collect();
+        assert_eq!(kps.len(), 4, "{positions:?}");
+        let top_left = kps.iter().find(|k| k.x < 80.0 && k.y < 80.0).expect("top-left corner");
+        assert!((60.0..=61.0).contains(&top_left.x) && (60.0..=61.0).contains(&top_left.y), "{positions:?}");
+        assert_eq!(top_left.angle, 45.0);
+        let bottom_right = kps.iter().find(|k| k.x > 80.0 && k.y > 80.0).unwrap();
+        assert_eq!((bottom_right.x, bottom_right.y), (99.0, 97.0), "(99, 97) already has nine contiguous darker circle pixels, and comes first");
+        assert!((215.0..=235.0).contains(&bottom_right.angle), "{}", bottom_right.angle);
+        assert!(kps.iter().all(|k| k.response > 20.0 && k.size == 64.0));
+    }
+
+    #[test]
+    fn suppression_keeps_one_of_equal_neighbours_and_the_stronger_of_two() {
+        let (w, h) = (6, 5);
+        let mut scores = vec![0u8; w * h];
+        scores[2 * w + 2] = 30;
+        scores[2 * w + 3] = 30; // equal right neighbour: the first in raster order wins
+        scores[w + 4] = 31; // but a stronger diagonal neighbour of (3, 2) is at (4, 1)
+        let kept = suppress_non_maxima(&scores, w, h);
+        assert_eq!(kept, vec![(4, 1, 31), (2, 2, 30)]);
+    }
+
+    #[test]
+    fn top_n_is_by_score_then_raster_order() {
+        let buf = crate::synthetic::rectangles(200, 200, 7);
+        let img = GrayView::new(&buf, 200, 200, 200).unwrap();
+        let all = detect(&img, &DetectorConfig { max_keypoints: usize::MAX, ..Default::default() });
+        let few = detect(&img, &DetectorConfig { max_keypoints: 5, ..Default::default() });
+        assert!(all.len() > 5);
+        assert_eq!(&all[..5], &few[..]);
+        for pair in all.windows(2) {
+            let key = |k: &KeyPoint| (-(k.response as i32), k.y as i32, k.x as i32);
+            assert!(key(&pair[0]) < key(&pair[1]));
+        }
+    }
+}

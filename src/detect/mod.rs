@@ -1,0 +1,106 @@
+//! Keypoint detection: FAST-9, non-maximum suppression, top-N, orientation by intensity centroid.
+//!
+//! The CPU module ([`cpu`]) is the reference; every step is integer arithmetic:
+//! 1. **FAST-9 score.** For pixel `p` with circle pixels `c[0..16]` (radius-3 Bresenham circle, clockwise
+//!    from the top, [`FAST_CIRCLE`]) the score is
+//!    `max over k of max(min_{j<9} (c[k+j] - p), min_{j<9} (p - c[k+j]))` (indices mod 16): the largest
+//!    `t` for which nine contiguous circle pixels are all brighter than `p + t`, or all darker than `p - t`.
+//!    `p` is a corner iff `score > threshold`. Scores are computed only for pixels at least `margin`
+//!    from every border; every other pixel, and every non-corner, has score 0.
+//! 2. **Non-maximum suppression** over the 3x3 neighbourhood, ties broken by raster order: a corner is
+//!    kept iff its score is `>` the score of each neighbour that comes before it in raster order
+//!    (the row above, and the left neighbour) and `>=` that of each neighbour after it.
+//! 3. **Top-N**: survivors are sorted by score (descending), then `y`, then `x` (ascending), and the first
+//!    `max_keypoints` are kept.
+//! 4. **Orientation**: integer moments `m10 = Σ dx·I`, `m01 = Σ dy·I` over the disc `dx² + dy² <= 15²`
+//!    around the keypoint, binned by [`crate::angle::direction_bin`]; the reported angle is the bin's
+//!    angle (a multiple of 1/8 degree, exact in `f32`).
+//!
+//! Keypoints are reported at integer pixel positions with `size = keypoint_size`, `response = score`,
+//! `octave = 0`. The margin is chosen so that every detected keypoint's descriptor window fits in the
+//! image at any angle, so detection never produces a keypoint that description skips.
+
+pub mod cpu;
+
+use crate::error::{Error, Result};
+use crate::keypoint::DEFAULT_KEYPOINT_SIZE;
+
+/// The 16 offsets of the FAST circle of radius 3, clockwise from the top (x right, y down).
+pub const FAST_CIRCLE: [[i32; 2]; 16] = [
+    [0, -3],
+    [1, -3],
+    [2, -2],
+    [3, -1],
+    [3, 0],
+    [3, 1],
+    [2, 2],
+    [1, 3],
+    [0, 3],
+    [-1, 3],
+    [-2, 2],
+    [-3, 1],
+    [-3, 0],
+    [-3, -1],
+    [-2, -2],
+    [-1, -3],
+];
+
+/// Contiguous circle pixels that must all be brighter (or all darker): FAST-9.
+pub const FAST_ARC: usize = 9;
+
+/// Radius of the disc the orientation moments are summed over.
+pub const ORIENTATION_RADIUS: i32 = 15;
+
+/// Detector settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DetectorConfig {
+    /// FAST threshold: a corner needs nine contiguous circle pixels more than this above or below the
+    /// centre. 1..=254. Default 20.
+    pub threshold: u8,
+    /// Keep at most this many keypoints, the strongest first. Default 5000.
+    pub max_keypoints: usize,
+    /// `size` given to detected keypoints: the side of their descriptor window in pixels. Default 64.
+    pub keypoint_size: f32,
+}
+
+impl Default for DetectorConfig {
+    fn default() -> Self {
+        Self {
+            threshold: 20,
+            max_keypoints: 5000,
+            keypoint_size: DEFAULT_KEYPOINT_SIZE,
+        }
+    }
+}
+
+impl DetectorConfig {
+    /// Checks every field's range.
+    pub fn validate(&self) -> Result<()> {
+        if self.threshold == 0 || self.threshold == 255 {
+            return Err(Error::InvalidConfig {
+                field: "threshold",
+                value: self.threshold.to_string(),
+                reason: "must be in 1..=254",
+            });
+        }
+        if self.max_keypoints == 0 {
+            return Err(Error::InvalidConfig {
+                field: "max_keypoints",
+                value: "0".into(),
+                reason: "must be at least 1",
+            });
+        }
+        crate::describe::check_size(self.keypoint_size).map_err(|reason| Error::InvalidConfig {
+            field: "keypoint_size",
+            value: self.keypoint_size.to_string(),
+            reason,
+        })
+    }
+
+    /// Pixels left free at each border: the rotated window (half-diagonal `size / sqrt 2`) plus one pixel
+    /// for bilinear interpolation and one for fixed-point rounding; never less than the orientation disc.
+    pub fn margin(&self) -> usize {
+        let half_diagonal = self.keypoint_size as f64 * std::f64::consts::FRAC_1_SQRT_2;
+        (half_diagonal.ceil() as usize + 2).max(ORIENTATION_RADIUS as usize + 1)
+    }
+}

@@ -1,0 +1,113 @@
+//! Detection and description behind one backend-independent interface.
+
+use crate::backend::Backend;
+use crate::describe::{self, Described, DescriptorConfig, WINDOW};
+use crate::descriptor::DescriptorSet;
+use crate::detect::{self, DetectorConfig};
+use crate::error::{Error, Result};
+use crate::image::GrayView;
+use crate::keypoint::KeyPoint;
+
+/// Settings of an [`Extractor`].
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct ExtractorConfig {
+    /// FAST detector settings.
+    pub detector: DetectorConfig,
+    /// CLATCH descriptor settings.
+    pub descriptor: DescriptorConfig,
+}
+
+/// Keypoints and their descriptors: row `i` of `descriptors` describes `keypoints[i]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Features {
+    /// Detected keypoints, strongest first.
+    pub keypoints: Vec<KeyPoint>,
+    /// One descriptor per keypoint.
+    pub descriptors: DescriptorSet,
+}
+
+/// Finds keypoints and computes their CLATCH descriptors.
+///
+/// ```
+/// use clatch::{Backend, Extractor, ExtractorConfig, GrayView};
+///
+/// let pixels = clatch::synthetic::rectangles(320, 240, 1);
+/// let image = GrayView::new(&pixels, 320, 240, 320)?;
+/// let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+/// let features = extractor.detect_and_describe(&image)?;
+/// assert_eq!(features.keypoints.len(), features.descriptors.len());
+/// # Ok::<(), clatch::Error>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Extractor {
+    backend: Backend,
+    config: ExtractorConfig,
+}
+
+impl Extractor {
+    /// Validates the configuration and the backend.
+    pub fn new(backend: Backend, config: ExtractorConfig) -> Result<Self> {
+        config.detector.validate()?;
+        backend.ensure_available()?;
+        Ok(Self { backend, config })
+    }
+
+    /// The backend this extractor runs on.
+    pub fn backend(&self) -> Backend {
+        self.backend
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ExtractorConfig {
+        &self.config
+    }
+
+    fn check_image(image: &GrayView) -> Result<()> {
+        if image.width() < WINDOW || image.height() < WINDOW {
+            return Err(Error::ImageTooSmall {
+                width: image.width(),
+                height: image.height(),
+                min: WINDOW,
+            });
+        }
+        Ok(())
+    }
+
+    /// FAST keypoints with orientation, strongest first (see [`crate::detect`] for the exact rules).
+    /// Every keypoint returned has a window that fits, so [`Extractor::describe`] skips none of them.
+    pub fn detect(&self, image: &GrayView) -> Result<Vec<KeyPoint>> {
+        Self::check_image(image)?;
+        match self.backend {
+            Backend::Cpu => Ok(detect::cpu::detect(image, &self.config.detector)),
+            #[cfg(feature = "cuda")]
+            Backend::Cuda { .. } => self.backend.ensure_available().map(|_| Vec::new()),
+        }
+    }
+
+    /// Descriptors of caller-supplied keypoints. Keypoints whose window leaves the image are not
+    /// described and are listed in [`Described::skipped`]; [`Described::keypoint_index`] maps each
+    /// descriptor row to its input keypoint. An empty keypoint list gives an empty result.
+    pub fn describe(&self, image: &GrayView, keypoints: &[KeyPoint]) -> Result<Described> {
+        Self::check_image(image)?;
+        describe::validate_keypoints(keypoints, image.width(), image.height())?;
+        match self.backend {
+            Backend::Cpu => Ok(describe::cpu::describe(image, keypoints, &self.config.descriptor)),
+            #[cfg(feature = "cuda")]
+            Backend::Cuda { .. } => Err(self.backend.ensure_available().unwrap_err()),
+        }
+    }
+
+    /// Detects keypoints and describes them.
+    pub fn detect_and_describe(&self, image: &GrayView) -> Result<Features> {
+        let mut keypoints = self.detect(image)?;
+        let described = self.describe(image, &keypoints)?;
+        if !described.skipped.is_empty() {
+            // Detection keeps a margin for the window, so this only guards against a future mismatch.
+            keypoints = described.keypoint_index.iter().map(|&i| keypoints[i]).collect();
+        }
+        Ok(Features {
+            keypoints,
+            descriptors: described.descriptors,
+        })
+    }
+}

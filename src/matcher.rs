@@ -1,0 +1,95 @@
+//! Hamming matching behind one backend-independent interface.
+
+use crate::backend::Backend;
+use crate::descriptor::DescriptorSet;
+use crate::error::{Error, Result};
+use crate::matching::{self, KnnMatches, Match, MatchConfig};
+
+/// Brute-force Hamming matcher (see [`crate::matching`] for the exact rules, ties included).
+///
+/// ```
+/// use clatch::{Backend, DescriptorSet, DescriptorWidth, MatchConfig, Matcher};
+///
+/// let width = DescriptorWidth::from_bits(64)?;
+/// let gallery = DescriptorSet::from_words(width, vec![0b1011, 0xFFFF, 0])?;
+/// let queries = DescriptorSet::from_words(width, vec![0b0011])?;
+/// let matcher = Matcher::new(Backend::Cpu, MatchConfig::default())?;
+/// let knn = matcher.knn(&queries, &gallery, 2)?;
+/// assert_eq!(knn.neighbours(0)[0].train, 0); // 1 bit away
+/// assert_eq!(knn.neighbours(0)[1].train, 2); // 2 bits away
+/// # Ok::<(), clatch::Error>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Matcher {
+    backend: Backend,
+    config: MatchConfig,
+}
+
+impl Matcher {
+    /// Validates the configuration and the backend.
+    pub fn new(backend: Backend, config: MatchConfig) -> Result<Self> {
+        if let Some(ratio) = config.ratio {
+            if !(ratio.is_finite() && ratio > 0.0 && ratio <= 1.0) {
+                return Err(Error::InvalidConfig {
+                    field: "ratio",
+                    value: ratio.to_string(),
+                    reason: "must be finite and in (0, 1]",
+                });
+            }
+        }
+        backend.ensure_available()?;
+        Ok(Self { backend, config })
+    }
+
+    /// The backend this matcher runs on.
+    pub fn backend(&self) -> Backend {
+        self.backend
+    }
+
+    /// The configuration used by [`Matcher::match_descriptors`].
+    pub fn config(&self) -> &MatchConfig {
+        &self.config
+    }
+
+    fn check_sets(query: &DescriptorSet, train: &DescriptorSet, k: usize) -> Result<()> {
+        if query.width() != train.width() {
+            return Err(Error::DescriptorWidthMismatch {
+                query_bits: query.width().bits(),
+                train_bits: train.width().bits(),
+            });
+        }
+        if train.is_empty() {
+            return Err(Error::EmptyGallery);
+        }
+        if k == 0 || k > train.len() {
+            return Err(Error::InvalidK {
+                k,
+                gallery: train.len(),
+            });
+        }
+        Ok(())
+    }
+
+    /// The `k` nearest gallery descriptors of every query, nearest first, ties to the lowest index.
+    /// An empty query set gives an empty result.
+    pub fn knn(&self, query: &DescriptorSet, train: &DescriptorSet, k: usize) -> Result<KnnMatches> {
+        Self::check_sets(query, train, k)?;
+        match self.backend {
+            Backend::Cpu => Ok(matching::cpu::knn(query, train, k)),
+            #[cfg(feature = "cuda")]
+            Backend::Cuda { .. } => Err(self.backend.ensure_available().unwrap_err()),
+        }
+    }
+
+    /// The best match of every query that passes the configured ratio test, cross-check and distance
+    /// limit, in query order. The ratio test needs at least two gallery descriptors.
+    pub fn match_descriptors(&self, query: &DescriptorSet, train: &DescriptorSet) -> Result<Vec<Match>> {
+        let k = if self.config.ratio.is_some() { 2 } else { 1 };
+        Self::check_sets(query, train, k)?;
+        match self.backend {
+            Backend::Cpu => Ok(matching::cpu::match_descriptors(query, train, &self.config)),
+            #[cfg(feature = "cuda")]
+            Backend::Cuda { .. } => Err(self.backend.ensure_available().unwrap_err()),
+        }
+    }
+}

@@ -212,8 +212,14 @@ mod tests {
         d.0[0] = 1; // triplet 0
         d.0[7] = 1 << 63; // triplet 511
         let bytes = d.to_opencv_bytes();
-        assert_eq!(bytes[0], 0x80, "triplet 0 is the most significant bit of byte 0");
-        assert_eq!(bytes[63], 0x01, "triplet 511 is the least significant bit of byte 63");
+        assert_eq!(
+            bytes[0], 0x80,
+            "triplet 0 is the most significant bit of byte 0"
+        );
+        assert_eq!(
+            bytes[63], 0x01,
+            "triplet 511 is the least significant bit of byte 63"
+        );
         assert_eq!(Descriptor::from_opencv_bytes(&bytes), d);
     }
 

@@ -17,7 +17,9 @@ pub enum Error {
     StrideTooSmall { width: usize, stride: usize },
 
     /// The pixel buffer is shorter than `stride * (height - 1) + width`.
-    #[error("pixel buffer holds {got} bytes but a {width}x{height} image with stride {stride} needs {needed}")]
+    #[error(
+        "pixel buffer holds {got} bytes but a {width}x{height} image with stride {stride} needs {needed}"
+    )]
     BufferTooSmall {
         width: usize,
         height: usize,
@@ -28,11 +30,19 @@ pub enum Error {
 
     /// The image cannot hold one descriptor window.
     #[error("image {width}x{height} is smaller than the {min}x{min} descriptor window")]
-    ImageTooSmall { width: usize, height: usize, min: usize },
+    ImageTooSmall {
+        width: usize,
+        height: usize,
+        min: usize,
+    },
 
     /// The image is larger than the fixed-point sampling arithmetic allows.
     #[error("image {width}x{height} exceeds the largest supported side of {max} pixels")]
-    ImageTooLarge { width: usize, height: usize, max: usize },
+    ImageTooLarge {
+        width: usize,
+        height: usize,
+        max: usize,
+    },
 
     /// A keypoint has a field that is not finite or out of range.
     #[error("keypoint {index}: {field} = {value} is invalid ({reason})")]
@@ -44,15 +54,24 @@ pub enum Error {
     },
 
     /// A descriptor width that is not 8·n bits with n in 1..=64.
-    #[error("descriptor width {bits} bits is invalid: it must be a multiple of 8 between 8 and 512")]
+    #[error(
+        "descriptor width {bits} bits is invalid: it must be a multiple of 8 between 8 and 512"
+    )]
     InvalidDescriptorWidth { bits: usize },
 
     /// Query and gallery descriptors have different widths.
-    #[error("query descriptors are {query_bits} bits wide but gallery descriptors are {train_bits} bits")]
-    DescriptorWidthMismatch { query_bits: usize, train_bits: usize },
+    #[error(
+        "query descriptors are {query_bits} bits wide but gallery descriptors are {train_bits} bits"
+    )]
+    DescriptorWidthMismatch {
+        query_bits: usize,
+        train_bits: usize,
+    },
 
     /// A descriptor buffer whose length is not a whole number of descriptors.
-    #[error("descriptor buffer of {words} words is not a multiple of {words_per_descriptor} words per descriptor")]
+    #[error(
+        "descriptor buffer of {words} words is not a multiple of {words_per_descriptor} words per descriptor"
+    )]
     DescriptorBufferLength {
         words: usize,
         words_per_descriptor: usize,

@@ -91,7 +91,11 @@ impl Extractor {
         Self::check_image(image)?;
         describe::validate_keypoints(keypoints, image.width(), image.height())?;
         match self.backend {
-            Backend::Cpu => Ok(describe::cpu::describe(image, keypoints, &self.config.descriptor)),
+            Backend::Cpu => Ok(describe::cpu::describe(
+                image,
+                keypoints,
+                &self.config.descriptor,
+            )),
             #[cfg(feature = "cuda")]
             Backend::Cuda { .. } => Err(self.backend.ensure_available().unwrap_err()),
         }
@@ -103,7 +107,11 @@ impl Extractor {
         let described = self.describe(image, &keypoints)?;
         if !described.skipped.is_empty() {
             // Detection keeps a margin for the window, so this only guards against a future mismatch.
-            keypoints = described.keypoint_index.iter().map(|&i| keypoints[i]).collect();
+            keypoints = described
+                .keypoint_index
+                .iter()
+                .map(|&i| keypoints[i])
+                .collect();
         }
         Ok(Features {
             keypoints,

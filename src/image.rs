@@ -134,15 +134,28 @@ mod tests {
     #[test]
     fn rejects_bad_geometry() {
         let buf = vec![0u8; 100];
-        assert!(matches!(GrayView::new(&buf, 0, 5, 10), Err(Error::EmptyImage { .. })));
-        assert!(matches!(GrayView::new(&buf, 5, 0, 10), Err(Error::EmptyImage { .. })));
+        assert!(matches!(
+            GrayView::new(&buf, 0, 5, 10),
+            Err(Error::EmptyImage { .. })
+        ));
+        assert!(matches!(
+            GrayView::new(&buf, 5, 0, 10),
+            Err(Error::EmptyImage { .. })
+        ));
         assert!(matches!(
             GrayView::new(&buf, 10, 5, 9),
-            Err(Error::StrideTooSmall { width: 10, stride: 9 })
+            Err(Error::StrideTooSmall {
+                width: 10,
+                stride: 9
+            })
         ));
         assert!(matches!(
             GrayView::new(&buf, 10, 11, 10),
-            Err(Error::BufferTooSmall { needed: 110, got: 100, .. })
+            Err(Error::BufferTooSmall {
+                needed: 110,
+                got: 100,
+                ..
+            })
         ));
         // The last row needs only `width` bytes, not a whole stride.
         assert!(GrayView::new(&buf, 10, 10, 10).is_ok());
@@ -173,7 +186,8 @@ mod tests {
 
     #[test]
     fn conversions_from_image_crate() {
-        let rgb = image::RgbImage::from_fn(3, 2, |x, y| image::Rgb([x as u8 * 100, y as u8 * 200, 7]));
+        let rgb =
+            image::RgbImage::from_fn(3, 2, |x, y| image::Rgb([x as u8 * 100, y as u8 * 200, 7]));
         let gray = gray_from_rgb(&rgb);
         assert_eq!(gray.get_pixel(2, 1).0[0], luma(200, 200, 7));
         let view = GrayView::try_from(&gray).unwrap();

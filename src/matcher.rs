@@ -72,7 +72,12 @@ impl Matcher {
 
     /// The `k` nearest gallery descriptors of every query, nearest first, ties to the lowest index.
     /// An empty query set gives an empty result.
-    pub fn knn(&self, query: &DescriptorSet, train: &DescriptorSet, k: usize) -> Result<KnnMatches> {
+    pub fn knn(
+        &self,
+        query: &DescriptorSet,
+        train: &DescriptorSet,
+        k: usize,
+    ) -> Result<KnnMatches> {
         Self::check_sets(query, train, k)?;
         match self.backend {
             Backend::Cpu => Ok(matching::cpu::knn(query, train, k)),
@@ -83,7 +88,11 @@ impl Matcher {
 
     /// The best match of every query that passes the configured ratio test, cross-check and distance
     /// limit, in query order. The ratio test needs at least two gallery descriptors.
-    pub fn match_descriptors(&self, query: &DescriptorSet, train: &DescriptorSet) -> Result<Vec<Match>> {
+    pub fn match_descriptors(
+        &self,
+        query: &DescriptorSet,
+        train: &DescriptorSet,
+    ) -> Result<Vec<Match>> {
         let k = if self.config.ratio.is_some() { 2 } else { 1 };
         Self::check_sets(query, train, k)?;
         match self.backend {

@@ -48,7 +48,9 @@ pub fn rectangles(width: usize, height: usize, seed: u64) -> Vec<u8> {
         }
     }
     for p in img.iter_mut() {
-        *p = p.saturating_add((rng.next_u64() % 5) as u8).saturating_sub(2);
+        *p = p
+            .saturating_add((rng.next_u64() % 5) as u8)
+            .saturating_sub(2);
     }
     img
 }

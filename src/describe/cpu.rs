@@ -47,7 +47,12 @@ fn triplet_difference(window: &Window, triplet: &[u8; 6], weights: &[i32; PATCH 
 }
 
 /// The first `width` bits of the descriptor of a sampled window, packed least significant bit first.
-pub fn window_bits(window: &Window, width: DescriptorWidth, weights: &[i32; PATCH * PATCH], out: &mut [u64]) {
+pub fn window_bits(
+    window: &Window,
+    width: DescriptorWidth,
+    weights: &[i32; PATCH * PATCH],
+    out: &mut [u64],
+) {
     out.fill(0);
     for (t, triplet) in TRIPLETS[..width.bits()].iter().enumerate() {
         if triplet_difference(window, triplet, weights) < 0 {
@@ -65,7 +70,9 @@ pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfi
         .iter()
         .map(|kp| Some(SamplingFrame::of(kp)).filter(|f| f.fits(img.width(), img.height())))
         .collect();
-    let keypoint_index: Vec<usize> = (0..keypoints.len()).filter(|&i| frames[i].is_some()).collect();
+    let keypoint_index: Vec<usize> = (0..keypoints.len())
+        .filter(|&i| frames[i].is_some())
+        .collect();
     let skipped = (0..keypoints.len())
         .filter(|&i| frames[i].is_none())
         .map(|keypoint| Skipped {
@@ -80,7 +87,9 @@ pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfi
         .for_each_init(
             || Box::new([0i32; WINDOW * WINDOW]),
             |window, (out, &i)| {
-                let frame = frames[i].as_ref().expect("only fitting frames are described");
+                let frame = frames[i]
+                    .as_ref()
+                    .expect("only fitting frames are described");
                 sample_window(img, frame, window);
                 window_bits(window, width, &weights, out);
             },
@@ -109,7 +118,10 @@ mod tests {
         sample_window(&img, &frame, &mut window);
         for v in 0..WINDOW {
             for u in 0..WINDOW {
-                assert_eq!(window[v * WINDOW + u], img.at(40 + u - 32, 45 + v - 32) as i32);
+                assert_eq!(
+                    window[v * WINDOW + u],
+                    img.at(40 + u - 32, 45 + v - 32) as i32
+                );
             }
         }
     }
@@ -118,7 +130,9 @@ mod tests {
     fn half_pixel_offset_averages_neighbours_rounding_half_up() {
         // Columns alternate 10, 21: halfway between them the sample is (10 + 21) / 2 = 15.5 -> 16.
         let (w, h) = (80, 80);
-        let buf: Vec<u8> = (0..w * h).map(|i| if i % 2 == 0 { 10 } else { 21 }).collect();
+        let buf: Vec<u8> = (0..w * h)
+            .map(|i| if i % 2 == 0 { 10 } else { 21 })
+            .collect();
         let img = GrayView::new(&buf, w, h, w).unwrap();
         let frame = SamplingFrame::of(&KeyPoint::new(40.5, 40.0));
         let mut window = [0i32; WINDOW * WINDOW];
@@ -161,17 +175,41 @@ mod tests {
         window[ay * WINDOW + ax] = 0;
         let width = DescriptorWidth::from_bits(8).unwrap();
         let mut bits = [0u64];
-        window_bits(&window, width, &PatchWeights::latch_7x7().as_array().map(|w| w as i32), &mut bits);
+        window_bits(
+            &window,
+            width,
+            &PatchWeights::latch_7x7().as_array().map(|w| w as i32),
+            &mut bits,
+        );
         let ignored = bits[0] & 1;
-        window_bits(&window, width, &PatchWeights::uniform().as_array().map(|w| w as i32), &mut bits);
+        window_bits(
+            &window,
+            width,
+            &PatchWeights::uniform().as_array().map(|w| w as i32),
+            &mut bits,
+        );
         assert_eq!(ignored, 0, "equal SSDs give 0");
-        assert_eq!(bits[0] & 1, 0, "a differs from the anchor, so SSD(a, b) > SSD(c, b)");
+        assert_eq!(
+            bits[0] & 1,
+            0,
+            "a differs from the anchor, so SSD(a, b) > SSD(c, b)"
+        );
         window[ay * WINDOW + ax] = 50;
         let [.., cx, cy] = TRIPLETS[0].map(|v| v as usize);
         window[cy * WINDOW + cx] = 0;
-        window_bits(&window, width, &PatchWeights::uniform().as_array().map(|w| w as i32), &mut bits);
+        window_bits(
+            &window,
+            width,
+            &PatchWeights::uniform().as_array().map(|w| w as i32),
+            &mut bits,
+        );
         assert_eq!(bits[0] & 1, 1, "now c differs, so SSD(a, b) < SSD(c, b)");
-        window_bits(&window, width, &PatchWeights::latch_7x7().as_array().map(|w| w as i32), &mut bits);
+        window_bits(
+            &window,
+            width,
+            &PatchWeights::latch_7x7().as_array().map(|w| w as i32),
+            &mut bits,
+        );
         assert_eq!(bits[0] & 1, 0, "and the 7x7 weights do not see it");
     }
 }

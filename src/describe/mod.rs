@@ -165,17 +165,22 @@ impl SamplingFrame {
     pub fn sample_position(&self, u: usize, v: usize) -> [i64; 2] {
         let du = u as i64 - (WINDOW as i64 / 2);
         let dv = v as i64 - (WINDOW as i64 / 2);
-        let at = |axis: usize| (self.origin[axis] + du * self.step_u[axis] + dv * self.step_v[axis] + 128) >> 8;
+        let at = |axis: usize| {
+            (self.origin[axis] + du * self.step_u[axis] + dv * self.step_v[axis] + 128) >> 8
+        };
         [at(0), at(1)]
     }
 
     /// True iff every sample lies inside a `width` x `height` image.
     pub fn fits(&self, width: usize, height: usize) -> bool {
         let last = (WINDOW - 1, WINDOW - 1);
-        [(0, 0), (last.0, 0), (0, last.1), last].iter().all(|&(u, v)| {
-            let [x, y] = self.sample_position(u, v);
-            (0..=256 * (width as i64 - 1)).contains(&x) && (0..=256 * (height as i64 - 1)).contains(&y)
-        })
+        [(0, 0), (last.0, 0), (0, last.1), last]
+            .iter()
+            .all(|&(u, v)| {
+                let [x, y] = self.sample_position(u, v);
+                (0..=256 * (width as i64 - 1)).contains(&x)
+                    && (0..=256 * (height as i64 - 1)).contains(&y)
+            })
     }
 }
 

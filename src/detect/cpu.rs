@@ -58,11 +58,11 @@ pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
         .skip(margin)
         .take(h - 2 * margin)
         .for_each(|(y, row)| {
-            for x in margin..w - margin {
+            for (x, score) in row.iter_mut().enumerate().take(w - margin).skip(margin) {
                 if may_be_corner(img, x, y, t) {
                     let s = fast_score(img, x, y);
                     if s > t {
-                        row[x] = s as u8;
+                        *score = s as u8;
                     }
                 }
             }
@@ -171,7 +171,10 @@ mod tests {
                 let img = GrayView::new(&buf, 9, 9, 9).unwrap();
                 assert_eq!(fast_score(&img, 4, 4), expected, "run {run} from {start}");
                 if run == 9 {
-                    assert!(may_be_corner(&img, 4, 4, 20), "the quick test must never reject a corner");
+                    assert!(
+                        may_be_corner(&img, 4, 4, 20),
+                        "the quick test must never reject a corner"
+                    );
                 }
             }
         }
@@ -193,19 +196,39 @@ mod tests {
     fn finds_the_corner_of_a_bright_square_and_orients_it() {
         // A 40x40 bright square in a 160x160 dark image; FAST must fire at its four corners only, and the
         // intensity centroid of the top-left corner points into the square: down-right, 45 degrees.
-        let buf = image(160, 160, |x, y| if (60..100).contains(&x) && (60..100).contains(&y) { 200 } else { 20 });
+        let buf = image(160, 160, |x, y| {
+            if (60..100).contains(&x) && (60..100).contains(&y) {
+                200
+            } else {
+                20
+            }
+        });
         let img = GrayView::new(&buf, 160, 160, 160).unwrap();
         let config = DetectorConfig::default();
         assert_eq!(config.margin(), 48);
         let kps = detect(&img, &config);
         let positions: Vec<(f32, f32)> = kps.iter().map(|k| (k.x, k.y)).collect();
         assert_eq!(kps.len(), 4, "{positions:?}");
-        let top_left = kps.iter().find(|k| k.x < 80.0 && k.y < 80.0).expect("top-left corner");
-        assert!((60.0..=61.0).contains(&top_left.x) && (60.0..=61.0).contains(&top_left.y), "{positions:?}");
+        let top_left = kps
+            .iter()
+            .find(|k| k.x < 80.0 && k.y < 80.0)
+            .expect("top-left corner");
+        assert!(
+            (60.0..=61.0).contains(&top_left.x) && (60.0..=61.0).contains(&top_left.y),
+            "{positions:?}"
+        );
         assert_eq!(top_left.angle, 45.0);
         let bottom_right = kps.iter().find(|k| k.x > 80.0 && k.y > 80.0).unwrap();
-        assert_eq!((bottom_right.x, bottom_right.y), (99.0, 97.0), "(99, 97) already has nine contiguous darker circle pixels, and comes first");
-        assert!((215.0..=235.0).contains(&bottom_right.angle), "{}", bottom_right.angle);
+        assert_eq!(
+            (bottom_right.x, bottom_right.y),
+            (99.0, 97.0),
+            "(99, 97) already has nine contiguous darker circle pixels, and comes first"
+        );
+        assert!(
+            (215.0..=235.0).contains(&bottom_right.angle),
+            "{}",
+            bottom_right.angle
+        );
         assert!(kps.iter().all(|k| k.response > 20.0 && k.size == 64.0));
     }
 
@@ -224,8 +247,20 @@ mod tests {
     fn top_n_is_by_score_then_raster_order() {
         let buf = crate::synthetic::rectangles(200, 200, 7);
         let img = GrayView::new(&buf, 200, 200, 200).unwrap();
-        let all = detect(&img, &DetectorConfig { max_keypoints: usize::MAX, ..Default::default() });
-        let few = detect(&img, &DetectorConfig { max_keypoints: 5, ..Default::default() });
+        let all = detect(
+            &img,
+            &DetectorConfig {
+                max_keypoints: usize::MAX,
+                ..Default::default()
+            },
+        );
+        let few = detect(
+            &img,
+            &DetectorConfig {
+                max_keypoints: 5,
+                ..Default::default()
+            },
+        );
         assert!(all.len() > 5);
         assert_eq!(&all[..5], &few[..]);
         for pair in all.windows(2) {

@@ -44,14 +44,24 @@ pub fn knn(query: &DescriptorSet, train: &DescriptorSet, k: usize) -> KnnMatches
 
 /// The nearest query of every gallery descriptor (lowest query index on ties).
 fn nearest_query_of_each_train(query: &DescriptorSet, train: &DescriptorSet) -> Vec<u32> {
-    knn(train, query, 1).matches.iter().map(|m| m.train).collect()
+    knn(train, query, 1)
+        .matches
+        .iter()
+        .map(|m| m.train)
+        .collect()
 }
 
 /// Applies ratio test, cross-check and distance limit (validated configuration).
-pub fn match_descriptors(query: &DescriptorSet, train: &DescriptorSet, config: &MatchConfig) -> Vec<Match> {
+pub fn match_descriptors(
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    config: &MatchConfig,
+) -> Vec<Match> {
     let k = if config.ratio.is_some() { 2 } else { 1 };
     let neighbours = knn(query, train, k);
-    let reverse = config.cross_check.then(|| nearest_query_of_each_train(query, train));
+    let reverse = config
+        .cross_check
+        .then(|| nearest_query_of_each_train(query, train));
     neighbours
         .iter()
         .filter_map(|n| {
@@ -90,7 +100,13 @@ mod tests {
         // with k = 2 the third one-bit neighbour (train 3) loses to the lower indices.
         let train = set(&[0b11, 0b01, 0b10, 0b100]);
         let query = set(&[0]);
-        let pairs = |k| -> Vec<(u32, u32)> { knn(&query, &train, k).matches.iter().map(|m| (m.train, m.distance)).collect() };
+        let pairs = |k| -> Vec<(u32, u32)> {
+            knn(&query, &train, k)
+                .matches
+                .iter()
+                .map(|m| (m.train, m.distance))
+                .collect()
+        };
         assert_eq!(pairs(3), vec![(1, 1), (2, 1), (3, 1)]);
         assert_eq!(pairs(2), vec![(1, 1), (2, 1)]);
         assert_eq!(pairs(4), vec![(1, 1), (2, 1), (3, 1), (0, 2)]);
@@ -100,8 +116,15 @@ mod tests {
     fn ratio_test_is_strict_and_exact() {
         let train = set(&[0b1111, 0b11111]); // distances 4 and 5 from 0
         let query = set(&[0]);
-        let cfg = |ratio| MatchConfig { ratio: Some(ratio), cross_check: false, max_distance: None };
-        assert!(match_descriptors(&query, &train, &cfg(0.8)).is_empty(), "0.8f32 * 5 rounds to exactly 4.0, and 4 < 4 is false");
+        let cfg = |ratio| MatchConfig {
+            ratio: Some(ratio),
+            cross_check: false,
+            max_distance: None,
+        };
+        assert!(
+            match_descriptors(&query, &train, &cfg(0.8)).is_empty(),
+            "0.8f32 * 5 rounds to exactly 4.0, and 4 < 4 is false"
+        );
         assert_eq!(match_descriptors(&query, &train, &cfg(0.81)).len(), 1);
     }
 
@@ -110,12 +133,36 @@ mod tests {
         // Query 1 (0b111) is nearer to train 0 (0b110) than query 0 is, so query 0 loses its match.
         let train = set(&[0b110, u64::MAX]);
         let query = set(&[0b000, 0b111]);
-        let plain = MatchConfig { ratio: None, cross_check: false, max_distance: None };
+        let plain = MatchConfig {
+            ratio: None,
+            cross_check: false,
+            max_distance: None,
+        };
         assert_eq!(match_descriptors(&query, &train, &plain).len(), 2);
-        let checked = MatchConfig { cross_check: true, ..plain.clone() };
+        let checked = MatchConfig {
+            cross_check: true,
+            ..plain.clone()
+        };
         let kept = match_descriptors(&query, &train, &checked);
-        assert_eq!(kept, vec![Match { query: 1, train: 0, distance: 1 }]);
-        let near = MatchConfig { max_distance: Some(1), ..plain };
-        assert_eq!(match_descriptors(&query, &train, &near), vec![Match { query: 1, train: 0, distance: 1 }]);
+        assert_eq!(
+            kept,
+            vec![Match {
+                query: 1,
+                train: 0,
+                distance: 1
+            }]
+        );
+        let near = MatchConfig {
+            max_distance: Some(1),
+            ..plain
+        };
+        assert_eq!(
+            match_descriptors(&query, &train, &near),
+            vec![Match {
+                query: 1,
+                train: 0,
+                distance: 1
+            }]
+        );
     }
 }

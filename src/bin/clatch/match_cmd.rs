@@ -1,0 +1,156 @@
+//! `clatch match A B`: match two image files, optionally check against a homography, draw, export.
+
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+use clatch::{KeyPoint, Match};
+
+use crate::draw::{MatchClass, check_picture_path, draw_matches, save_picture};
+use crate::error::CliError;
+use crate::homography::Homography;
+use crate::input::load_gray;
+use crate::pipeline;
+use crate::progress::Progress;
+use crate::report;
+use crate::{MatchArgs, settings};
+
+/// Writes matches as CSV: `query,train,distance,xq,yq,xt,yt`.
+pub fn write_matches_csv(
+    mut w: impl Write,
+    matches: &[Match],
+    query: &[KeyPoint],
+    train: &[KeyPoint],
+) -> std::io::Result<()> {
+    writeln!(w, "query,train,distance,xq,yq,xt,yt")?;
+    for m in matches {
+        let (q, t) = (&query[m.query as usize], &train[m.train as usize]);
+        writeln!(
+            w,
+            "{},{},{},{},{},{},{}",
+            m.query, m.train, m.distance, q.x, q.y, t.x, t.y
+        )?;
+    }
+    w.flush()
+}
+
+/// Runs `clatch match`.
+pub fn main(args: &MatchArgs) -> Result<(), CliError> {
+    let settings = settings(&args.backend, &args.detect, Some(&args.matching))?;
+    check_picture_path(&args.output)?;
+    // Read the cheap inputs first, so a bad homography file fails before any work.
+    let homography = args
+        .homography
+        .as_deref()
+        .map(Homography::from_file)
+        .transpose()?;
+
+    let progress = Progress::new(2 + pipeline::PAIR_STAGES + 1);
+    progress.stage("reading images");
+    let img_a = load_gray(&args.image_a)?;
+    progress.done();
+    let img_b = load_gray(&args.image_b)?;
+    progress.done();
+
+    let run = pipeline::match_pair(
+        &settings,
+        (&img_a, &args.image_a),
+        (&img_b, &args.image_b),
+        &progress,
+    )?;
+    let (kps_a, kps_b) = (&run.a.features.keypoints, &run.b.features.keypoints);
+    let evaluation = homography
+        .as_ref()
+        .map(|h| report::evaluate(&run.matches, kps_a, kps_b, h, args.check.inlier_px));
+
+    progress.stage("writing results");
+    let classes = match &evaluation {
+        Some(e) => e.classes.clone(),
+        None => vec![MatchClass::Unchecked; run.matches.len()],
+    };
+    let picture = draw_matches(
+        &img_a,
+        &img_b,
+        kps_a,
+        kps_b,
+        &run.matches,
+        &classes,
+        args.draw.max_lines,
+    );
+    save_picture(&picture, &args.output)?;
+    if let Some(path) = &args.matches_csv {
+        write_csv_file(path, &run.matches, kps_a, kps_b)?;
+    }
+    progress.done();
+    progress.finish();
+
+    println!("clatch match");
+    println!("  image A     {}", args.image_a.display());
+    println!("  image B     {}", args.image_b.display());
+    if let Some(path) = &args.homography {
+        println!("  homography  {} (maps A to B)", path.display());
+    }
+    print!(
+        "{}",
+        report::pair_summary(
+            &run,
+            [img_a.dimensions(), img_b.dimensions()],
+            &settings.matching,
+            evaluation.as_ref(),
+        )
+    );
+    let legend = if evaluation.is_some() {
+        "inliers green, outliers red"
+    } else {
+        "matches yellow"
+    };
+    println!(
+        "{}",
+        report::picture_written(
+            &args.output,
+            picture.dimensions(),
+            run.matches.len(),
+            args.draw.max_lines,
+            legend,
+        )
+    );
+    if let Some(path) = &args.matches_csv {
+        println!(
+            "  wrote       {} ({} matches)",
+            path.display(),
+            run.matches.len()
+        );
+    }
+    Ok(())
+}
+
+fn write_csv_file(
+    path: &Path,
+    matches: &[Match],
+    query: &[KeyPoint],
+    train: &[KeyPoint],
+) -> Result<(), CliError> {
+    let file = std::fs::File::create(path).map_err(CliError::write(path))?;
+    write_matches_csv(BufWriter::new(file), matches, query, train).map_err(CliError::write(path))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_rows() {
+        let q = [KeyPoint::new(1.0, 2.0), KeyPoint::new(3.0, 4.5)];
+        let t = [KeyPoint::new(7.0, 8.0)];
+        let m = [Match {
+            query: 1,
+            train: 0,
+            distance: 17,
+        }];
+        let mut out = Vec::new();
+        write_matches_csv(&mut out, &m, &q, &t).unwrap();
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "query,train,distance,xq,yq,xt,yt\n1,0,17,3,4.5,7,8\n"
+        );
+    }
+}

@@ -1,1 +1,66 @@
-fn main() {}
+//! Extraction benchmarks on a 1024x768 synthetic image: description of ~2000 and ~10000 keypoints
+//! (throughput in keypoints = descriptors per second) and detection alone.
+//!
+//! `cargo bench --bench extract`
+
+use std::hint::black_box;
+use std::time::Duration;
+
+use clatch::synthetic::SplitMix64;
+use clatch::{Backend, DetectorConfig, Extractor, ExtractorConfig, GrayView, KeyPoint};
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+
+const WIDTH: usize = 1024;
+const HEIGHT: usize = 768;
+
+/// `n` keypoints inside the detector margin, random angles: every one is described.
+fn keypoints(n: usize) -> Vec<KeyPoint> {
+    let margin = DetectorConfig::default().margin();
+    let mut rng = SplitMix64::new(1);
+    (0..n)
+        .map(|_| {
+            let x = margin + rng.below((WIDTH - 2 * margin) as u64) as usize;
+            let y = margin + rng.below((HEIGHT - 2 * margin) as u64) as usize;
+            KeyPoint::new(x as f32, y as f32).with_angle(rng.below(3600) as f32 / 10.0)
+        })
+        .collect()
+}
+
+fn extraction(c: &mut Criterion) {
+    let pixels = clatch::synthetic::rectangles(WIDTH, HEIGHT, 1);
+    let image = GrayView::new(&pixels, WIDTH, HEIGHT, WIDTH).unwrap();
+    let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
+
+    let mut group = c.benchmark_group("describe 1024x768");
+    group
+        .measurement_time(Duration::from_secs(4))
+        .sample_size(10);
+    for n in [2000, 10000] {
+        let kps = keypoints(n);
+        assert!(extractor.describe(&image, &kps).unwrap().skipped.is_empty());
+        group.throughput(Throughput::Elements(n as u64));
+        group.bench_with_input(BenchmarkId::from_parameter(n), &kps, |b, kps| {
+            b.iter(|| {
+                extractor
+                    .describe(black_box(&image), black_box(kps))
+                    .unwrap()
+            })
+        });
+    }
+    group.finish();
+
+    let mut group = c.benchmark_group("detect 1024x768");
+    group
+        .measurement_time(Duration::from_secs(4))
+        .sample_size(20);
+    let found = extractor.detect(&image).unwrap().len();
+    group.throughput(Throughput::Elements((WIDTH * HEIGHT) as u64));
+    group.bench_function(
+        BenchmarkId::new("pixels", format!("{found} keypoints")),
+        |b| b.iter(|| extractor.detect(black_box(&image)).unwrap()),
+    );
+    group.finish();
+}
+
+criterion_group!(benches, extraction);
+criterion_main!(benches);

@@ -157,7 +157,8 @@ impl DescriptorSet {
     /// The packed words of descriptor `i`, or `None` past the end.
     pub fn get(&self, i: usize) -> Option<&[u64]> {
         let per = self.width.words();
-        self.words.get(i * per..(i + 1) * per)
+        let start = i.checked_mul(per)?;
+        self.words.get(start..start.checked_add(per)?)
     }
 
     /// Descriptor `i` as a full 512-bit value (zero-padded), or `None` past the end.

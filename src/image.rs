@@ -39,13 +39,15 @@ impl<'a> GrayView<'a> {
                 max: MAX_IMAGE_SIDE,
             });
         }
-        let needed = stride * (height - 1) + width;
-        if data.len() < needed {
+        let needed = stride
+            .checked_mul(height - 1)
+            .and_then(|n| n.checked_add(width));
+        if needed.is_none_or(|n| data.len() < n) {
             return Err(Error::BufferTooSmall {
                 width,
                 height,
                 stride,
-                needed,
+                needed: needed.unwrap_or(usize::MAX),
                 got: data.len(),
             });
         }

@@ -1,0 +1,88 @@
+//! Helpers shared by the integration tests (each test binary uses a different subset).
+#![allow(dead_code)]
+
+use clatch::synthetic::SplitMix64;
+use clatch::{DescriptorSet, DescriptorWidth, GrayView};
+
+/// An owned 8-bit gray image, row-major, stride = width.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Gray {
+    pub pixels: Vec<u8>,
+    pub width: usize,
+    pub height: usize,
+}
+
+impl Gray {
+    pub fn new(pixels: Vec<u8>, width: usize, height: usize) -> Self {
+        assert_eq!(pixels.len(), width * height);
+        Self {
+            pixels,
+            width,
+            height,
+        }
+    }
+
+    pub fn view(&self) -> GrayView<'_> {
+        GrayView::new(&self.pixels, self.width, self.height, self.width).expect("valid image")
+    }
+
+    pub fn at(&self, x: usize, y: usize) -> u8 {
+        self.pixels[y * self.width + x]
+    }
+
+    /// The image turned by +90 degrees in image coordinates (y down): a point at offset `(a, b)` from the
+    /// centre goes to `(-b, a)`. Pixel `(x, y)` lands on `(height - 1 - y, x)` of the `height x width`
+    /// result, so an angle measured by `atan2(dy, dx)` grows by 90 degrees.
+    pub fn rotate90(&self) -> Gray {
+        let (w, h) = (self.height, self.width);
+        let mut out = vec![0u8; w * h];
+        for y in 0..self.height {
+            for x in 0..self.width {
+                let (nx, ny) = rotate90_point(x, y, self.height);
+                out[ny * w + nx] = self.at(x, y);
+            }
+        }
+        Gray::new(out, w, h)
+    }
+
+    /// [`Gray::rotate90`] applied `turns` times.
+    pub fn rotate(&self, turns: usize) -> Gray {
+        (0..turns).fold(self.clone(), |img, _| img.rotate90())
+    }
+}
+
+/// Where pixel `(x, y)` of an image `height` pixels high lands after [`Gray::rotate90`].
+pub fn rotate90_point(x: usize, y: usize, height: usize) -> (usize, usize) {
+    (height - 1 - y, x)
+}
+
+/// The embedded photograph (512x512, 8-bit gray PNG), decoded with the `image` crate.
+pub fn astronaut() -> Gray {
+    let decoded = image::load_from_memory(include_bytes!("../../assets/astronaut.png"))
+        .expect("the embedded PNG decodes");
+    let gray = clatch::image::gray_from_dynamic(&decoded);
+    let (w, h) = (gray.width() as usize, gray.height() as usize);
+    Gray::new(gray.into_raw(), w, h)
+}
+
+/// `clatch::synthetic::rectangles` as a [`Gray`].
+pub fn rectangles(width: usize, height: usize, seed: u64) -> Gray {
+    Gray::new(
+        clatch::synthetic::rectangles(width, height, seed),
+        width,
+        height,
+    )
+}
+
+/// Uniformly random descriptors of the given width (bits past the width cleared by the set).
+pub fn random_set(width: DescriptorWidth, count: usize, rng: &mut SplitMix64) -> DescriptorSet {
+    let words = (0..count * width.words()).map(|_| rng.next_u64()).collect();
+    DescriptorSet::from_words(width, words).expect("whole rows")
+}
+
+/// Hamming distance computed bit by bit, independent of the crate's popcount.
+pub fn naive_hamming(a: &[u64], b: &[u64], bits: usize) -> u32 {
+    (0..bits)
+        .filter(|&t| (a[t / 64] >> (t % 64)) & 1 != (b[t / 64] >> (t % 64)) & 1)
+        .count() as u32
+}

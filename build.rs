@@ -1,7 +1,132 @@
-//! Build script. The default (`cpu`) build needs nothing beyond cargo. Under the `cuda` feature this is
-//! where `kernels/*.cu` will be compiled to PTX with nvcc; this release ships no kernels yet.
+//! Build script. The default (`cpu`) build needs nothing beyond cargo and does nothing here.
+//!
+//! Under the `cuda` feature it is the one place that knows about nvcc:
+//! - finds nvcc (`NVCC`, then `CUDA_HOME`/`CUDA_PATH`, then `PATH`);
+//! - compiles every `kernels/*.cu` to portable PTX for a baseline virtual architecture (the driver
+//!   JIT-compiles it for the GPU at hand), with FMA contraction off so no float decides a bit by accident;
+//! - assembles each kernel for sm_90 with ptxas as a compile-only check and keeps ptxas's resource report;
+//! - writes `kernels.rs` (the PTX as string constants) and `clatch_h.rs` (bindgen of `kernels/clatch.h`)
+//!   into OUT_DIR.
 
 fn main() {
     println!("cargo::rerun-if-changed=build.rs");
     println!("cargo::rerun-if-changed=kernels");
+    #[cfg(feature = "cuda")]
+    cuda::build();
+}
+
+#[cfg(feature = "cuda")]
+mod cuda {
+    use std::fs;
+    use std::path::{Path, PathBuf};
+    use std::process::Command;
+
+    /// PTX target: old enough for every GPU the driver supports, new enough for the intrinsics used.
+    const PTX_ARCH: &str = "compute_75";
+    /// Native target checked with ptxas (the H100).
+    const CHECK_ARCH: &str = "sm_90";
+    const NVCC_FLAGS: &[&str] = &["-O3", "--fmad=false", "-lineinfo", "-std=c++17"];
+
+    pub fn build() {
+        for var in ["NVCC", "CUDA_HOME", "CUDA_PATH", "PATH"] {
+            println!("cargo::rerun-if-env-changed={var}");
+        }
+        let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
+        let kernels = Path::new("kernels");
+        let nvcc = find_nvcc().unwrap_or_else(|| {
+            panic!(
+                "\n\nclatch: the `cuda` feature compiles kernels/*.cu with nvcc, and none was found.\n\
+                 Set NVCC=/path/to/nvcc, or CUDA_HOME, or put nvcc on PATH. nvcc 13.0 is known to work\n\
+                 (its PTX is accepted by 13.0 drivers); without a CUDA toolkit it installs with pip:\n\
+                 \n    pip install --target DIR nvidia-cuda-nvcc==13.0.88 nvidia-cuda-crt==13.0.88 \\\n\
+                 \x20       nvidia-cuda-runtime==13.0.96 nvidia-nvvm==13.0.88\n\
+                 \x20   export NVCC=DIR/nvidia/cu13/bin/nvcc\n\n"
+            )
+        });
+
+        let mut sources: Vec<PathBuf> = fs::read_dir(kernels)
+            .expect("kernels/ exists")
+            .map(|entry| entry.expect("readable kernels/ entry").path())
+            .filter(|p| p.extension().is_some_and(|e| e == "cu"))
+            .collect();
+        sources.sort();
+
+        let mut constants = String::new();
+        let mut report = String::new();
+        for source in &sources {
+            println!("cargo::rerun-if-changed={}", source.display());
+            let stem = source.file_stem().unwrap().to_string_lossy().into_owned();
+            let ptx = out.join(format!("{stem}.ptx"));
+            run(Command::new(&nvcc)
+                .args(NVCC_FLAGS)
+                .args(["-ptx", &format!("-arch={PTX_ARCH}"), "-I"])
+                .arg(kernels)
+                .arg(source)
+                .arg("-o")
+                .arg(&ptx));
+            let cubin = out.join(format!("{stem}.{CHECK_ARCH}.cubin"));
+            let check = run(Command::new(&nvcc)
+                .args(NVCC_FLAGS)
+                .args([
+                    "-cubin",
+                    &format!("-arch={CHECK_ARCH}"),
+                    "-Xptxas",
+                    "-v",
+                    "-I",
+                ])
+                .arg(kernels)
+                .arg(source)
+                .arg("-o")
+                .arg(&cubin));
+            report.push_str(&format!("== {stem} ({CHECK_ARCH})\n{check}\n"));
+            constants.push_str(&format!(
+                "/// PTX of `kernels/{stem}.cu`.\npub const {}_PTX: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{stem}.ptx\"));\n",
+                stem.to_uppercase()
+            ));
+        }
+        fs::write(out.join("kernels.rs"), constants).expect("write kernels.rs");
+        fs::write(out.join("ptxas-report.txt"), report).expect("write ptxas report");
+
+        let header = kernels.join("clatch.h");
+        bindgen::Builder::default()
+            .header(header.to_string_lossy())
+            .allowlist_item("clatch_.*|CLATCH_.*")
+            .derive_default(true)
+            .layout_tests(true)
+            .generate()
+            .expect("bindgen parses kernels/clatch.h")
+            .write_to_file(out.join("clatch_h.rs"))
+            .expect("write clatch_h.rs");
+    }
+
+    fn find_nvcc() -> Option<PathBuf> {
+        let exists = |p: PathBuf| p.is_file().then_some(p);
+        if let Some(p) = std::env::var_os("NVCC") {
+            return exists(PathBuf::from(p));
+        }
+        for var in ["CUDA_HOME", "CUDA_PATH"] {
+            if let Some(home) = std::env::var_os(var) {
+                if let Some(p) = exists(Path::new(&home).join("bin").join("nvcc")) {
+                    return Some(p);
+                }
+            }
+        }
+        std::env::split_paths(&std::env::var_os("PATH")?).find_map(|dir| exists(dir.join("nvcc")))
+    }
+
+    /// Runs a command; on failure stops the build with the exact command line and its output.
+    fn run(cmd: &mut Command) -> String {
+        let output = cmd
+            .output()
+            .unwrap_or_else(|e| panic!("clatch: cannot run {cmd:?}: {e}"));
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&output.stdout),
+            String::from_utf8_lossy(&output.stderr)
+        );
+        if !output.status.success() {
+            panic!("clatch: kernel build failed:\n  {cmd:?}\n{text}");
+        }
+        text
+    }
 }

@@ -105,6 +105,14 @@ pub enum Error {
         reason: &'static str,
     },
 
+    /// A CUDA driver call or kernel launch failed.
+    #[error("CUDA {operation} failed: {message}")]
+    Cuda { operation: String, message: String },
+
+    /// The device ran out of memory; the context stays usable.
+    #[error("CUDA device out of memory during {operation} ({bytes} bytes requested)")]
+    DeviceOutOfMemory { operation: String, bytes: usize },
+
     /// The requested backend cannot run here.
     #[error("backend {backend} is unavailable: {reason}")]
     BackendUnavailable { backend: String, reason: String },

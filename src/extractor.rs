@@ -79,8 +79,9 @@ impl Extractor {
         Self::check_image(image)?;
         match self.backend {
             Backend::Cpu => Ok(detect::cpu::detect(image, &self.config.detector)),
+            // The detection kernels are not written yet: the CPU reference runs (same results).
             #[cfg(feature = "cuda")]
-            Backend::Cuda { .. } => self.backend.ensure_available().map(|_| Vec::new()),
+            Backend::Cuda { .. } => Ok(detect::cpu::detect(image, &self.config.detector)),
         }
     }
 
@@ -97,7 +98,12 @@ impl Extractor {
                 &self.config.descriptor,
             )),
             #[cfg(feature = "cuda")]
-            Backend::Cuda { .. } => Err(self.backend.ensure_available().unwrap_err()),
+            Backend::Cuda { device } => crate::cuda::describe(
+                &*crate::cuda::device(device)?,
+                image,
+                keypoints,
+                &self.config.descriptor,
+            ),
         }
     }
 

@@ -7,6 +7,7 @@
 /// `size` is the side of the descriptor window in pixels: the 64x64 sample window is spread over
 /// `size` x `size` pixels, so the default 64 samples every pixel once.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub struct KeyPoint {
     /// Column of the keypoint centre, in pixels.
     pub x: f32,

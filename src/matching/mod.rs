@@ -15,6 +15,7 @@ pub mod cpu;
 /// A correspondence between query descriptor `query` and gallery descriptor `train`, as in OpenCV's
 /// `DMatch` (without the image index).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(C)]
 pub struct Match {
     /// Index in the query set.
     pub query: u32,

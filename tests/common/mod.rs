@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests (each test binary uses a different subset).
 #![allow(dead_code)]
 
+pub mod golden;
+
 use clatch::synthetic::SplitMix64;
 use clatch::{DescriptorSet, DescriptorWidth, GrayView};
 

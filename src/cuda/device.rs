@@ -1,0 +1,140 @@
+//! One loaded device: context, kernels and the constant tables, created once per ordinal.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use cudarc::driver::{CudaContext, CudaFunction, CudaSlice, CudaStream, DriverError, sys};
+use cudarc::nvrtc::Ptx;
+
+use super::ptx;
+use crate::angle::rotation_table;
+use crate::describe::triplets::TRIPLETS;
+use crate::error::{Error, Result};
+
+/// A CUDA device with clatch's kernels loaded and its tables uploaded.
+#[derive(Debug)]
+pub struct GpuDevice {
+    pub(crate) ctx: Arc<CudaContext>,
+    pub(crate) describe: CudaFunction,
+    pub(crate) rotation: CudaSlice<i32>,
+    pub(crate) triplets: CudaSlice<u8>,
+    pub(crate) pitch_alignment: usize,
+    pub(crate) multiprocessors: usize,
+    name: String,
+}
+
+/// Maps a driver error to ours, naming the operation.
+pub(crate) fn driver_error(operation: &str) -> impl Fn(DriverError) -> Error + '_ {
+    move |e| {
+        let message = e
+            .error_string()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|_| format!("{e:?}"));
+        if e.0 == sys::cudaError_enum::CUDA_ERROR_OUT_OF_MEMORY {
+            Error::DeviceOutOfMemory {
+                operation: operation.to_string(),
+                bytes: 0,
+            }
+        } else {
+            Error::Cuda {
+                operation: operation.to_string(),
+                message,
+            }
+        }
+    }
+}
+
+fn unavailable(ordinal: usize, reason: impl Into<String>) -> Error {
+    Error::BackendUnavailable {
+        backend: format!("cuda:{ordinal}"),
+        reason: reason.into(),
+    }
+}
+
+/// The loaded device `ordinal`, created on first use and shared afterwards.
+pub fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
+    static DEVICES: OnceLock<Mutex<HashMap<usize, Arc<GpuDevice>>>> = OnceLock::new();
+    let mut devices = DEVICES
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some(dev) = devices.get(&ordinal) {
+        return Ok(dev.clone());
+    }
+    // cudarc panics if libcuda cannot be loaded: ask first.
+    // SAFETY: only tries to open the driver library.
+    if !unsafe { sys::is_culib_present() } {
+        return Err(unavailable(
+            ordinal,
+            "no CUDA driver (libcuda) on this machine",
+        ));
+    }
+    let count = CudaContext::device_count()
+        .map_err(|e| unavailable(ordinal, format!("no CUDA device ({e:?})")))?;
+    if ordinal >= count.max(0) as usize {
+        return Err(unavailable(
+            ordinal,
+            format!("no CUDA device {ordinal} ({count} present)"),
+        ));
+    }
+    let dev = Arc::new(GpuDevice::load(ordinal)?);
+    devices.insert(ordinal, dev.clone());
+    Ok(dev)
+}
+
+impl GpuDevice {
+    fn load(ordinal: usize) -> Result<Self> {
+        let ctx = CudaContext::new(ordinal).map_err(driver_error("context creation"))?;
+        let describe_module = ctx
+            .load_module(Ptx::from_src(ptx::DESCRIBE_PTX))
+            .map_err(driver_error("loading kernels/describe.cu"))?;
+        let describe = describe_module
+            .load_function("clatch_describe")
+            .map_err(driver_error("loading clatch_describe"))?;
+        let stream = ctx.default_stream();
+        let rotation: Vec<i32> = rotation_table().iter().flatten().copied().collect();
+        let rotation = stream
+            .clone_htod(&rotation)
+            .map_err(driver_error("uploading the rotation table"))?;
+        let triplets: Vec<u8> = TRIPLETS.iter().flatten().copied().collect();
+        let triplets = stream
+            .clone_htod(&triplets)
+            .map_err(driver_error("uploading the triplet table"))?;
+        stream
+            .synchronize()
+            .map_err(driver_error("uploading the tables"))?;
+        let attribute = |a| {
+            ctx.attribute(a)
+                .map_err(driver_error("reading device attributes"))
+        };
+        let pitch_alignment =
+            attribute(sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_TEXTURE_PITCH_ALIGNMENT)?
+                as usize;
+        let multiprocessors =
+            attribute(sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_MULTIPROCESSOR_COUNT)? as usize;
+        let name = ctx
+            .name()
+            .map_err(driver_error("reading the device name"))?;
+        Ok(Self {
+            ctx,
+            describe,
+            rotation,
+            triplets,
+            pitch_alignment,
+            multiprocessors,
+            name,
+        })
+    }
+
+    /// The device's name, e.g. "NVIDIA H100 80GB HBM3".
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// A new stream owned by the caller (never the default stream).
+    pub(crate) fn new_stream(&self) -> Result<Arc<CudaStream>> {
+        self.ctx
+            .new_stream()
+            .map_err(driver_error("stream creation"))
+    }
+}

@@ -230,7 +230,7 @@ mod gpu {
         ] {
             let mut rng = SplitMix64::new(seed);
             let (w, h) = (image.width as u64, image.height as u64);
-            let keypoints: Vec<KeyPoint> = (0..500_000)
+            let keypoints: Vec<KeyPoint> = (0..700_000)
                 .map(|_| {
                     KeyPoint::new(
                         rng.below((w - 1) * 256) as f32 / 256.0,

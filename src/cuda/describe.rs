@@ -1,6 +1,8 @@
 //! GPU description: `kernels/describe.cu`, reproducing [`crate::describe::cpu::describe`].
 
-use cudarc::driver::{DeviceRepr, LaunchConfig, PushKernelArg};
+use std::sync::Arc;
+
+use cudarc::driver::{CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg, sys};
 
 use super::device::{GpuDevice, driver_error};
 use super::header::CLATCH_DESCRIBE_WARPS;
@@ -45,57 +47,132 @@ pub(crate) fn describe(
         });
     }
     let selected: Vec<KeyPoint> = keypoint_index.iter().map(|&i| keypoints[i]).collect();
-    let weights: Vec<i32> = config
-        .weights
-        .as_array()
-        .iter()
-        .map(|&w| w as i32)
-        .collect();
-
-    let stream = dev.new_stream()?;
-    let device_image = DeviceImage::upload(dev, &stream, image)?;
-    let d_keypoints = stream
-        .clone_htod(&selected)
-        .map_err(driver_error("keypoint upload"))?;
-    let d_weights = stream
-        .clone_htod(&weights)
-        .map_err(driver_error("weight upload"))?;
-    let mut d_out = stream
-        .alloc_zeros::<u64>(selected.len() * width.words())
-        .map_err(driver_error("descriptor allocation"))?;
-
-    let count = selected.len() as i32;
-    let (w, h) = (image.width() as i32, image.height() as i32);
-    let bits = width.bits() as i32;
-    let texture = device_image.texture();
-    let blocks = selected.len().min(dev.multiprocessors * BLOCKS_PER_SM) as u32;
-    let mut launch = stream.launch_builder(&dev.describe);
-    launch
-        .arg(&texture)
-        .arg(&w)
-        .arg(&h)
-        .arg(&d_keypoints)
-        .arg(&count)
-        .arg(&dev.rotation)
-        .arg(&dev.triplets)
-        .arg(&d_weights)
-        .arg(&bits)
-        .arg(&mut d_out);
-    let config = LaunchConfig {
-        grid_dim: (blocks, 1, 1),
-        block_dim: (CLATCH_DESCRIBE_WARPS * 32, 1, 1),
-        shared_mem_bytes: 0,
-    };
-    // SAFETY: the argument list matches clatch_describe's signature; every buffer holds what the
-    // kernel indexes (count keypoints, 2880 rotations, 512 triplets, 64 weights, count * words outputs).
-    unsafe { launch.launch(config) }.map_err(driver_error("launching clatch_describe"))?;
-    let words = stream.clone_dtoh(&d_out).map_err(driver_error(
+    let mut job = Job::prepare(dev, image, &selected, config)?;
+    job.launch(dev)?;
+    let words = job.stream.clone_dtoh(&job.out).map_err(driver_error(
         "clatch_describe (running, or copying descriptors back)",
     ))?;
-    drop(device_image);
     Ok(Described {
         descriptors: DescriptorSet::from_words(width, words)?,
         keypoint_index,
         skipped,
     })
+}
+
+/// Everything one launch of `clatch_describe` needs, on the device.
+struct Job {
+    stream: Arc<CudaStream>,
+    image: DeviceImage,
+    keypoints: CudaSlice<KeyPoint>,
+    weights: CudaSlice<i32>,
+    out: CudaSlice<u64>,
+    size: (i32, i32),
+    bits: i32,
+}
+
+impl Job {
+    /// Uploads the image and keypoints (all of which must fit) on a new stream.
+    fn prepare(
+        dev: &GpuDevice,
+        image: &GrayView,
+        keypoints: &[KeyPoint],
+        config: &DescriptorConfig,
+    ) -> Result<Self> {
+        let stream = dev.new_stream()?;
+        let device_image = DeviceImage::upload(dev, &stream, image)?;
+        let weights: Vec<i32> = config
+            .weights
+            .as_array()
+            .iter()
+            .map(|&w| w as i32)
+            .collect();
+        Ok(Self {
+            keypoints: stream
+                .clone_htod(keypoints)
+                .map_err(driver_error("keypoint upload"))?,
+            weights: stream
+                .clone_htod(&weights)
+                .map_err(driver_error("weight upload"))?,
+            out: stream
+                .alloc_zeros::<u64>(keypoints.len() * config.width.words())
+                .map_err(driver_error("descriptor allocation"))?,
+            image: device_image,
+            size: (image.width() as i32, image.height() as i32),
+            bits: config.width.bits() as i32,
+            stream,
+        })
+    }
+
+    /// Queues the kernel on the job's stream.
+    fn launch(&mut self, dev: &GpuDevice) -> Result<()> {
+        let count = self.keypoints.len() as i32;
+        let texture = self.image.texture();
+        let blocks = self
+            .keypoints
+            .len()
+            .min(dev.multiprocessors * BLOCKS_PER_SM) as u32;
+        let mut launch = self.stream.launch_builder(&dev.describe);
+        launch
+            .arg(&texture)
+            .arg(&self.size.0)
+            .arg(&self.size.1)
+            .arg(&self.keypoints)
+            .arg(&count)
+            .arg(&dev.rotation)
+            .arg(&dev.triplets)
+            .arg(&self.weights)
+            .arg(&self.bits)
+            .arg(&mut self.out);
+        let config = LaunchConfig {
+            grid_dim: (blocks, 1, 1),
+            block_dim: (CLATCH_DESCRIBE_WARPS * 32, 1, 1),
+            shared_mem_bytes: 0,
+        };
+        // SAFETY: the argument list matches clatch_describe's signature; every buffer holds what the
+        // kernel indexes (count keypoints, 2880 rotations, 512 triplets, 64 weights, count * words
+        // outputs).
+        unsafe { launch.launch(config) }.map_err(driver_error("launching clatch_describe"))?;
+        Ok(())
+    }
+}
+
+/// Kernel times in milliseconds of `repeats` launches after `warmup` launches, measured with CUDA
+/// events on the job's stream (upload and download excluded). Keypoints must all fit.
+#[doc(hidden)]
+pub fn time_describe_kernel(
+    dev: &GpuDevice,
+    image: &GrayView,
+    keypoints: &[KeyPoint],
+    config: &DescriptorConfig,
+    warmup: usize,
+    repeats: usize,
+) -> Result<Vec<f32>> {
+    let mut job = Job::prepare(dev, image, keypoints, config)?;
+    for _ in 0..warmup {
+        job.launch(dev)?;
+    }
+    let timing = Some(sys::CUevent_flags::CU_EVENT_DEFAULT);
+    let mut times = Vec::with_capacity(repeats);
+    for _ in 0..repeats {
+        let start = dev
+            .ctx
+            .new_event(timing)
+            .map_err(driver_error("event creation"))?;
+        let end = dev
+            .ctx
+            .new_event(timing)
+            .map_err(driver_error("event creation"))?;
+        start
+            .record(&job.stream)
+            .map_err(driver_error("event record"))?;
+        job.launch(dev)?;
+        end.record(&job.stream)
+            .map_err(driver_error("event record"))?;
+        times.push(
+            start
+                .elapsed_ms(&end)
+                .map_err(driver_error("clatch_describe (timed)"))?,
+        );
+    }
+    Ok(times)
 }

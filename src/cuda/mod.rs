@@ -21,6 +21,8 @@ pub mod ptx {
 }
 
 pub(crate) use describe::describe;
+#[doc(hidden)]
+pub use describe::time_describe_kernel;
 pub use device::{GpuDevice, device};
 
 use crate::error::Result;

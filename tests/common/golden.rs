@@ -9,9 +9,16 @@ use clatch::{
 
 use super::Gray;
 
-/// Where the golden file lives.
+/// Where the golden file lives: in this checkout, or (for a test binary carried to another machine)
+/// under the current directory.
 pub fn golden_path() -> std::path::PathBuf {
-    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden/astronaut.txt")
+    let relative = "tests/golden/astronaut.txt";
+    let built = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(relative);
+    if built.exists() {
+        built
+    } else {
+        relative.into()
+    }
 }
 
 /// The committed keypoint list: integer and sub-pixel positions, many angles and sizes, and keypoints

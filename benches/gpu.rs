@@ -1,0 +1,58 @@
+//! GPU timings: `cargo bench --features cuda --bench gpu`. Kernel times come from CUDA events around
+//! each launch, after warm-up; the median of the repeats is reported with the device's name.
+
+#[cfg(not(feature = "cuda"))]
+fn main() {
+    println!("skipped: no CUDA device (built without the `cuda` feature)");
+}
+
+#[cfg(feature = "cuda")]
+fn main() {
+    use clatch::synthetic::SplitMix64;
+    use clatch::{DescriptorConfig, GrayView, KeyPoint};
+
+    let dev = match clatch::cuda::device(0) {
+        Ok(dev) => dev,
+        Err(e) => {
+            println!("skipped: no CUDA device ({e})");
+            return;
+        }
+    };
+    println!("device: {}", dev.name());
+    let median = |mut v: Vec<f32>| {
+        v.sort_by(f32::total_cmp);
+        v[v.len() / 2] as f64
+    };
+    for (name, w, h) in [("1080p", 1920usize, 1080usize), ("5616x3744", 5616, 3744)] {
+        let pixels = clatch::synthetic::rectangles(w, h, 9);
+        let image = GrayView::new(&pixels, w, h, w).unwrap();
+        for n in [1_000usize, 10_000, 100_000, 1_000_000] {
+            let mut rng = SplitMix64::new(n as u64);
+            // Upright-to-any angle, default size, positions where the window always fits.
+            let keypoints: Vec<KeyPoint> = (0..n)
+                .map(|_| {
+                    KeyPoint::new(
+                        48.0 + rng.below((w as u64 - 97) * 16) as f32 / 16.0,
+                        48.0 + rng.below((h as u64 - 97) * 16) as f32 / 16.0,
+                    )
+                    .with_angle(rng.below(2880) as f32 / 8.0)
+                })
+                .collect();
+            let times = clatch::cuda::time_describe_kernel(
+                &dev,
+                &image,
+                &keypoints,
+                &DescriptorConfig::default(),
+                3,
+                15,
+            )
+            .expect("describe kernel");
+            let ms = median(times);
+            println!(
+                "describe {name:>9} {n:>8} keypoints: median {ms:9.3} ms  {:8.1} M descriptors/s  {:6.2} ns/descriptor",
+                n as f64 / ms / 1e3,
+                ms * 1e6 / n as f64
+            );
+        }
+    }
+}

@@ -111,7 +111,7 @@ impl Job {
             .keypoints
             .len()
             .min(dev.multiprocessors * BLOCKS_PER_SM) as u32;
-        let mut launch = self.stream.launch_builder(&dev.describe);
+        let mut launch = self.stream.launch_builder(dev.kernel("clatch_describe"));
         launch
             .arg(&texture)
             .arg(&self.size.0)

@@ -11,11 +11,19 @@ use crate::angle::rotation_table;
 use crate::describe::triplets::TRIPLETS;
 use crate::error::{Error, Result};
 
+/// Every kernel entry point, by the PTX of the file that defines it. Add a kernel here and fetch it
+/// with [`GpuDevice::kernel`].
+const KERNELS: &[(&str, &str, &[&str])] = &[(
+    "kernels/describe.cu",
+    ptx::DESCRIBE_PTX,
+    &["clatch_describe"],
+)];
+
 /// A CUDA device with clatch's kernels loaded and its tables uploaded.
 #[derive(Debug)]
 pub struct GpuDevice {
     pub(crate) ctx: Arc<CudaContext>,
-    pub(crate) describe: CudaFunction,
+    kernels: HashMap<&'static str, CudaFunction>,
     pub(crate) rotation: CudaSlice<i32>,
     pub(crate) triplets: CudaSlice<u8>,
     pub(crate) pitch_alignment: usize,
@@ -85,12 +93,16 @@ pub fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
 impl GpuDevice {
     fn load(ordinal: usize) -> Result<Self> {
         let ctx = CudaContext::new(ordinal).map_err(driver_error("context creation"))?;
-        let describe_module = ctx
-            .load_module(Ptx::from_src(ptx::DESCRIBE_PTX))
-            .map_err(driver_error("loading kernels/describe.cu"))?;
-        let describe = describe_module
-            .load_function("clatch_describe")
-            .map_err(driver_error("loading clatch_describe"))?;
+        let mut kernels = HashMap::new();
+        for &(file, source, names) in KERNELS {
+            let module = ctx
+                .load_module(Ptx::from_src(source))
+                .map_err(driver_error(file))?;
+            for &name in names {
+                let function = module.load_function(name).map_err(driver_error(name))?;
+                kernels.insert(name, function);
+            }
+        }
         let stream = ctx.default_stream();
         let rotation: Vec<i32> = rotation_table().iter().flatten().copied().collect();
         let rotation = stream
@@ -117,13 +129,20 @@ impl GpuDevice {
             .map_err(driver_error("reading the device name"))?;
         Ok(Self {
             ctx,
-            describe,
+            kernels,
             rotation,
             triplets,
             pitch_alignment,
             multiprocessors,
             name,
         })
+    }
+
+    /// A loaded kernel, by its `extern "C"` name (one listed in `KERNELS`).
+    pub(crate) fn kernel(&self, name: &'static str) -> &CudaFunction {
+        self.kernels
+            .get(name)
+            .unwrap_or_else(|| panic!("kernel {name} is not listed in KERNELS"))
     }
 
     /// The device's name, e.g. "NVIDIA H100 80GB HBM3".

@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub mod golden;
+pub mod gpu;
 
 use clatch::synthetic::SplitMix64;
 use clatch::{DescriptorSet, DescriptorWidth, GrayView};

@@ -5,27 +5,20 @@
 
 mod common;
 
-use libtest_mimic::{Arguments, Trial};
+use libtest_mimic::Trial;
 
 fn main() {
-    let args = Arguments::from_args();
-    libtest_mimic::run(&args, trials()).exit();
+    common::gpu::run(trials())
 }
 
 #[cfg(not(feature = "cuda"))]
 fn trials() -> Vec<Trial> {
-    println!("skipped: no CUDA device (built without the `cuda` feature)");
-    vec![
-        Trial::test("cuda_identity", || -> Result<(), libtest_mimic::Failed> {
-            Err("built without the `cuda` feature".into())
-        })
-        .with_ignored_flag(true),
-    ]
+    common::gpu::feature_missing("cuda_describe")
 }
 
 #[cfg(feature = "cuda")]
 fn trials() -> Vec<Trial> {
-    let trials = vec![
+    vec![
         Trial::test("describe_reproduces_golden_file", gpu::golden_file),
         Trial::test("describe_every_angle_bin", gpu::every_angle_bin),
         Trial::test("describe_every_width", gpu::every_width),
@@ -34,20 +27,7 @@ fn trials() -> Vec<Trial> {
             gpu::sizes_subpixel_and_borders,
         ),
         Trial::test("describe_a_million_random_keypoints", gpu::million_random),
-    ];
-    match clatch::cuda::device(0) {
-        Ok(dev) => {
-            println!("device: {}", dev.name());
-            trials
-        }
-        Err(e) => {
-            println!("skipped: no CUDA device ({e})");
-            trials
-                .into_iter()
-                .map(|t| t.with_ignored_flag(true))
-                .collect()
-        }
-    }
+    ]
 }
 
 #[cfg(feature = "cuda")]

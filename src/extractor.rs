@@ -26,6 +26,22 @@ pub struct Features {
     pub descriptors: DescriptorSet,
 }
 
+impl Features {
+    /// Pairs `keypoints` with their description, keeping only the keypoints that got a descriptor
+    /// (for detected keypoints that is all of them: detection keeps a margin for the window).
+    pub fn from_described(keypoints: Vec<KeyPoint>, described: Described) -> Self {
+        let keypoints = if described.skipped.is_empty() {
+            keypoints
+        } else {
+            described.keypoint_index.iter().map(|&i| keypoints[i]).collect()
+        };
+        Self {
+            keypoints,
+            descriptors: described.descriptors,
+        }
+    }
+}
+
 /// Finds keypoints and computes their CLATCH descriptors.
 ///
 /// ```
@@ -109,19 +125,8 @@ impl Extractor {
 
     /// Detects keypoints and describes them.
     pub fn detect_and_describe(&self, image: &GrayView) -> Result<Features> {
-        let mut keypoints = self.detect(image)?;
+        let keypoints = self.detect(image)?;
         let described = self.describe(image, &keypoints)?;
-        if !described.skipped.is_empty() {
-            // Detection keeps a margin for the window, so this only guards against a future mismatch.
-            keypoints = described
-                .keypoint_index
-                .iter()
-                .map(|&i| keypoints[i])
-                .collect();
-        }
-        Ok(Features {
-            keypoints,
-            descriptors: described.descriptors,
-        })
+        Ok(Features::from_described(keypoints, described))
     }
 }

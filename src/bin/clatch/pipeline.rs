@@ -67,7 +67,7 @@ pub fn extract(
 
     progress.stage("detecting keypoints");
     let start = Instant::now();
-    let mut keypoints = extractor.detect(&view).map_err(in_image())?;
+    let keypoints = extractor.detect(&view).map_err(in_image())?;
     let detect = start.elapsed();
     progress.done();
 
@@ -77,19 +77,8 @@ pub fn extract(
     let describe = start.elapsed();
     progress.done();
 
-    if !described.skipped.is_empty() {
-        // Detection keeps a margin for the window, so this only guards against a future mismatch.
-        keypoints = described
-            .keypoint_index
-            .iter()
-            .map(|&i| keypoints[i])
-            .collect();
-    }
     Ok(Extracted {
-        features: Features {
-            keypoints,
-            descriptors: described.descriptors,
-        },
+        features: Features::from_described(keypoints, described),
         detect,
         describe,
     })

@@ -33,7 +33,11 @@ impl Features {
         let keypoints = if described.skipped.is_empty() {
             keypoints
         } else {
-            described.keypoint_index.iter().map(|&i| keypoints[i]).collect()
+            described
+                .keypoint_index
+                .iter()
+                .map(|&i| keypoints[i])
+                .collect()
         };
         Self {
             keypoints,

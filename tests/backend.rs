@@ -21,7 +21,12 @@ fn without_the_cuda_feature_auto_is_the_cpu() {
 fn auto_agrees_with_device_availability() {
     match clatch::cuda::device(0) {
         Ok(dev) => {
-            assert_eq!(Backend::auto(), Backend::Cuda { device: 0 }, "{}", dev.name());
+            assert_eq!(
+                Backend::auto(),
+                Backend::Cuda { device: 0 },
+                "{}",
+                dev.name()
+            );
         }
         Err(e) => {
             assert!(matches!(e, Error::BackendUnavailable { .. }), "{e}");

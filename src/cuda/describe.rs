@@ -6,6 +6,7 @@ use cudarc::driver::{CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernel
 
 use super::device::{GpuDevice, driver_error};
 use super::header::CLATCH_DESCRIBE_WARPS;
+use super::memory::{alloc_zeros, upload};
 use super::texture::DeviceImage;
 use crate::describe::{Described, DescriptorConfig, SamplingFrame, SkipReason, Skipped};
 use crate::descriptor::DescriptorSet;
@@ -87,15 +88,13 @@ impl Job {
             .map(|&w| w as i32)
             .collect();
         Ok(Self {
-            keypoints: stream
-                .clone_htod(keypoints)
-                .map_err(driver_error("keypoint upload"))?,
-            weights: stream
-                .clone_htod(&weights)
-                .map_err(driver_error("weight upload"))?,
-            out: stream
-                .alloc_zeros::<u64>(keypoints.len() * config.width.words())
-                .map_err(driver_error("descriptor allocation"))?,
+            keypoints: upload(&stream, keypoints, "keypoint upload")?,
+            weights: upload(&stream, &weights, "weight upload")?,
+            out: alloc_zeros(
+                &stream,
+                keypoints.len() * config.width.words(),
+                "descriptor allocation",
+            )?,
             image: device_image,
             size: (image.width() as i32, image.height() as i32),
             bits: config.width.bits() as i32,

@@ -5,7 +5,8 @@ use std::sync::Arc;
 use cudarc::driver::{CudaSlice, CudaStream, DevicePtr, sys};
 
 use super::device::{GpuDevice, driver_error};
-use crate::error::{Error, Result};
+use super::memory::upload_staged;
+use crate::error::Result;
 use crate::image::GrayView;
 
 /// A texture object; destroyed on drop.
@@ -44,20 +45,12 @@ impl DeviceImage {
     pub fn upload(dev: &GpuDevice, stream: &Arc<CudaStream>, image: &GrayView) -> Result<Self> {
         let (width, height) = (image.width(), image.height());
         let pitch = width.div_ceil(dev.pitch_alignment) * dev.pitch_alignment;
-        let mut staged = vec![0u8; pitch * height];
-        for (y, row) in staged.chunks_exact_mut(pitch).enumerate() {
-            row[..width].copy_from_slice(image.row(y));
-        }
-        let pixels =
-            stream
-                .clone_htod(&staged)
-                .map_err(|e| match driver_error("image upload")(e) {
-                    Error::DeviceOutOfMemory { operation, .. } => Error::DeviceOutOfMemory {
-                        operation,
-                        bytes: staged.len(),
-                    },
-                    other => other,
-                })?;
+        let pixels = upload_staged(stream, pitch * height, "image upload", |staged| {
+            for (y, row) in staged.chunks_exact_mut(pitch).enumerate() {
+                row[..width].copy_from_slice(image.row(y));
+                row[width..].fill(0);
+            }
+        })?;
         let texture = {
             let (ptr, _sync) = pixels.device_ptr(stream);
             // SAFETY: plain-old-data descriptors, zero-initialised as the driver API expects.

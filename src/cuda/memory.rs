@@ -1,0 +1,104 @@
+//! Device allocations and uploads that report failures as typed errors, and the pinned host staging
+//! buffers uploads go through.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use cudarc::driver::{CudaSlice, CudaStream, DeviceRepr, PinnedHostSlice, ValidAsZeroBits};
+
+use super::device::driver_error;
+use crate::error::{Error, Result};
+
+/// Adds the requested size to an out-of-memory error.
+fn with_bytes(error: Error, bytes: usize) -> Error {
+    match error {
+        Error::DeviceOutOfMemory { operation, .. } => Error::DeviceOutOfMemory { operation, bytes },
+        other => other,
+    }
+}
+
+/// `len` zeroed elements on the device, queued on `stream`.
+pub(crate) fn alloc_zeros<T: DeviceRepr + ValidAsZeroBits>(
+    stream: &Arc<CudaStream>,
+    len: usize,
+    operation: &str,
+) -> Result<CudaSlice<T>> {
+    let bytes = len.saturating_mul(size_of::<T>());
+    stream
+        .alloc_zeros::<T>(len)
+        .map_err(|e| with_bytes(driver_error(operation)(e), bytes))
+}
+
+/// A copy of `data` on the device, queued on `stream` (from pageable memory: for small uploads).
+pub(crate) fn upload<T: DeviceRepr>(
+    stream: &Arc<CudaStream>,
+    data: &[T],
+    operation: &str,
+) -> Result<CudaSlice<T>> {
+    stream
+        .clone_htod(data)
+        .map_err(|e| with_bytes(driver_error(operation)(e), size_of_val(data)))
+}
+
+/// Reusable page-locked host buffers, by exact size, so repeated uploads of same-sized images (video,
+/// batches) are true asynchronous DMA without a fresh `cuMemHostAlloc` each time.
+type Pool = Mutex<HashMap<(usize, usize), Vec<PinnedHostSlice<u8>>>>;
+
+/// Buffers kept per size; more in flight at once are allocated and dropped.
+const KEPT_PER_SIZE: usize = 4;
+
+fn pool() -> &'static Pool {
+    static POOL: OnceLock<Pool> = OnceLock::new();
+    POOL.get_or_init(Default::default)
+}
+
+/// Uploads `len` bytes written by `fill` into a pinned staging buffer, then copied to a new device
+/// buffer on `stream`. The staging buffer returns to the pool; its next user waits (through the event
+/// cudarc records) until this copy has finished reading it.
+pub(crate) fn upload_staged(
+    stream: &Arc<CudaStream>,
+    len: usize,
+    operation: &str,
+    fill: impl FnOnce(&mut [u8]),
+) -> Result<CudaSlice<u8>> {
+    let ctx = stream.context();
+    let key = (ctx.ordinal(), len);
+    let reused = pool()
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .get_mut(&key)
+        .and_then(Vec::pop);
+    let mut staging = match reused {
+        Some(buffer) => buffer,
+        // SAFETY: the buffer is fully written by `fill` below before it is read.
+        None => unsafe { ctx.alloc_pinned::<u8>(len) }
+            .map_err(|e| with_bytes(driver_error("pinned staging allocation")(e), len))?,
+    };
+    let host = staging
+        .as_mut_slice()
+        .map_err(driver_error("waiting for a staging buffer"))?;
+    fill(host);
+    let device = stream
+        .clone_htod(&staging)
+        .map_err(|e| with_bytes(driver_error(operation)(e), len))?;
+    let mut pool = pool().lock().unwrap_or_else(|p| p.into_inner());
+    let kept = pool.entry(key).or_default();
+    if kept.len() < KEPT_PER_SIZE {
+        kept.push(staging);
+    }
+    Ok(device)
+}
+
+/// Asks for `bytes` of device memory and frees them again: lets tests check that exhaustion is a
+/// typed error and that the context stays usable afterwards.
+#[doc(hidden)]
+pub fn probe_allocation(ordinal: usize, bytes: usize) -> Result<()> {
+    let dev = super::device(ordinal)?;
+    let stream = dev.new_stream()?;
+    let buffer = alloc_zeros::<u8>(&stream, bytes, "probe allocation")?;
+    stream
+        .synchronize()
+        .map_err(driver_error("probe allocation"))?;
+    drop(buffer);
+    Ok(())
+}

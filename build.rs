@@ -105,10 +105,10 @@ mod cuda {
             return exists(PathBuf::from(p));
         }
         for var in ["CUDA_HOME", "CUDA_PATH"] {
-            if let Some(home) = std::env::var_os(var) {
-                if let Some(p) = exists(Path::new(&home).join("bin").join("nvcc")) {
-                    return Some(p);
-                }
+            if let Some(home) = std::env::var_os(var)
+                && let Some(p) = exists(Path::new(&home).join("bin").join("nvcc"))
+            {
+                return Some(p);
             }
         }
         std::env::split_paths(&std::env::var_os("PATH")?).find_map(|dir| exists(dir.join("nvcc")))

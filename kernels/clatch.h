@@ -21,9 +21,23 @@
 
 /* Launch shapes the host must use. */
 #define CLATCH_DESCRIBE_WARPS 8 /* one 64-bit descriptor word per warp */
-#define CLATCH_MATCH_THREADS 128
-#define CLATCH_MATCH_TILE 256 /* gallery descriptors per shared-memory tile */
-#define CLATCH_MATCH_MAX_K 8
+/* Matching (kernels/match.cu, kernels/knn.cuh). */
+#define CLATCH_MATCH_THREADS 128 /* threads per block of the kNN kernels */
+#define CLATCH_MATCH_QUERIES_PER_THREAD 2 /* queries held in each thread's registers */
+#define CLATCH_MATCH_TILE 64 /* gallery descriptors per shared-memory tile */
+#define CLATCH_MATCH_MAX_K 8 /* most neighbours per query on the GPU */
+#define CLATCH_MATCH_ROW_PAD 256 /* device descriptor buffers hold a multiple of this many rows */
+#define CLATCH_MATCH_SELECT_THREADS 256 /* clatch_match_filter / clatch_match_compact (8 warps) */
+#define CLATCH_MATCH_SCAN_THREADS 1024 /* clatch_match_scan: one block */
+
+/* Detection (kernels/detect.cu). */
+#define CLATCH_DETECT_TILE_X 32    /* clatch_detect_nms: one thread per pixel of a 32x8 tile */
+#define CLATCH_DETECT_TILE_Y 8
+#define CLATCH_DETECT_ROW_ALIGN 128 /* row pitch of the kept map, in bytes (one warp reads 128 per step) */
+#define CLATCH_DETECT_WARPS 8      /* warps per block of clatch_detect_scatter / clatch_detect_orient */
+#define CLATCH_SCAN_THREADS 256    /* clatch_scan_reduce / clatch_scan_apply */
+#define CLATCH_SCAN_CHUNK 4096     /* counts per block of the scan (16 per thread) */
+#define CLATCH_SCAN_TOP_THREADS 1024 /* clatch_scan_partials: one block */
 
 /* One keypoint; the same layout as clatch::KeyPoint (#[repr(C)]). */
 typedef struct clatch_keypoint {

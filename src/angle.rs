@@ -17,7 +17,8 @@ pub const BINS_PER_DEGREE: usize = 8;
 pub const ROTATION_FRAC_BITS: u32 = 16;
 /// Fractional bits of the half-bin direction vectors used to bin a measured orientation.
 const BOUNDARY_FRAC_BITS: u32 = 30;
-const BINS_PER_QUADRANT: usize = ANGLE_BINS / 4;
+/// Bins in a quarter turn: the length of [`quadrant_boundaries`].
+pub(crate) const BINS_PER_QUADRANT: usize = ANGLE_BINS / 4;
 
 /// The bin of an angle in degrees: `round_half_even(8 * (angle mod 360)) mod 2880`, where `mod` is the
 /// exact IEEE remainder made non-negative. Callers pass finite angles (validated at the API).
@@ -56,7 +57,8 @@ pub fn rotation_table() -> &'static [[i32; 2]; ANGLE_BINS] {
 }
 
 /// Directions at the upper edge of each first-quadrant bin, `(k + 1/2) / 8` degrees, as 2.30 fixed point.
-fn quadrant_boundaries() -> &'static [[i64; 2]; BINS_PER_QUADRANT] {
+/// The GPU detector bins with this same table, uploaded from the host.
+pub(crate) fn quadrant_boundaries() -> &'static [[i64; 2]; BINS_PER_QUADRANT] {
     static TABLE: OnceLock<Box<[[i64; 2]; BINS_PER_QUADRANT]>> = OnceLock::new();
     TABLE.get_or_init(|| {
         let one = (1i64 << BOUNDARY_FRAC_BITS) as f64;

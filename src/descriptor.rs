@@ -17,7 +17,7 @@ impl DescriptorWidth {
 
     /// Checks that `bits` is a multiple of 8 in `8..=512`.
     pub fn from_bits(bits: usize) -> Result<Self> {
-        if bits == 0 || bits > MAX_DESCRIPTOR_BITS || bits % 8 != 0 {
+        if bits == 0 || bits > MAX_DESCRIPTOR_BITS || !bits.is_multiple_of(8) {
             return Err(Error::InvalidDescriptorWidth { bits });
         }
         Ok(Self(bits as u16))
@@ -113,7 +113,7 @@ impl DescriptorSet {
     /// Wraps packed words (see the type docs). Bits past the width are cleared so distances ignore them.
     pub fn from_words(width: DescriptorWidth, mut words: Vec<u64>) -> Result<Self> {
         let per = width.words();
-        if words.len() % per != 0 {
+        if !words.len().is_multiple_of(per) {
             return Err(Error::DescriptorBufferLength {
                 words: words.len(),
                 words_per_descriptor: per,

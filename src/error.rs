@@ -85,6 +85,16 @@ pub enum Error {
     #[error("k = {k} is invalid for a gallery of {gallery} descriptors (need 1 <= k <= gallery)")]
     InvalidK { k: usize, gallery: usize },
 
+    /// k is more neighbours than the chosen backend returns per query.
+    #[error(
+        "k = {k} is more than backend {backend} supports: it returns at most {max} neighbours per query"
+    )]
+    KTooLargeForBackend {
+        k: usize,
+        max: usize,
+        backend: String,
+    },
+
     /// The patch weights have the wrong length.
     #[error("patch weights must have {expected} entries (8x8, row-major), got {got}")]
     WeightsLength { expected: usize, got: usize },

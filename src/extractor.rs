@@ -99,9 +99,10 @@ impl Extractor {
         Self::check_image(image)?;
         match self.backend {
             Backend::Cpu => Ok(detect::cpu::detect(image, &self.config.detector)),
-            // The detection kernels are not written yet: the CPU reference runs (same results).
             #[cfg(feature = "cuda")]
-            Backend::Cuda { .. } => Ok(detect::cpu::detect(image, &self.config.detector)),
+            Backend::Cuda { device } => {
+                crate::cuda::detect(&*crate::cuda::device(device)?, image, &self.config.detector)
+            }
         }
     }
 

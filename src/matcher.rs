@@ -28,14 +28,14 @@ pub struct Matcher {
 impl Matcher {
     /// Validates the configuration and the backend.
     pub fn new(backend: Backend, config: MatchConfig) -> Result<Self> {
-        if let Some(ratio) = config.ratio {
-            if !(ratio.is_finite() && ratio > 0.0 && ratio <= 1.0) {
-                return Err(Error::InvalidConfig {
-                    field: "ratio",
-                    value: ratio.to_string(),
-                    reason: "must be finite and in (0, 1]",
-                });
-            }
+        if let Some(ratio) = config.ratio
+            && !(ratio.is_finite() && ratio > 0.0 && ratio <= 1.0)
+        {
+            return Err(Error::InvalidConfig {
+                field: "ratio",
+                value: ratio.to_string(),
+                reason: "must be finite and in (0, 1]",
+            });
         }
         backend.ensure_available()?;
         Ok(Self { backend, config })
@@ -71,7 +71,8 @@ impl Matcher {
     }
 
     /// The `k` nearest gallery descriptors of every query, nearest first, ties to the lowest index.
-    /// An empty query set gives an empty result.
+    /// An empty query set gives an empty result. The CUDA backend returns at most 8 neighbours per
+    /// query (`clatch::cuda::MAX_K`); a larger `k` is [`Error::KTooLargeForBackend`].
     pub fn knn(
         &self,
         query: &DescriptorSet,
@@ -81,9 +82,10 @@ impl Matcher {
         Self::check_sets(query, train, k)?;
         match self.backend {
             Backend::Cpu => Ok(matching::cpu::knn(query, train, k)),
-            // The matching kernel is not written yet: the CPU reference runs (same results).
             #[cfg(feature = "cuda")]
-            Backend::Cuda { .. } => Ok(matching::cpu::knn(query, train, k)),
+            Backend::Cuda { device } => {
+                crate::cuda::knn(&*crate::cuda::device(device)?, query, train, k)
+            }
         }
     }
 
@@ -99,9 +101,12 @@ impl Matcher {
         match self.backend {
             Backend::Cpu => Ok(matching::cpu::match_descriptors(query, train, &self.config)),
             #[cfg(feature = "cuda")]
-            Backend::Cuda { .. } => {
-                Ok(matching::cpu::match_descriptors(query, train, &self.config))
-            }
+            Backend::Cuda { device } => crate::cuda::match_descriptors(
+                &*crate::cuda::device(device)?,
+                query,
+                train,
+                &self.config,
+            ),
         }
     }
 }

@@ -150,7 +150,7 @@ mod gpu {
         }
         let gaussian: Vec<u32> = (0..64)
             .map(|i| {
-                let (r, s) = ((i / 8) as i32 - 4, (i % 8) as i32 - 4);
+                let (r, s) = (i / 8 - 4, i % 8 - 4);
                 (64.0 * (-((r * r + s * s) as f64) / 18.0).exp()).round() as u32
             })
             .collect();

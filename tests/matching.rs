@@ -68,10 +68,10 @@ fn naive_match_sorted(
         if config.cross_check && backward[t as usize][0].1 != q as u32 {
             continue;
         }
-        if let Some(max) = config.max_distance {
-            if d1 > max {
-                continue;
-            }
+        if let Some(max) = config.max_distance
+            && d1 > max
+        {
+            continue;
         }
         out.push(Match {
             query: q as u32,
@@ -110,7 +110,7 @@ fn tied_sets(
     let per = width.words();
     let mut rng = SplitMix64::new(seed);
     let mask_row = |row: &mut [u64]| {
-        if bits % 64 != 0 {
+        if !bits.is_multiple_of(64) {
             row[per - 1] &= (1u64 << (bits % 64)) - 1;
         }
     };

@@ -7,17 +7,38 @@ use cudarc::driver::{CudaContext, CudaFunction, CudaSlice, CudaStream, DriverErr
 use cudarc::nvrtc::Ptx;
 
 use super::ptx;
-use crate::angle::rotation_table;
+use crate::angle::{quadrant_boundaries, rotation_table};
 use crate::describe::triplets::TRIPLETS;
 use crate::error::{Error, Result};
 
 /// Every kernel entry point, by the PTX of the file that defines it. Add a kernel here and fetch it
 /// with [`GpuDevice::kernel`].
-const KERNELS: &[(&str, &str, &[&str])] = &[(
-    "kernels/describe.cu",
-    ptx::DESCRIBE_PTX,
-    &["clatch_describe"],
-)];
+const KERNELS: &[(&str, &str, &[&str])] = &[
+    (
+        "kernels/describe.cu",
+        ptx::DESCRIBE_PTX,
+        &["clatch_describe"],
+    ),
+    (
+        "kernels/detect.cu",
+        ptx::DETECT_PTX,
+        &[
+            "clatch_detect_nms",
+            "clatch_scan_reduce",
+            "clatch_scan_partials",
+            "clatch_scan_apply",
+            "clatch_detect_scatter",
+            "clatch_detect_orient",
+            "clatch_debug_read_texture",
+        ],
+    ),
+    ("kernels/match.cu", ptx::MATCH_PTX, super::matching::KERNELS),
+    (
+        "kernels/match_variants.cu",
+        ptx::MATCH_VARIANTS_PTX,
+        super::matching::VARIANT_KERNELS,
+    ),
+];
 
 /// A CUDA device with clatch's kernels loaded and its tables uploaded.
 #[derive(Debug)]
@@ -26,6 +47,8 @@ pub struct GpuDevice {
     kernels: HashMap<&'static str, CudaFunction>,
     pub(crate) rotation: CudaSlice<i32>,
     pub(crate) triplets: CudaSlice<u8>,
+    /// `angle::quadrant_boundaries()`, flattened `(x, y)` pairs: the detector's orientation bins.
+    pub(crate) boundaries: CudaSlice<i64>,
     pub(crate) pitch_alignment: usize,
     pub(crate) multiprocessors: usize,
     name: String,
@@ -112,6 +135,10 @@ impl GpuDevice {
         let triplets = stream
             .clone_htod(&triplets)
             .map_err(driver_error("uploading the triplet table"))?;
+        let boundaries: Vec<i64> = quadrant_boundaries().iter().flatten().copied().collect();
+        let boundaries = stream
+            .clone_htod(&boundaries)
+            .map_err(driver_error("uploading the direction boundaries"))?;
         stream
             .synchronize()
             .map_err(driver_error("uploading the tables"))?;
@@ -132,6 +159,7 @@ impl GpuDevice {
             kernels,
             rotation,
             triplets,
+            boundaries,
             pitch_alignment,
             multiprocessors,
             name,

@@ -5,7 +5,9 @@
 //! built with `cuda` still starts on a machine without one and reports `no CUDA driver` as a typed error.
 
 mod describe;
+mod detect;
 mod device;
+mod matching;
 mod memory;
 mod texture;
 
@@ -24,7 +26,17 @@ pub mod ptx {
 pub(crate) use describe::describe;
 #[doc(hidden)]
 pub use describe::time_describe_kernel;
+pub(crate) use detect::detect;
+#[doc(hidden)]
+pub use detect::{DetectStages, debug_detect_stages, time_detect};
 pub use device::{GpuDevice, device};
+pub use matching::MAX_K;
+pub(crate) use matching::{knn, match_descriptors};
+#[doc(hidden)]
+pub use matching::{
+    knn_segmented, multiprocessors_and_clock_khz, time_knn_kernel, time_knn_variants,
+    time_match_kernels,
+};
 #[doc(hidden)]
 pub use memory::probe_allocation;
 

@@ -38,6 +38,8 @@ pub struct DeviceImage {
     texture: TextureObject,
     #[allow(dead_code)]
     pixels: CudaSlice<u8>,
+    width: usize,
+    height: usize,
 }
 
 impl DeviceImage {
@@ -75,11 +77,26 @@ impl DeviceImage {
                 .map_err(driver_error("texture object creation"))?;
             TextureObject(handle)
         };
-        Ok(Self { texture, pixels })
+        Ok(Self {
+            texture,
+            pixels,
+            width,
+            height,
+        })
     }
 
     /// The texture handle for kernel arguments.
     pub fn texture(&self) -> u64 {
         self.texture.handle()
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> usize {
+        self.height
     }
 }

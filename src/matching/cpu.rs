@@ -72,10 +72,10 @@ pub fn match_descriptors(
                     return None;
                 }
             }
-            if let Some(reverse) = &reverse {
-                if reverse[best.train as usize] != best.query {
-                    return None;
-                }
+            if let Some(reverse) = &reverse
+                && reverse[best.train as usize] != best.query
+            {
+                return None;
             }
             if config.max_distance.is_some_and(|max| best.distance > max) {
                 return None;

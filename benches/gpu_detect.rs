@@ -1,0 +1,112 @@
+//! GPU detection timings: `cargo bench --features cuda --bench gpu_detect`.
+//!
+//! - detection alone: all of its launches (scores + suppression, scan, scatter, orientation) between two
+//!   CUDA events on its stream, after warm-up; the image upload and the read-back are excluded;
+//! - detection + description: the detection time plus the describe kernel's event-timed time on the
+//!   detected keypoints (both device-only), and the wall-clock time of the whole
+//!   `Extractor::detect_and_describe` call (uploads, host round trip and read-backs included), with the
+//!   CPU reference's wall-clock time beside it.
+//!
+//! Medians of the repeats are reported with the device's name.
+
+#[cfg(not(feature = "cuda"))]
+fn main() {
+    println!("skipped: no CUDA device (built without the `cuda` feature)");
+}
+
+#[cfg(feature = "cuda")]
+fn main() {
+    use std::time::Instant;
+
+    use clatch::{Backend, DetectorConfig, Extractor, ExtractorConfig, GrayView};
+
+    const WARMUP: usize = 3;
+    const REPEATS: usize = 15;
+
+    let dev = match clatch::cuda::device(0) {
+        Ok(dev) => dev,
+        Err(e) => {
+            println!("skipped: no CUDA device ({e})");
+            return;
+        }
+    };
+    println!("device: {}", dev.name());
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let wall = |runs: usize, f: &mut dyn FnMut()| {
+        median(
+            (0..runs)
+                .map(|_| {
+                    let start = Instant::now();
+                    f();
+                    start.elapsed().as_secs_f64() * 1e3
+                })
+                .collect(),
+        )
+    };
+    for (name, w, h) in [("1080p", 1920usize, 1080usize), ("5616x3744", 5616, 3744)] {
+        let pixels = clatch::synthetic::rectangles(w, h, 9);
+        let image = GrayView::new(&pixels, w, h, w).unwrap();
+        for max_keypoints in [20_000usize, usize::MAX] {
+            let detector = DetectorConfig {
+                max_keypoints,
+                ..DetectorConfig::default()
+            };
+            let (times, keypoints) =
+                clatch::cuda::time_detect(&dev, &image, &detector, WARMUP, REPEATS)
+                    .expect("detection kernels");
+            let detect_ms = median(times.into_iter().map(f64::from).collect());
+            let limit = if max_keypoints == usize::MAX {
+                "all".to_string()
+            } else {
+                max_keypoints.to_string()
+            };
+            println!(
+                "detect          {name:>9} (max {limit:>6}): {:>7} keypoints  median {detect_ms:8.3} ms  {:7.1} Mpixel/s",
+                keypoints.len(),
+                (w * h) as f64 / detect_ms / 1e3
+            );
+            if keypoints.is_empty() {
+                continue;
+            }
+            let describe_ms = median(
+                clatch::cuda::time_describe_kernel(
+                    &dev,
+                    &image,
+                    &keypoints,
+                    &Default::default(),
+                    WARMUP,
+                    REPEATS,
+                )
+                .expect("describe kernel")
+                .into_iter()
+                .map(f64::from)
+                .collect(),
+            );
+            println!(
+                "detect+describe {name:>9} (max {limit:>6}): {:>7} keypoints  median {:8.3} ms on the device (detect {detect_ms:.3} + describe {describe_ms:.3})",
+                keypoints.len(),
+                detect_ms + describe_ms
+            );
+            let config = ExtractorConfig {
+                detector,
+                ..ExtractorConfig::default()
+            };
+            let gpu = Extractor::new(Backend::Cuda { device: 0 }, config.clone()).unwrap();
+            let cpu = Extractor::new(Backend::Cpu, config).unwrap();
+            gpu.detect_and_describe(&image).unwrap();
+            let gpu_ms = wall(REPEATS, &mut || {
+                gpu.detect_and_describe(&image).unwrap();
+            });
+            let cpu_ms = wall(3, &mut || {
+                cpu.detect_and_describe(&image).unwrap();
+            });
+            println!(
+                "detect+describe {name:>9} (max {limit:>6}): wall clock, whole call: GPU {gpu_ms:8.3} ms, CPU ({} threads) {cpu_ms:8.3} ms",
+                rayon::current_num_threads()
+            );
+        }
+    }
+}

@@ -1,0 +1,129 @@
+//! GPU matching timings: `cargo bench --features cuda --bench gpu_match`.
+//!
+//! Brute-force kNN of random 512-bit descriptors, k = 2, N x N for N = 1k, 16k, 64k, 128k: kernel time
+//! from CUDA events around the launches (kNN and, when the gallery is split, the merge), after warm-up;
+//! the median of the repeats, descriptor pairs per second, and the fraction of a POPC bound read off the
+//! device (SMs x SM clock x 16 POPC per SM and clock on Hopper; 8 popcounts of 64 bits per 512-bit pair,
+//! as the CLATCH paper counts; a 64-bit popcount is two 32-bit POPC instructions in SASS, so the bound of
+//! the plain instruction count is half that). Then the device time of `match_descriptors` (kNN, fused
+//! reverse 1-NN for the cross-check, filter, compaction), the kernel alternatives of
+//! kernels/match_variants.cu, and the end-to-end `Matcher::match_descriptors` wall time (uploads
+//! included).
+
+#[cfg(not(feature = "cuda"))]
+fn main() {
+    println!("skipped: no CUDA device (built without the `cuda` feature)");
+}
+
+#[cfg(feature = "cuda")]
+fn main() {
+    use std::time::Instant;
+
+    use clatch::synthetic::SplitMix64;
+    use clatch::{Backend, DescriptorSet, DescriptorWidth, MatchConfig, Matcher};
+
+    const REPEATS: usize = 15;
+    const WARMUP: usize = 3;
+
+    let start = Instant::now();
+    let dev = match clatch::cuda::device(0) {
+        Ok(dev) => dev,
+        Err(e) => {
+            println!("skipped: no CUDA device ({e})");
+            return;
+        }
+    };
+    println!(
+        "device: {} (context and kernel modules loaded in {:.0} ms)",
+        dev.name(),
+        start.elapsed().as_secs_f64() * 1e3
+    );
+    let (sms, clock_khz) = clatch::cuda::multiprocessors_and_clock_khz(&dev).expect("attributes");
+    let popc_per_s = sms as f64 * clock_khz as f64 * 1e3 * 16.0;
+    let bound = popc_per_s / 8.0;
+    println!(
+        "POPC bound: {sms} SMs x {:.0} MHz x 16 POPC/SM/clock / 8 per pair = {:.1} G pairs/s \
+         ({:.1} G pairs/s at 16 32-bit POPC per pair)",
+        clock_khz as f64 / 1e3,
+        bound / 1e9,
+        bound / 2e9
+    );
+    let median = |mut v: Vec<f32>| {
+        v.sort_by(f32::total_cmp);
+        v[v.len() / 2] as f64
+    };
+    let random_set = |n: usize, rng: &mut SplitMix64| {
+        let w = DescriptorWidth::FULL;
+        DescriptorSet::from_words(w, (0..n * w.words()).map(|_| rng.next_u64()).collect()).unwrap()
+    };
+    let mut rng = SplitMix64::new(2024);
+    let mut sets = Vec::new();
+    for n in [1usize << 10, 1 << 14, 1 << 16, 1 << 17] {
+        let (query, train) = (random_set(n, &mut rng), random_set(n, &mut rng));
+        let times = clatch::cuda::time_knn_kernel(&dev, &query, &train, 2, WARMUP, REPEATS)
+            .expect("kNN kernel");
+        let (lo, hi) = (
+            times.iter().copied().fold(f32::MAX, f32::min),
+            times.iter().copied().fold(0.0, f32::max),
+        );
+        let ms = median(times);
+        let rate = (n * n) as f64 / (ms * 1e-3);
+        println!(
+            "knn k=2 512 bits {n:>6} x {n:<6}: median {ms:9.3} ms (min {lo:.3}, max {hi:.3}, {REPEATS} runs)  \
+             {:7.1} G pairs/s  {:5.1}% of the POPC bound",
+            rate / 1e9,
+            100.0 * rate / bound
+        );
+        sets.push((n, query, train));
+    }
+
+    for (n, query, train) in &sets {
+        for (name, config) in [
+            ("ratio 0.8, cross-check", MatchConfig::default()),
+            (
+                "ratio 0.8, no cross-check",
+                MatchConfig {
+                    cross_check: false,
+                    ..MatchConfig::default()
+                },
+            ),
+        ] {
+            let times =
+                clatch::cuda::time_match_kernels(&dev, query, train, &config, WARMUP, REPEATS)
+                    .expect("match kernels");
+            let ms = median(times);
+            println!(
+                "match_descriptors device time, {name:<25} {n:>6} x {n:<6}: median {ms:9.3} ms  {:7.1} G pairs/s",
+                (n * n) as f64 / (ms * 1e-3) / 1e9
+            );
+        }
+    }
+
+    for (n, query, train) in sets.iter().filter(|(n, ..)| [1 << 14, 1 << 16].contains(n)) {
+        println!("kernel alternatives, {n} x {n} (all checked equal to the production kernel):");
+        let variants =
+            clatch::cuda::time_knn_variants(&dev, query, train, WARMUP, 10).expect("kNN variants");
+        for (name, times) in variants {
+            let ms = median(times);
+            println!(
+                "  {name:<30} median {ms:9.3} ms  {:7.1} G pairs/s",
+                (n * n) as f64 / (ms * 1e-3) / 1e9
+            );
+        }
+    }
+
+    let matcher = Matcher::new(Backend::Cuda { device: 0 }, MatchConfig::default()).unwrap();
+    for (n, query, train) in sets.iter().filter(|(n, ..)| [1 << 14, 1 << 16].contains(n)) {
+        let mut walls = Vec::new();
+        let mut kept = 0;
+        for _ in 0..7 {
+            let t = Instant::now();
+            kept = matcher.match_descriptors(query, train).unwrap().len();
+            walls.push(t.elapsed().as_secs_f32() * 1e3);
+        }
+        println!(
+            "match_descriptors (ratio 0.8, cross-check) {n} x {n}, end to end: median {:.3} ms, {kept} kept",
+            median(walls)
+        );
+    }
+}

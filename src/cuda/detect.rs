@@ -1,0 +1,481 @@
+//! GPU detection: `kernels/detect.cu`, reproducing [`crate::detect::cpu::detect`] keypoint for keypoint
+//! (position, score, angle and order, ties included).
+//!
+//! All stages run on one stream with no host round trip between them: score + suppression (kept map and
+//! per-(score, row) survivor counts), an exclusive scan of the counts in (score descending, row
+//! ascending) order, which gives every (score, row) its first output position, a scatter that ranks
+//! equal scores within a row left to right, and the orientation of the kept keypoints. The output stays
+//! on the device ([`DeviceKeypoints`]) until the caller reads it back, so a GPU `detect_and_describe`
+//! can hand it to the describe kernel together with the same [`DeviceImage`].
+
+use std::sync::Arc;
+
+use cudarc::driver::{CudaSlice, CudaStream, LaunchConfig, PushKernelArg, ValidAsZeroBits, sys};
+
+use super::device::{GpuDevice, driver_error};
+use super::header::{
+    CLATCH_DETECT_ROW_ALIGN, CLATCH_DETECT_TILE_X, CLATCH_DETECT_TILE_Y, CLATCH_DETECT_WARPS,
+    CLATCH_SCAN_CHUNK, CLATCH_SCAN_THREADS, CLATCH_SCAN_TOP_THREADS,
+};
+use super::memory::alloc_zeros;
+use super::texture::DeviceImage;
+use crate::detect::DetectorConfig;
+use crate::error::Result;
+use crate::image::GrayView;
+use crate::keypoint::KeyPoint;
+
+// SAFETY: KeyPoint is #[repr(C)] f32s and an i32; all-zero bits are a valid value.
+unsafe impl ValidAsZeroBits for KeyPoint {}
+
+/// Distinct scores a survivor can have (1..=255): the counts have this many rows per image row.
+const SCORES: usize = 255;
+/// Orientation blocks per multiprocessor (grid-stride over the keypoints).
+const ORIENT_BLOCKS_PER_SM: usize = 8;
+
+/// Detected keypoints on the device.
+#[derive(Debug)]
+pub(crate) struct DeviceKeypoints {
+    /// `capacity` records (at least one); the first `min(total, capacity)` are the result, in the
+    /// CPU's order.
+    pub(crate) keypoints: CudaSlice<KeyPoint>,
+    /// One value: how many corners survived suppression (before the top-N cut).
+    pub(crate) total: CudaSlice<u32>,
+    /// `min(max_keypoints, the most survivors the image can have)`.
+    pub(crate) capacity: usize,
+}
+
+impl DeviceKeypoints {
+    /// Copies the result to the host (waits for the stream).
+    pub(crate) fn download(&self, stream: &Arc<CudaStream>) -> Result<Vec<KeyPoint>> {
+        let total = stream.clone_dtoh(&self.total).map_err(driver_error(
+            "detection (running, or reading the count back)",
+        ))?[0];
+        let count = (total as usize).min(self.capacity);
+        if count == 0 {
+            return Ok(Vec::new());
+        }
+        stream
+            .clone_dtoh(&self.keypoints.slice(..count))
+            .map_err(driver_error("reading the keypoints back"))
+    }
+}
+
+/// Launch geometry of one image size and configuration.
+#[derive(Clone, Copy, Debug)]
+struct Geometry {
+    width: usize,
+    height: usize,
+    margin: usize,
+    /// Row pitch of the kept map (a multiple of CLATCH_DETECT_ROW_ALIGN).
+    pitch: usize,
+    capacity: usize,
+    /// Rows that can hold a corner: `margin .. height - margin`.
+    inner_rows: usize,
+}
+
+impl Geometry {
+    fn new(width: usize, height: usize, config: &DetectorConfig) -> Self {
+        let margin = config.margin();
+        let inner_cols = width.saturating_sub(2 * margin);
+        let inner_rows = height.saturating_sub(2 * margin);
+        // Two survivors are never 8-neighbours (each would have to beat the other), so every 2x2 block
+        // of the scored area holds at most one.
+        let most = inner_cols.div_ceil(2) * inner_rows.div_ceil(2);
+        let align = CLATCH_DETECT_ROW_ALIGN as usize;
+        Self {
+            width,
+            height,
+            margin,
+            pitch: width.div_ceil(align) * align,
+            capacity: config.max_keypoints.min(most),
+            inner_rows,
+        }
+    }
+
+    fn counts(&self) -> usize {
+        SCORES * self.height
+    }
+
+    fn scan_blocks(&self) -> usize {
+        self.counts().div_ceil(CLATCH_SCAN_CHUNK as usize)
+    }
+}
+
+/// The detector's stages, in launch order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Stage {
+    Suppress,
+    Scan,
+    Scatter,
+    Orient,
+}
+
+/// The device buffers of one detection, and the launches that fill them.
+struct DetectJob {
+    geometry: Geometry,
+    threshold: i32,
+    size: f32,
+    kept: CudaSlice<u8>,
+    counts: CudaSlice<u32>,
+    partials: CudaSlice<u32>,
+    output: DeviceKeypoints,
+}
+
+impl DetectJob {
+    /// Allocates everything for an image of `width` x `height` on `stream`.
+    fn new(
+        stream: &Arc<CudaStream>,
+        width: usize,
+        height: usize,
+        config: &DetectorConfig,
+    ) -> Result<Self> {
+        let geometry = Geometry::new(width, height, config);
+        Ok(Self {
+            threshold: config.threshold as i32,
+            size: config.keypoint_size,
+            kept: alloc_zeros(stream, geometry.pitch * height, "detection: kept map")?,
+            counts: alloc_zeros(stream, geometry.counts(), "detection: survivor counts")?,
+            partials: alloc_zeros(stream, geometry.scan_blocks(), "detection: scan partials")?,
+            output: DeviceKeypoints {
+                keypoints: alloc_zeros(
+                    stream,
+                    geometry.capacity.max(1),
+                    "detection: keypoint output",
+                )?,
+                total: alloc_zeros(stream, 1, "detection: survivor total")?,
+                capacity: geometry.capacity,
+            },
+            geometry,
+        })
+    }
+
+    /// Queues the whole detector on `stream` (no synchronisation, no host round trip).
+    fn launch(
+        &mut self,
+        dev: &GpuDevice,
+        stream: &Arc<CudaStream>,
+        image: &DeviceImage,
+    ) -> Result<()> {
+        self.launch_stages(dev, stream, image, Stage::Orient)
+    }
+
+    /// Queues the stages up to and including `last`.
+    fn launch_stages(
+        &mut self,
+        dev: &GpuDevice,
+        stream: &Arc<CudaStream>,
+        image: &DeviceImage,
+        last: Stage,
+    ) -> Result<()> {
+        let g = self.geometry;
+        debug_assert_eq!((image.width(), image.height()), (g.width, g.height));
+        let texture = image.texture();
+        let (width, height, margin) = (g.width as i32, g.height as i32, g.margin as i32);
+        let pitch = g.pitch as i32;
+        let counts_len = g.counts() as u32;
+        let scan_blocks = g.scan_blocks() as u32;
+        let capacity = g.capacity as u32;
+
+        stream
+            .memset_zeros(&mut self.counts)
+            .map_err(driver_error("detection: clearing the counts"))?;
+
+        let tile = (CLATCH_DETECT_TILE_X as usize, CLATCH_DETECT_TILE_Y as usize);
+        let mut nms = stream.launch_builder(dev.kernel("clatch_detect_nms"));
+        nms.arg(&texture)
+            .arg(&width)
+            .arg(&height)
+            .arg(&margin)
+            .arg(&self.threshold)
+            .arg(&mut self.kept)
+            .arg(&pitch)
+            .arg(&mut self.counts);
+        let config = LaunchConfig {
+            grid_dim: (
+                (g.pitch / tile.0) as u32,
+                g.height.div_ceil(tile.1) as u32,
+                1,
+            ),
+            block_dim: (tile.0 as u32, tile.1 as u32, 1),
+            shared_mem_bytes: 0,
+        };
+        // SAFETY: arguments match the kernel's signature; the grid covers exactly `pitch` x `height`
+        // (rows past the image return), the size of `kept`; counts holds 255 x height.
+        unsafe { nms.launch(config) }.map_err(driver_error("launching clatch_detect_nms"))?;
+        if last == Stage::Suppress {
+            return Ok(());
+        }
+
+        let scan = |blocks: u32, threads: u32| LaunchConfig {
+            grid_dim: (blocks, 1, 1),
+            block_dim: (threads, 1, 1),
+            shared_mem_bytes: 0,
+        };
+        let mut reduce = stream.launch_builder(dev.kernel("clatch_scan_reduce"));
+        reduce
+            .arg(&self.counts)
+            .arg(&counts_len)
+            .arg(&mut self.partials);
+        // SAFETY: one partial per block of CLATCH_SCAN_CHUNK counts; reads are bounded by counts_len.
+        unsafe { reduce.launch(scan(scan_blocks, CLATCH_SCAN_THREADS)) }
+            .map_err(driver_error("launching clatch_scan_reduce"))?;
+
+        let mut partials = stream.launch_builder(dev.kernel("clatch_scan_partials"));
+        partials
+            .arg(&mut self.partials)
+            .arg(&scan_blocks)
+            .arg(&mut self.output.total);
+        // SAFETY: one block scans the scan_blocks partials in place and writes the one total.
+        unsafe { partials.launch(scan(1, CLATCH_SCAN_TOP_THREADS)) }
+            .map_err(driver_error("launching clatch_scan_partials"))?;
+
+        let mut apply = stream.launch_builder(dev.kernel("clatch_scan_apply"));
+        apply
+            .arg(&mut self.counts)
+            .arg(&counts_len)
+            .arg(&self.partials);
+        // SAFETY: as clatch_scan_reduce.
+        unsafe { apply.launch(scan(scan_blocks, CLATCH_SCAN_THREADS)) }
+            .map_err(driver_error("launching clatch_scan_apply"))?;
+        if last == Stage::Scan {
+            return Ok(());
+        }
+
+        let warps = CLATCH_DETECT_WARPS as usize;
+        let mut scatter = stream.launch_builder(dev.kernel("clatch_detect_scatter"));
+        scatter
+            .arg(&self.kept)
+            .arg(&pitch)
+            .arg(&height)
+            .arg(&margin)
+            .arg(&mut self.counts)
+            .arg(&capacity)
+            .arg(&self.size)
+            .arg(&mut self.output.keypoints);
+        // SAFETY: one warp per row of the scored area (extra warps return); rows are `pitch` bytes, a
+        // multiple of 128; writes go only to positions below capacity.
+        unsafe {
+            scatter.launch(scan(
+                g.inner_rows.div_ceil(warps).max(1) as u32,
+                (warps * 32) as u32,
+            ))
+        }
+        .map_err(driver_error("launching clatch_detect_scatter"))?;
+        if last == Stage::Scatter {
+            return Ok(());
+        }
+
+        let orient_blocks = g
+            .capacity
+            .div_ceil(warps)
+            .clamp(1, dev.multiprocessors * ORIENT_BLOCKS_PER_SM);
+        let mut orient = stream.launch_builder(dev.kernel("clatch_detect_orient"));
+        orient
+            .arg(&texture)
+            .arg(&self.output.total)
+            .arg(&capacity)
+            .arg(&dev.boundaries)
+            .arg(&mut self.output.keypoints);
+        // SAFETY: reads and writes the first min(total, capacity) records; the boundary table holds
+        // 720 (x, y) pairs.
+        unsafe { orient.launch(scan(orient_blocks as u32, (warps * 32) as u32)) }
+            .map_err(driver_error("launching clatch_detect_orient"))?;
+        Ok(())
+    }
+}
+
+/// Runs the detector on an image already on the device; the result stays there. Everything is queued
+/// on `stream` (the one `image` was uploaded on, or one ordered after it).
+pub(crate) fn detect_on_device(
+    dev: &GpuDevice,
+    stream: &Arc<CudaStream>,
+    image: &DeviceImage,
+    config: &DetectorConfig,
+) -> Result<DeviceKeypoints> {
+    let mut job = DetectJob::new(stream, image.width(), image.height(), config)?;
+    job.launch(dev, stream, image)?;
+    // The scratch buffers are freed in stream order, after the launches that use them.
+    Ok(job.output)
+}
+
+/// Detects keypoints on the GPU: the same list as [`crate::detect::cpu::detect`]. The image must be
+/// at least one descriptor window in each direction (checked by the caller).
+pub(crate) fn detect(
+    dev: &GpuDevice,
+    image: &GrayView,
+    config: &DetectorConfig,
+) -> Result<Vec<KeyPoint>> {
+    let stream = dev.new_stream()?;
+    let device_image = DeviceImage::upload(dev, &stream, image)?;
+    detect_on_device(dev, &stream, &device_image, config)?.download(&stream)
+}
+
+/// Times the detector: `repeats` runs of all its launches after `warmup` runs, each measured with CUDA
+/// events on its stream (image upload, allocation and read-back excluded). Returns the times in
+/// milliseconds and the keypoints of the last run.
+#[doc(hidden)]
+pub fn time_detect(
+    dev: &GpuDevice,
+    image: &GrayView,
+    config: &DetectorConfig,
+    warmup: usize,
+    repeats: usize,
+) -> Result<(Vec<f32>, Vec<KeyPoint>)> {
+    let stream = dev.new_stream()?;
+    let device_image = DeviceImage::upload(dev, &stream, image)?;
+    let mut job = DetectJob::new(&stream, image.width(), image.height(), config)?;
+    for _ in 0..warmup {
+        job.launch(dev, &stream, &device_image)?;
+    }
+    let timing = Some(sys::CUevent_flags::CU_EVENT_DEFAULT);
+    let mut times = Vec::with_capacity(repeats);
+    for _ in 0..repeats {
+        let start = dev
+            .ctx
+            .new_event(timing)
+            .map_err(driver_error("event creation"))?;
+        let end = dev
+            .ctx
+            .new_event(timing)
+            .map_err(driver_error("event creation"))?;
+        start
+            .record(&stream)
+            .map_err(driver_error("event record"))?;
+        job.launch(dev, &stream, &device_image)?;
+        end.record(&stream).map_err(driver_error("event record"))?;
+        times.push(
+            start
+                .elapsed_ms(&end)
+                .map_err(driver_error("detection (timed)"))?,
+        );
+    }
+    let keypoints = job.output.download(&stream)?;
+    Ok((times, keypoints))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::cpu::{detect, suppress_non_maxima};
+    use crate::synthetic::{SplitMix64, noise};
+
+    #[test]
+    fn survivors_are_never_neighbours_so_the_capacity_bound_holds() {
+        // Score maps of few distinct values (many ties); the border ring is 0 as outside a margin.
+        let mut rng = SplitMix64::new(7);
+        for (w, h) in [(5usize, 5usize), (8, 8), (33, 17), (64, 4), (9, 40)] {
+            for _ in 0..300 {
+                let mut scores = vec![0u8; w * h];
+                for y in 1..h - 1 {
+                    for x in 1..w - 1 {
+                        scores[y * w + x] = rng.below(4) as u8;
+                    }
+                }
+                let kept = suppress_non_maxima(&scores, w, h);
+                assert!(kept.len() <= (w - 2).div_ceil(2) * (h - 2).div_ceil(2));
+                for (i, a) in kept.iter().enumerate() {
+                    for b in &kept[i + 1..] {
+                        assert!(
+                            a.0.abs_diff(b.0) > 1 || a.1.abs_diff(b.1) > 1,
+                            "{a:?} {b:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn capacity_covers_every_survivor_of_noise() {
+        for (w, h) in [(64usize, 64usize), (97, 99), (120, 101), (200, 150)] {
+            let pixels = noise(w, h, (w * h) as u64);
+            let image = GrayView::new(&pixels, w, h, w).unwrap();
+            let config = DetectorConfig {
+                threshold: 1,
+                max_keypoints: usize::MAX,
+                keypoint_size: 16.0,
+            };
+            let geometry = Geometry::new(w, h, &config);
+            assert!(detect(&image, &config).len() <= geometry.capacity);
+            assert_eq!(geometry.pitch % CLATCH_DETECT_ROW_ALIGN as usize, 0);
+        }
+    }
+}
+
+/// Intermediate results of one detection, for diagnosing a difference from the CPU.
+#[doc(hidden)]
+#[derive(Clone, Debug)]
+pub struct DetectStages {
+    /// Every texel as the texture returns it, `width x height`.
+    pub texture: Vec<u8>,
+    /// Row pitch of `kept`.
+    pub pitch: usize,
+    /// Suppression's output: the score of each survivor, 0 elsewhere (`pitch x height`).
+    pub kept: Vec<u8>,
+    /// The scanned counts: `offsets[(255 - s) * height + y]` = first output position of score `s`, row
+    /// `y`.
+    pub offsets: Vec<u32>,
+    /// Survivors in all.
+    pub total: u32,
+    /// The scatter's records (angle still 0), then the final keypoints.
+    pub scattered: Vec<KeyPoint>,
+    /// The final keypoints.
+    pub keypoints: Vec<KeyPoint>,
+}
+
+/// Runs the detector stage by stage and reads every intermediate buffer back.
+#[doc(hidden)]
+pub fn debug_detect_stages(
+    dev: &GpuDevice,
+    image: &GrayView,
+    config: &DetectorConfig,
+) -> Result<DetectStages> {
+    let stream = dev.new_stream()?;
+    let device_image = DeviceImage::upload(dev, &stream, image)?;
+    let (width, height) = (image.width(), image.height());
+    let mut texels = alloc_zeros::<u8>(&stream, width * height, "debug texels")?;
+    let mut read = stream.launch_builder(dev.kernel("clatch_debug_read_texture"));
+    let texture = device_image.texture();
+    let (w, h) = (width as i32, height as i32);
+    read.arg(&texture).arg(&w).arg(&h).arg(&mut texels);
+    // SAFETY: one thread per texel of the width x height output.
+    unsafe {
+        read.launch(LaunchConfig {
+            grid_dim: (width.div_ceil(128) as u32, height as u32, 1),
+            block_dim: (128, 1, 1),
+            shared_mem_bytes: 0,
+        })
+    }
+    .map_err(driver_error("launching clatch_debug_read_texture"))?;
+    let texture = stream
+        .clone_dtoh(&texels)
+        .map_err(driver_error("debug texels"))?;
+    let mut job = DetectJob::new(&stream, width, height, config)?;
+    job.launch_stages(dev, &stream, &device_image, Stage::Suppress)?;
+    let kept = stream
+        .clone_dtoh(&job.kept)
+        .map_err(driver_error("debug kept map"))?;
+    let mut job = DetectJob::new(&stream, width, height, config)?;
+    job.launch_stages(dev, &stream, &device_image, Stage::Scan)?;
+    let offsets = stream
+        .clone_dtoh(&job.counts)
+        .map_err(driver_error("debug offsets"))?;
+    let total = stream
+        .clone_dtoh(&job.output.total)
+        .map_err(driver_error("debug total"))?[0];
+    let mut job = DetectJob::new(&stream, width, height, config)?;
+    job.launch_stages(dev, &stream, &device_image, Stage::Scatter)?;
+    let scattered = job.output.download(&stream)?;
+    let mut job = DetectJob::new(&stream, width, height, config)?;
+    job.launch(dev, &stream, &device_image)?;
+    let keypoints = job.output.download(&stream)?;
+    Ok(DetectStages {
+        texture,
+        pitch: job.geometry.pitch,
+        kept,
+        offsets,
+        total,
+        scattered,
+        keypoints,
+    })
+}

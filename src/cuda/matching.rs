@@ -1,0 +1,718 @@
+//! GPU matching: `kernels/match.cu` (with `kernels/knn.cuh`), reproducing [`crate::matching::cpu::knn`]
+//! and [`crate::matching::cpu::match_descriptors`] exactly, ties included.
+//!
+//! Exactness strategy: distances are integer popcounts; each kNN thread scans its gallery segment in
+//! increasing index order and inserts only on a strictly smaller distance, and segment lists are merged
+//! by `(distance, index)`, which is the CPU's order. The ratio test is the same single `f32` product
+//! (`__fmul_rn`, nothing contracted). The kept matches are compacted on the device by an exclusive scan,
+//! so they come back in query order.
+//!
+//! One call = one stream of our own: upload both sets (zero-padded to whole tiles), kNN (fused with the
+//! reverse 1-NN when cross-checking), filter, scan, compact, then copy back the count and the kept
+//! matches. No host round trip sits between the kernels.
+
+use std::mem::size_of;
+use std::sync::Arc;
+
+use cudarc::driver::{
+    CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg, ValidAsZeroBits, sys,
+};
+
+use super::device::{GpuDevice, driver_error};
+use super::header::{
+    CLATCH_MATCH_MAX_K, CLATCH_MATCH_QUERIES_PER_THREAD, CLATCH_MATCH_ROW_PAD,
+    CLATCH_MATCH_SCAN_THREADS, CLATCH_MATCH_SELECT_THREADS, CLATCH_MATCH_THREADS,
+    CLATCH_MATCH_TILE,
+};
+use crate::descriptor::DescriptorSet;
+use crate::error::{Error, Result};
+use crate::matching::{KnnMatches, Match, MatchConfig};
+
+// SAFETY: Match is #[repr(C)] plain old data (three u32) with the layout of clatch_match (checked in
+// tests); all-zero bits are a valid Match.
+unsafe impl DeviceRepr for Match {}
+// SAFETY: as above.
+unsafe impl ValidAsZeroBits for Match {}
+
+/// The most neighbours per query the GPU matcher returns.
+pub const MAX_K: usize = CLATCH_MATCH_MAX_K as usize;
+
+/// List lengths the kNN kernels are compiled for; `k` is rounded up to one of them. The kernels with
+/// the fused reverse 1-NN (cross-check) exist for the first two.
+const LIST_LENGTHS: [usize; 4] = [1, 2, 4, 8];
+/// kNN kernels per descriptor width: one per list length, then the two with the reverse 1-NN.
+const KERNELS_PER_WIDTH: usize = 6;
+
+macro_rules! match_kernels {
+    ($($w:literal)*) => {
+        &[
+            $(
+                concat!("clatch_knn_w", $w, "_k1"),
+                concat!("clatch_knn_w", $w, "_k2"),
+                concat!("clatch_knn_w", $w, "_k4"),
+                concat!("clatch_knn_w", $w, "_k8"),
+                concat!("clatch_knn_mutual_w", $w, "_k1"),
+                concat!("clatch_knn_mutual_w", $w, "_k2"),
+            )*
+            "clatch_knn_merge",
+            "clatch_match_filter",
+            "clatch_match_scan",
+            "clatch_match_compact",
+        ]
+    };
+}
+
+/// Every entry point of `kernels/match.cu`: for descriptor widths of 1..8 words, the kNN kernels
+/// (`KERNELS_PER_WIDTH` each, see [`knn_kernel`]), then the merge and selection kernels.
+pub(crate) const KERNELS: &[&str] = match_kernels!(1 2 3 4 5 6 7 8);
+
+/// The kNN kernel for rows of `words` 64-bit words and `k` neighbours, with the reverse 1-NN of the
+/// cross-check when `mutual` (then `k` is 1 or 2).
+fn knn_kernel(words: usize, k: usize, mutual: bool) -> &'static str {
+    let slot = LIST_LENGTHS
+        .iter()
+        .position(|&len| len >= k)
+        .expect("k checked against MAX_K");
+    let slot = if mutual { 4 + slot } else { slot };
+    KERNELS[(words - 1) * KERNELS_PER_WIDTH + slot]
+}
+
+/// The alternatives of `kernels/match_variants.cu` (512 bits, k = 2): `q` queries per thread, popcount
+/// groups of `g` words, gallery loop unrolled `u` times.
+pub(crate) const VARIANT_KERNELS: &[&str] = &[
+    "clatch_knn_variant_q1_g1_u1",
+    "clatch_knn_variant_q1_g3_u1",
+    "clatch_knn_variant_q1_g7_u1",
+    "clatch_knn_variant_q1_g15_u1",
+    "clatch_knn_variant_q2_g1_u1",
+    "clatch_knn_variant_q2_g3_u1",
+    "clatch_knn_variant_q2_g7_u1",
+    "clatch_knn_variant_q2_g15_u1",
+    "clatch_knn_variant_q2_g7_u2",
+];
+
+const THREADS: usize = CLATCH_MATCH_THREADS as usize;
+const TILE: usize = CLATCH_MATCH_TILE as usize;
+const ROW_PAD: usize = CLATCH_MATCH_ROW_PAD as usize;
+const SELECT_THREADS: usize = CLATCH_MATCH_SELECT_THREADS as usize;
+/// Blocks per multiprocessor the kNN grid aims at (several waves, so the last one is short).
+const TARGET_BLOCKS_PER_SM: usize = 16;
+/// Fewest tiles per gallery segment, so the prefetch pipeline has something to overlap.
+const MIN_SEGMENT_TILES: usize = 2;
+/// Most gallery segments (grid y).
+const MAX_SEGMENTS: usize = 65_535;
+/// Largest set the u32 indices of the kernels (and of [`Match`]) can address, padding included.
+const MAX_ROWS: usize = u32::MAX as usize - ROW_PAD;
+
+/// Checks that the GPU matcher can return `k` neighbours.
+fn check_k(k: usize) -> Result<()> {
+    if k > MAX_K {
+        return Err(Error::KTooLargeForBackend {
+            k,
+            max: MAX_K,
+            backend: "cuda".into(),
+        });
+    }
+    Ok(())
+}
+
+fn check_rows(set: &DescriptorSet, what: &'static str) -> Result<()> {
+    if set.len() > MAX_ROWS {
+        return Err(Error::InvalidConfig {
+            field: what,
+            value: set.len().to_string(),
+            reason: "the CUDA matcher indexes descriptors with u32: at most 2^32 - 257 per set",
+        });
+    }
+    Ok(())
+}
+
+/// Replaces the byte count of an out-of-memory error.
+fn with_bytes(e: Error, bytes: usize) -> Error {
+    match e {
+        Error::DeviceOutOfMemory { operation, .. } => Error::DeviceOutOfMemory { operation, bytes },
+        other => other,
+    }
+}
+
+/// A zeroed device buffer of `len` (at least one) elements; out of memory is reported with its size.
+fn alloc_zeros<T: DeviceRepr + ValidAsZeroBits>(
+    stream: &Arc<CudaStream>,
+    len: usize,
+    what: &str,
+) -> Result<CudaSlice<T>> {
+    let len = len.max(1);
+    let bytes = len.saturating_mul(size_of::<T>());
+    if bytes == usize::MAX {
+        return Err(Error::DeviceOutOfMemory {
+            operation: what.to_string(),
+            bytes,
+        });
+    }
+    stream
+        .alloc_zeros::<T>(len)
+        .map_err(|e| with_bytes(driver_error(what)(e), bytes))
+}
+
+/// Uploads a set's rows into a zeroed buffer of a whole number of `ROW_PAD` rows.
+fn upload(stream: &Arc<CudaStream>, set: &DescriptorSet, what: &str) -> Result<CudaSlice<u64>> {
+    let rows = set.len().div_ceil(ROW_PAD).max(1) * ROW_PAD;
+    let mut buffer = alloc_zeros::<u64>(stream, rows * set.width().words(), what)?;
+    stream
+        .memcpy_htod(set.as_words(), &mut buffer)
+        .map_err(driver_error(what))?;
+    Ok(buffer)
+}
+
+/// How one kNN is cut into blocks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Geometry {
+    query_blocks: usize,
+    /// Gallery rows per segment, a multiple of TILE.
+    segment: usize,
+    segments: usize,
+}
+
+impl Geometry {
+    /// Enough blocks to fill the device several times over: queries in blocks of `THREADS * qpt`,
+    /// the gallery cut into segments (grid y) when there are too few query blocks.
+    /// `segment_tiles` forces the segment length (tests).
+    fn new(
+        dev: &GpuDevice,
+        nq: usize,
+        nt: usize,
+        qpt: usize,
+        segment_tiles: Option<usize>,
+    ) -> Self {
+        let query_blocks = nq.div_ceil(THREADS * qpt);
+        let tiles = nt.div_ceil(TILE);
+        let target = dev.multiprocessors.max(1) * TARGET_BLOCKS_PER_SM;
+        let segments_wanted = target.div_ceil(query_blocks).max(1);
+        let segment_tiles = segment_tiles
+            .unwrap_or_else(|| tiles.div_ceil(segments_wanted).max(MIN_SEGMENT_TILES))
+            .max(tiles.div_ceil(MAX_SEGMENTS))
+            .clamp(1, tiles);
+        Self {
+            query_blocks,
+            segment: segment_tiles * TILE,
+            segments: tiles.div_ceil(segment_tiles),
+        }
+    }
+}
+
+/// One kNN on the device: kernel choice, geometry, the per-segment scratch buffer and, for the
+/// cross-check, the reverse 1-NN keys.
+struct KnnRun {
+    kernel: &'static str,
+    geometry: Geometry,
+    nq: u32,
+    nt: u32,
+    k: u32,
+    partial: CudaSlice<u64>,
+    /// Whether the kernel also computes the reverse 1-NN (a `clatch_knn_mutual_*` kernel).
+    mutual: bool,
+    /// Per gallery descriptor, `!(distance << 32 | query)` of its nearest query (one unused element
+    /// unless `mutual`).
+    reverse: CudaSlice<u64>,
+}
+
+impl KnnRun {
+    /// Plans the production kernel for `nq` queries against `nt` gallery rows of `words` words;
+    /// `mutual` (k = 1 or 2) also computes the nearest query of every gallery row.
+    fn new(
+        dev: &GpuDevice,
+        stream: &Arc<CudaStream>,
+        (nq, nt, words): (usize, usize, usize),
+        k: usize,
+        mutual: bool,
+        segment_tiles: Option<usize>,
+    ) -> Result<Self> {
+        let kernel = knn_kernel(words, k, mutual);
+        let qpt = CLATCH_MATCH_QUERIES_PER_THREAD as usize;
+        let mut run = Self::with_kernel(dev, stream, kernel, qpt, (nq, nt), k, segment_tiles)?;
+        if mutual {
+            run.mutual = true;
+            run.reverse = alloc_zeros(stream, nt, "reverse 1-NN keys")?;
+        }
+        Ok(run)
+    }
+
+    fn with_kernel(
+        dev: &GpuDevice,
+        stream: &Arc<CudaStream>,
+        kernel: &'static str,
+        qpt: usize,
+        (nq, nt): (usize, usize),
+        k: usize,
+        segment_tiles: Option<usize>,
+    ) -> Result<Self> {
+        let geometry = Geometry::new(dev, nq, nt, qpt, segment_tiles);
+        let partial_len = if geometry.segments > 1 {
+            geometry.segments.saturating_mul(nq).saturating_mul(k)
+        } else {
+            1
+        };
+        Ok(Self {
+            kernel,
+            geometry,
+            nq: nq as u32,
+            nt: nt as u32,
+            k: k as u32,
+            partial: alloc_zeros(stream, partial_len, "kNN segment lists")?,
+            mutual: false,
+            reverse: alloc_zeros(stream, 1, "kNN placeholder")?,
+        })
+    }
+
+    /// Queues the kNN (and the merge of the segment lists) on `stream`; `out` gets `nq * k` matches.
+    fn launch(
+        &mut self,
+        dev: &GpuDevice,
+        stream: &Arc<CudaStream>,
+        query: &CudaSlice<u64>,
+        train: &CudaSlice<u64>,
+        out: &mut CudaSlice<Match>,
+    ) -> Result<()> {
+        let g = self.geometry;
+        let segment = g.segment as u32;
+        if self.mutual {
+            // The reverse keys are folded in with atomics: start from zero (no candidate) every run.
+            stream
+                .memset_zeros(&mut self.reverse)
+                .map_err(driver_error("clearing the reverse 1-NN keys"))?;
+        }
+        let mut launch = stream.launch_builder(dev.kernel(self.kernel));
+        launch
+            .arg(query)
+            .arg(&self.nq)
+            .arg(train)
+            .arg(&self.nt)
+            .arg(&segment)
+            .arg(&self.k)
+            .arg(&mut *out)
+            .arg(&mut self.partial)
+            .arg(&mut self.reverse);
+        let config = LaunchConfig {
+            grid_dim: (g.query_blocks as u32, g.segments as u32, 1),
+            block_dim: (CLATCH_MATCH_THREADS, 1, 1),
+            shared_mem_bytes: 0,
+        };
+        // SAFETY: the arguments match clatch_knn_*'s signature. Both descriptor buffers hold whole
+        // ROW_PAD-row blocks (so every tile and query block the kernel loads is in bounds), `out` holds
+        // nq * k matches, `partial` segments * nq * k keys when there is more than one segment, and
+        // `reverse` nt keys for the mutual kernels (the only ones that touch it).
+        unsafe { launch.launch(config) }.map_err(driver_error(self.kernel))?;
+        if g.segments > 1 {
+            let segments = g.segments as u32;
+            let mut launch = stream.launch_builder(dev.kernel("clatch_knn_merge"));
+            launch
+                .arg(&self.partial)
+                .arg(&self.nq)
+                .arg(&segments)
+                .arg(&self.k)
+                .arg(&mut *out);
+            let blocks = (self.nq as usize).div_ceil(SELECT_THREADS).min(1 << 20) as u32;
+            let config = LaunchConfig {
+                grid_dim: (blocks, 1, 1),
+                block_dim: (CLATCH_MATCH_SELECT_THREADS, 1, 1),
+                shared_mem_bytes: 0,
+            };
+            // SAFETY: `partial` holds segments * nq * k keys, all written by the kNN kernel above
+            // (every segment is non-empty), and `out` nq * k matches.
+            unsafe { launch.launch(config) }.map_err(driver_error("clatch_knn_merge"))?;
+        }
+        Ok(())
+    }
+}
+
+/// The k nearest gallery descriptors of every query (validated sets and `k`, as for
+/// [`crate::matching::cpu::knn`]). `k` above [`MAX_K`] is an error.
+pub(crate) fn knn(
+    dev: &GpuDevice,
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    k: usize,
+) -> Result<KnnMatches> {
+    knn_with(dev, query, train, k, None)
+}
+
+/// [`knn`] with the gallery cut into segments of `segment_tiles` tiles of
+/// `CLATCH_MATCH_TILE` descriptors (1 = one block per tile, `usize::MAX` = one segment): lets the
+/// tests reach both the direct and the merged path at every size.
+#[doc(hidden)]
+pub fn knn_segmented(
+    dev: &GpuDevice,
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    k: usize,
+    segment_tiles: usize,
+) -> Result<KnnMatches> {
+    knn_with(dev, query, train, k, Some(segment_tiles.max(1)))
+}
+
+fn knn_with(
+    dev: &GpuDevice,
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    k: usize,
+    segment_tiles: Option<usize>,
+) -> Result<KnnMatches> {
+    check_k(k)?;
+    check_rows(query, "query descriptors")?;
+    check_rows(train, "gallery descriptors")?;
+    if query.is_empty() {
+        return Ok(KnnMatches {
+            k,
+            matches: Vec::new(),
+        });
+    }
+    let stream = dev.new_stream()?;
+    let q = upload(&stream, query, "query descriptor upload")?;
+    let t = upload(&stream, train, "gallery descriptor upload")?;
+    let shape = (query.len(), train.len(), query.width().words());
+    let mut run = KnnRun::new(dev, &stream, shape, k, false, segment_tiles)?;
+    let mut out = alloc_zeros::<Match>(&stream, query.len() * k, "kNN matches")?;
+    run.launch(dev, &stream, &q, &t, &mut out)?;
+    let matches = stream.clone_dtoh(&out).map_err(driver_error(
+        "clatch_knn (running, or copying matches back)",
+    ))?;
+    Ok(KnnMatches { k, matches })
+}
+
+/// The kept best matches in query order, exactly as [`crate::matching::cpu::match_descriptors`]
+/// (validated sets and configuration).
+pub(crate) fn match_descriptors(
+    dev: &GpuDevice,
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    config: &MatchConfig,
+) -> Result<Vec<Match>> {
+    check_rows(query, "query descriptors")?;
+    check_rows(train, "gallery descriptors")?;
+    if query.is_empty() {
+        return Ok(Vec::new());
+    }
+    let mut job = MatchJob::prepare(dev, query, train, config)?;
+    job.launch(dev)?;
+    job.fetch()
+}
+
+/// Everything one `match_descriptors` needs on the device, on its own stream.
+struct MatchJob {
+    stream: Arc<CudaStream>,
+    query: CudaSlice<u64>,
+    train: CudaSlice<u64>,
+    run: KnnRun,
+    forward: CudaSlice<Match>,
+    keep_bits: CudaSlice<u32>,
+    counts: CudaSlice<u32>,
+    total: CudaSlice<u32>,
+    kept: CudaSlice<Match>,
+    nq: usize,
+    k: usize,
+    config: MatchConfig,
+}
+
+impl MatchJob {
+    /// Uploads both (non-empty) sets and allocates every buffer.
+    fn prepare(
+        dev: &GpuDevice,
+        query: &DescriptorSet,
+        train: &DescriptorSet,
+        config: &MatchConfig,
+    ) -> Result<Self> {
+        let (nq, nt, words) = (query.len(), train.len(), query.width().words());
+        let k = if config.ratio.is_some() { 2 } else { 1 };
+        let stream = dev.new_stream()?;
+        let blocks = nq.div_ceil(SELECT_THREADS);
+        Ok(Self {
+            query: upload(&stream, query, "query descriptor upload")?,
+            train: upload(&stream, train, "gallery descriptor upload")?,
+            run: KnnRun::new(dev, &stream, (nq, nt, words), k, config.cross_check, None)?,
+            forward: alloc_zeros(&stream, nq * k, "kNN matches")?,
+            keep_bits: alloc_zeros(&stream, blocks * SELECT_THREADS / 32, "match flags")?,
+            counts: alloc_zeros(&stream, blocks, "match counts")?,
+            total: alloc_zeros(&stream, 1, "match count")?,
+            kept: alloc_zeros(&stream, nq, "kept matches")?,
+            nq,
+            k,
+            config: config.clone(),
+            stream,
+        })
+    }
+
+    /// Queues the kNN (fused with the reverse 1-NN when cross-checking), the filter and the
+    /// compaction.
+    fn launch(&mut self, dev: &GpuDevice) -> Result<()> {
+        let stream = &self.stream;
+        self.run
+            .launch(dev, stream, &self.query, &self.train, &mut self.forward)?;
+
+        let blocks = self.nq.div_ceil(SELECT_THREADS);
+        let (n, k, blocks32) = (self.nq as u32, self.k as u32, blocks as u32);
+        let use_ratio = self.config.ratio.is_some() as i32;
+        let ratio = self.config.ratio.unwrap_or(0.0);
+        let cross_check = self.config.cross_check as i32;
+        let use_max = self.config.max_distance.is_some() as i32;
+        let max_distance = self.config.max_distance.unwrap_or(u32::MAX);
+        let shape = |blocks: usize, threads: u32| LaunchConfig {
+            grid_dim: (blocks as u32, 1, 1),
+            block_dim: (threads, 1, 1),
+            shared_mem_bytes: 0,
+        };
+
+        let mut launch = stream.launch_builder(dev.kernel("clatch_match_filter"));
+        launch
+            .arg(&self.forward)
+            .arg(&n)
+            .arg(&k)
+            .arg(&use_ratio)
+            .arg(&ratio)
+            .arg(&cross_check)
+            .arg(&self.run.reverse)
+            .arg(&use_max)
+            .arg(&max_distance)
+            .arg(&mut self.keep_bits)
+            .arg(&mut self.counts);
+        // SAFETY: the arguments match clatch_match_filter's signature; `forward` holds nq * k
+        // matches, `run.reverse` nt keys with the cross-check (read only then, at train indices
+        // < nt), `keep_bits` 8 words and `counts` one word per block.
+        unsafe { launch.launch(shape(blocks, CLATCH_MATCH_SELECT_THREADS)) }
+            .map_err(driver_error("clatch_match_filter"))?;
+
+        let mut launch = stream.launch_builder(dev.kernel("clatch_match_scan"));
+        launch
+            .arg(&mut self.counts)
+            .arg(&blocks32)
+            .arg(&mut self.total);
+        // SAFETY: `counts` holds `blocks` words, `total` one.
+        unsafe { launch.launch(shape(1, CLATCH_MATCH_SCAN_THREADS)) }
+            .map_err(driver_error("clatch_match_scan"))?;
+
+        let mut launch = stream.launch_builder(dev.kernel("clatch_match_compact"));
+        launch
+            .arg(&self.forward)
+            .arg(&n)
+            .arg(&k)
+            .arg(&self.keep_bits)
+            .arg(&self.counts)
+            .arg(&mut self.kept);
+        // SAFETY: as for the filter; `kept` holds nq matches and every offset plus rank is below
+        // the number of kept queries.
+        unsafe { launch.launch(shape(blocks, CLATCH_MATCH_SELECT_THREADS)) }
+            .map_err(driver_error("clatch_match_compact"))?;
+        Ok(())
+    }
+
+    /// Waits for the kernels and copies the kept matches back.
+    fn fetch(&self) -> Result<Vec<Match>> {
+        let count = self.stream.clone_dtoh(&self.total).map_err(driver_error(
+            "matching (running, or copying the count back)",
+        ))?[0] as usize;
+        if count == 0 {
+            return Ok(Vec::new());
+        }
+        self.stream
+            .clone_dtoh(&self.kept.slice(0..count.min(self.nq)))
+            .map_err(driver_error("copying the kept matches back"))
+    }
+}
+
+/// Kernel times in milliseconds of `repeats` runs of everything `match_descriptors` queues on the
+/// device (kNN with the fused reverse 1-NN, filter, scan, compaction) after `warmup` runs, measured
+/// with CUDA events (uploads and downloads excluded). Validated, non-empty sets.
+#[doc(hidden)]
+pub fn time_match_kernels(
+    dev: &GpuDevice,
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    config: &MatchConfig,
+    warmup: usize,
+    repeats: usize,
+) -> Result<Vec<f32>> {
+    let k = if config.ratio.is_some() { 2 } else { 1 };
+    if query.is_empty() || train.len() < k {
+        return Err(Error::InvalidK {
+            k,
+            gallery: train.len(),
+        });
+    }
+    let mut job = MatchJob::prepare(dev, query, train, config)?;
+    let stream = job.stream.clone();
+    time_launches(dev, &stream, warmup, repeats, || job.launch(dev))
+}
+
+/// The device's multiprocessor count and its maximum SM clock in kHz (driver attributes), for the
+/// bench's POPC bound.
+#[doc(hidden)]
+pub fn multiprocessors_and_clock_khz(dev: &GpuDevice) -> Result<(usize, usize)> {
+    let attribute = |a| {
+        dev.ctx
+            .attribute(a)
+            .map_err(driver_error("reading device attributes"))
+    };
+    let sms = attribute(sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_MULTIPROCESSOR_COUNT)?;
+    let clock = attribute(sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_CLOCK_RATE)?;
+    Ok((sms.max(0) as usize, clock.max(0) as usize))
+}
+
+/// Times `launch` with CUDA events on `stream`: `warmup` untimed calls, then `repeats` timed ones
+/// (milliseconds each).
+fn time_launches(
+    dev: &GpuDevice,
+    stream: &Arc<CudaStream>,
+    warmup: usize,
+    repeats: usize,
+    mut launch: impl FnMut() -> Result<()>,
+) -> Result<Vec<f32>> {
+    for _ in 0..warmup {
+        launch()?;
+    }
+    let timing = Some(sys::CUevent_flags::CU_EVENT_DEFAULT);
+    let mut times = Vec::with_capacity(repeats);
+    for _ in 0..repeats {
+        let start = dev
+            .ctx
+            .new_event(timing)
+            .map_err(driver_error("event creation"))?;
+        let end = dev
+            .ctx
+            .new_event(timing)
+            .map_err(driver_error("event creation"))?;
+        start.record(stream).map_err(driver_error("event record"))?;
+        launch()?;
+        end.record(stream).map_err(driver_error("event record"))?;
+        times.push(
+            start
+                .elapsed_ms(&end)
+                .map_err(driver_error("clatch_knn (timed)"))?,
+        );
+    }
+    Ok(times)
+}
+
+/// Kernel times in milliseconds of `repeats` kNN runs (the kNN kernel and, when the gallery is split,
+/// the merge) after `warmup` runs, measured with CUDA events (uploads and downloads excluded).
+#[doc(hidden)]
+pub fn time_knn_kernel(
+    dev: &GpuDevice,
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    k: usize,
+    warmup: usize,
+    repeats: usize,
+) -> Result<Vec<f32>> {
+    check_k(k)?;
+    if query.is_empty() || k == 0 || k > train.len() {
+        return Err(Error::InvalidK {
+            k,
+            gallery: train.len(),
+        });
+    }
+    let stream = dev.new_stream()?;
+    let q = upload(&stream, query, "query descriptor upload")?;
+    let t = upload(&stream, train, "gallery descriptor upload")?;
+    let shape = (query.len(), train.len(), query.width().words());
+    let mut run = KnnRun::new(dev, &stream, shape, k, false, None)?;
+    let mut out = alloc_zeros::<Match>(&stream, query.len() * k, "kNN matches")?;
+    time_launches(dev, &stream, warmup, repeats, || {
+        run.launch(dev, &stream, &q, &t, &mut out)
+    })
+}
+
+/// Times every kernel of `kernels/match_variants.cu` (512-bit sets, k = 2) as [`time_knn_kernel`]
+/// does, after checking that each returns exactly the production kernel's matches. Returns
+/// `(kernel name, times in ms)`.
+#[doc(hidden)]
+pub fn time_knn_variants(
+    dev: &GpuDevice,
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    warmup: usize,
+    repeats: usize,
+) -> Result<Vec<(&'static str, Vec<f32>)>> {
+    const K: usize = 2;
+    if query.width().words() != 8 || train.len() < K {
+        return Err(Error::InvalidConfig {
+            field: "variant sets",
+            value: format!(
+                "{} bits, {} gallery rows",
+                query.width().bits(),
+                train.len()
+            ),
+            reason: "the kNN variants are compiled for 512-bit descriptors and k = 2",
+        });
+    }
+    let expected = knn(dev, query, train, K)?.matches;
+    let stream = dev.new_stream()?;
+    let q = upload(&stream, query, "query descriptor upload")?;
+    let t = upload(&stream, train, "gallery descriptor upload")?;
+    let mut results = Vec::new();
+    for &kernel in VARIANT_KERNELS {
+        let qpt = if kernel.contains("_q2_") { 2 } else { 1 };
+        let mut run = KnnRun::with_kernel(
+            dev,
+            &stream,
+            kernel,
+            qpt,
+            (query.len(), train.len()),
+            K,
+            None,
+        )?;
+        let mut out = alloc_zeros::<Match>(&stream, query.len() * K, "kNN matches")?;
+        run.launch(dev, &stream, &q, &t, &mut out)?;
+        let got = stream
+            .clone_dtoh(&out)
+            .map_err(driver_error("copying variant matches back"))?;
+        if got != expected {
+            let first = got.iter().zip(&expected).position(|(a, b)| a != b);
+            return Err(Error::Cuda {
+                operation: kernel.to_string(),
+                message: format!("differs from the production kernel (first at {first:?})"),
+            });
+        }
+        let times = time_launches(dev, &stream, warmup, repeats, || {
+            run.launch(dev, &stream, &q, &t, &mut out)
+        })?;
+        results.push((kernel, times));
+    }
+    Ok(results)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kernel_choice_follows_words_and_k() {
+        for words in 1..=8 {
+            for k in 1..=MAX_K {
+                let len = LIST_LENGTHS.iter().find(|&&len| len >= k).unwrap();
+                assert_eq!(
+                    knn_kernel(words, k, false),
+                    format!("clatch_knn_w{words}_k{len}")
+                );
+            }
+            for k in 1..=2 {
+                assert_eq!(
+                    knn_kernel(words, k, true),
+                    format!("clatch_knn_mutual_w{words}_k{k}")
+                );
+            }
+        }
+        assert_eq!(*LIST_LENGTHS.last().unwrap(), MAX_K);
+        assert_eq!(KERNELS.len(), 8 * KERNELS_PER_WIDTH + 4);
+    }
+
+    #[test]
+    fn padding_holds_whole_tiles_and_query_blocks() {
+        let qpt = CLATCH_MATCH_QUERIES_PER_THREAD as usize;
+        assert_eq!(ROW_PAD % TILE, 0);
+        assert_eq!(ROW_PAD % (THREADS * qpt), 0);
+        assert_eq!(
+            ROW_PAD % THREADS,
+            0,
+            "the variants with one query per thread"
+        );
+    }
+}

@@ -4,7 +4,8 @@
 //! - finds nvcc (`NVCC`, then `CUDA_HOME`/`CUDA_PATH`, then `PATH`);
 //! - compiles every `kernels/*.cu` to portable PTX for a baseline virtual architecture (the driver
 //!   JIT-compiles it for the GPU at hand), with FMA contraction off so no float decides a bit by accident;
-//! - assembles each kernel for sm_90 with ptxas as a compile-only check and keeps ptxas's resource report;
+//! - builds a fatbin of each with native sm_90 code plus that PTX (loaded at run time: no JIT on Hopper),
+//!   which is also the ptxas check for sm_90, and keeps ptxas's resource report;
 //! - writes `kernels.rs` (the PTX as string constants) and `clatch_h.rs` (bindgen of `kernels/clatch.h`)
 //!   into OUT_DIR.
 
@@ -64,12 +65,15 @@ mod cuda {
                 .arg(source)
                 .arg("-o")
                 .arg(&ptx));
-            let cubin = out.join(format!("{stem}.{CHECK_ARCH}.cubin"));
+            // The fatbin carries native sm_90 code (no JIT on an H100) plus the portable PTX, so the
+            // driver JIT-compiles only on other GPUs; building it is also the ptxas check for sm_90.
+            let fatbin = out.join(format!("{stem}.fatbin"));
             let check = run(Command::new(&nvcc)
                 .args(NVCC_FLAGS)
                 .args([
-                    "-cubin",
-                    &format!("-arch={CHECK_ARCH}"),
+                    "-fatbin",
+                    &format!("-gencode=arch=compute_{0},code=sm_{0}", &CHECK_ARCH[3..]),
+                    &format!("-gencode=arch={PTX_ARCH},code={PTX_ARCH}"),
                     "-Xptxas",
                     "-v",
                     "-I",
@@ -77,11 +81,12 @@ mod cuda {
                 .arg(kernels)
                 .arg(source)
                 .arg("-o")
-                .arg(&cubin));
+                .arg(&fatbin));
             report.push_str(&format!("== {stem} ({CHECK_ARCH})\n{check}\n"));
+            let name = stem.to_uppercase();
             constants.push_str(&format!(
-                "/// PTX of `kernels/{stem}.cu`.\npub const {}_PTX: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{stem}.ptx\"));\n",
-                stem.to_uppercase()
+                "/// PTX of `kernels/{stem}.cu` ({PTX_ARCH}).\npub const {name}_PTX: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{stem}.ptx\"));\n\
+                 /// Fatbin of `kernels/{stem}.cu`: {CHECK_ARCH} code and {PTX_ARCH} PTX.\npub const {name}_FATBIN: &[u8] = include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{stem}.fatbin\"));\n"
             ));
         }
         fs::write(out.join("kernels.rs"), constants).expect("write kernels.rs");

@@ -48,8 +48,10 @@ __device__ __forceinline__ bool nine_in_a_row(unsigned m) {
 // The largest t >= lo such that nine contiguous circle differences are all >= t (sign = 1) or all
 // <= -t (sign = -1), or 0 if there is none: max over k of min_{j<9} (sign * d[k+j]), when it is >= lo.
 // A binary search over t with bit-mask tests instead of a min/max network: the score is decided by
-// comparisons alone. (ptxas 13.0 fuses the obvious min/max network into 3-input VIMNMX3 for sm_90, and
-// the H100 returned wrong scores from that code: max(d) where max_k min9(d) was due.)
+// comparisons alone. Do not "simplify" this back: the obvious network (2-, 4-, 8-, 9-wide sliding
+// minima) compiled to correct PTX (checked by simulating the PTX) but returned max(d) instead of
+// max_k min9(d) on the H100 (driver 580.159, PTX JIT-compiled for sm_90); ptxas 13.0 turns that
+// network into 3-input VIMNMX3 instructions for sm_90, the likely culprit.
 __device__ __forceinline__ int arc_score(const int d[16], int sign, int lo) {
     unsigned mask = 0;
 #pragma unroll

@@ -1,9 +1,9 @@
 //! Backend selection: `Backend::auto()` picks CUDA only when it can really run, and a CUDA backend
 //! that cannot run is a typed error, never a panic (this runs in CI, where there is no driver).
 
-use clatch::{Backend, Extractor, ExtractorConfig, MatchConfig, Matcher};
 #[cfg(feature = "cuda")]
 use clatch::Error;
+use clatch::{Backend, Extractor, ExtractorConfig, MatchConfig, Matcher};
 
 #[test]
 fn cpu_is_always_available() {

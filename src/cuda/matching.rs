@@ -11,7 +11,6 @@
 //! reverse 1-NN when cross-checking), filter, scan, compact, then copy back the count and the kept
 //! matches. No host round trip sits between the kernels.
 
-use std::mem::size_of;
 use std::sync::Arc;
 
 use cudarc::driver::{
@@ -24,6 +23,7 @@ use super::header::{
     CLATCH_MATCH_SCAN_THREADS, CLATCH_MATCH_SELECT_THREADS, CLATCH_MATCH_THREADS,
     CLATCH_MATCH_TILE,
 };
+use super::memory::alloc_zeros;
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
 use crate::matching::{KnnMatches, Match, MatchConfig};
@@ -125,33 +125,6 @@ fn check_rows(set: &DescriptorSet, what: &'static str) -> Result<()> {
         });
     }
     Ok(())
-}
-
-/// Replaces the byte count of an out-of-memory error.
-fn with_bytes(e: Error, bytes: usize) -> Error {
-    match e {
-        Error::DeviceOutOfMemory { operation, .. } => Error::DeviceOutOfMemory { operation, bytes },
-        other => other,
-    }
-}
-
-/// A zeroed device buffer of `len` (at least one) elements; out of memory is reported with its size.
-fn alloc_zeros<T: DeviceRepr + ValidAsZeroBits>(
-    stream: &Arc<CudaStream>,
-    len: usize,
-    what: &str,
-) -> Result<CudaSlice<T>> {
-    let len = len.max(1);
-    let bytes = len.saturating_mul(size_of::<T>());
-    if bytes == usize::MAX {
-        return Err(Error::DeviceOutOfMemory {
-            operation: what.to_string(),
-            bytes,
-        });
-    }
-    stream
-        .alloc_zeros::<T>(len)
-        .map_err(|e| with_bytes(driver_error(what)(e), bytes))
 }
 
 /// Uploads a set's rows into a zeroed buffer of a whole number of `ROW_PAD` rows.

@@ -17,13 +17,21 @@ fn with_bytes(error: Error, bytes: usize) -> Error {
     }
 }
 
-/// `len` zeroed elements on the device, queued on `stream`.
+/// `len` zeroed elements (at least one, so no launch ever sees a null buffer) on the device, queued on
+/// `stream`; out of memory is reported with the size asked for.
 pub(crate) fn alloc_zeros<T: DeviceRepr + ValidAsZeroBits>(
     stream: &Arc<CudaStream>,
     len: usize,
     operation: &str,
 ) -> Result<CudaSlice<T>> {
+    let len = len.max(1);
     let bytes = len.saturating_mul(size_of::<T>());
+    if bytes == usize::MAX {
+        return Err(Error::DeviceOutOfMemory {
+            operation: operation.to_string(),
+            bytes,
+        });
+    }
     stream
         .alloc_zeros::<T>(len)
         .map_err(|e| with_bytes(driver_error(operation)(e), bytes))

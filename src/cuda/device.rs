@@ -11,17 +11,19 @@ use crate::angle::{quadrant_boundaries, rotation_table};
 use crate::describe::triplets::TRIPLETS;
 use crate::error::{Error, Result};
 
-/// Every kernel entry point, by the PTX of the file that defines it. Add a kernel here and fetch it
-/// with [`GpuDevice::kernel`].
-const KERNELS: &[(&str, &str, &[&str])] = &[
+/// Every kernel entry point, by the file that defines it (its portable PTX and its fatbin). Add a
+/// kernel here and fetch it with [`GpuDevice::kernel`].
+const KERNELS: &[(&str, &str, &[u8], &[&str])] = &[
     (
         "kernels/describe.cu",
         ptx::DESCRIBE_PTX,
+        ptx::DESCRIBE_FATBIN,
         &["clatch_describe"],
     ),
     (
         "kernels/detect.cu",
         ptx::DETECT_PTX,
+        ptx::DETECT_FATBIN,
         &[
             "clatch_detect_nms",
             "clatch_scan_reduce",
@@ -32,10 +34,16 @@ const KERNELS: &[(&str, &str, &[&str])] = &[
             "clatch_debug_read_texture",
         ],
     ),
-    ("kernels/match.cu", ptx::MATCH_PTX, super::matching::KERNELS),
+    (
+        "kernels/match.cu",
+        ptx::MATCH_PTX,
+        ptx::MATCH_FATBIN,
+        super::matching::KERNELS,
+    ),
     (
         "kernels/match_variants.cu",
         ptx::MATCH_VARIANTS_PTX,
+        ptx::MATCH_VARIANTS_FATBIN,
         super::matching::VARIANT_KERNELS,
     ),
 ];
@@ -117,10 +125,16 @@ impl GpuDevice {
     fn load(ordinal: usize) -> Result<Self> {
         let ctx = CudaContext::new(ordinal).map_err(driver_error("context creation"))?;
         let mut kernels = HashMap::new();
-        for &(file, source, names) in KERNELS {
-            let module = ctx
-                .load_module(Ptx::from_src(source))
-                .map_err(driver_error(file))?;
+        // The fatbin's native code loads without JIT on the GPUs it was built for (and falls back to its
+        // PTX elsewhere); CLATCH_FORCE_PTX=1 loads the plain PTX instead, so tests can prove both paths.
+        let force_ptx = std::env::var_os("CLATCH_FORCE_PTX").is_some_and(|v| v == "1");
+        for &(file, source, fatbin, names) in KERNELS {
+            let image = if force_ptx {
+                Ptx::from_src(source)
+            } else {
+                Ptx::from_binary(fatbin.to_vec())
+            };
+            let module = ctx.load_module(image).map_err(driver_error(file))?;
             for &name in names {
                 let function = module.load_function(name).map_err(driver_error(name))?;
                 kernels.insert(name, function);

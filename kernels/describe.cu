@@ -26,13 +26,18 @@ __device__ __forceinline__ int angle_bin(float angle) {
 
 extern "C" __global__ void __launch_bounds__(CLATCH_DESCRIBE_WARPS * 32)
 clatch_describe(cudaTextureObject_t image, int width, int height,
-                const clatch_keypoint* __restrict__ keypoints, int count,
+                const clatch_keypoint* __restrict__ keypoints,
+                const unsigned int* __restrict__ total,     // keypoints available (e.g. detection's count)
+                int capacity,                               // records in `keypoints` (and rows of `out`)
                 const int2* __restrict__ rotation,         // CLATCH_ANGLE_BINS (cos, sin), 16 fraction bits
                 const unsigned char* __restrict__ triplets, // CLATCH_TRIPLETS x 6 window coordinates
                 const int* __restrict__ weights,            // 8x8, row-major
                 int bits,                                   // 8..512, a multiple of 8
-                u64* __restrict__ out)                      // count x ceil(bits / 64) words
+                u64* __restrict__ out)                      // capacity x ceil(bits / 64) words
 {
+    // The count may come from a kernel queued earlier on the same stream (GPU detection), so it is read
+    // here rather than passed by the host: no round trip between detection and description.
+    const int count = min((int)min(*total, (unsigned int)capacity), capacity);
     __shared__ int window[2][CLATCH_WINDOW * WINDOW_STRIDE];
 
     const unsigned full = 0xffffffffu;

@@ -128,10 +128,65 @@ impl Extractor {
         }
     }
 
-    /// Detects keypoints and describes them.
+    /// Detects keypoints and describes them. On the GPU the image is uploaded once and description
+    /// follows detection on the device with no host round trip.
     pub fn detect_and_describe(&self, image: &GrayView) -> Result<Features> {
-        let keypoints = self.detect(image)?;
-        let described = self.describe(image, &keypoints)?;
-        Ok(Features::from_described(keypoints, described))
+        match self.backend {
+            Backend::Cpu => {
+                let keypoints = self.detect(image)?;
+                let described = self.describe(image, &keypoints)?;
+                Ok(Features::from_described(keypoints, described))
+            }
+            #[cfg(feature = "cuda")]
+            Backend::Cuda { device } => self
+                .detect_and_describe_async(&crate::cuda::GpuStream::new(device)?, image)?
+                .wait(),
+        }
+    }
+
+    /// Queues detection and description of `image` on `stream` and returns at once; the result's
+    /// `wait` gives exactly what [`Extractor::detect_and_describe`] gives. With one stream per image,
+    /// several images are in flight at once (see [`crate::cuda::GpuStream`]). The backend must be
+    /// `Backend::Cuda` on the stream's device.
+    ///
+    /// ```no_run
+    /// # fn main() -> clatch::Result<()> {
+    /// use clatch::{Backend, Extractor, ExtractorConfig, GrayView, cuda::GpuStream};
+    /// let frames: Vec<Vec<u8>> = vec![vec![0; 640 * 480]; 8];
+    /// let extractor = Extractor::new(Backend::Cuda { device: 0 }, ExtractorConfig::default())?;
+    /// let streams: Vec<GpuStream> = (0..4).map(|_| GpuStream::new(0)).collect::<Result<_, _>>()?;
+    /// let pending: Vec<_> = frames
+    ///     .iter()
+    ///     .zip(streams.iter().cycle())
+    ///     .map(|(f, s)| extractor.detect_and_describe_async(s, &GrayView::new(f, 640, 480, 640)?))
+    ///     .collect::<Result<_, _>>()?;
+    /// for p in pending {
+    ///     let features = p.wait()?;
+    /// }
+    /// # Ok(()) }
+    /// ```
+    #[cfg(feature = "cuda")]
+    pub fn detect_and_describe_async(
+        &self,
+        stream: &crate::cuda::GpuStream,
+        image: &GrayView,
+    ) -> Result<crate::cuda::PendingFeatures> {
+        Self::check_image(image)?;
+        match self.backend {
+            Backend::Cuda { device } => {
+                stream.check_device(device)?;
+                crate::cuda::detect_and_describe_async(
+                    stream,
+                    image,
+                    &self.config.detector,
+                    &self.config.descriptor,
+                )
+            }
+            Backend::Cpu => Err(Error::InvalidConfig {
+                field: "backend",
+                value: "cpu".into(),
+                reason: "asynchronous extraction runs on a CUDA backend",
+            }),
+        }
     }
 }

@@ -109,4 +109,29 @@ impl Matcher {
             ),
         }
     }
+
+    /// Queues [`Matcher::match_descriptors`] on `stream` and returns at once; the result's `wait`
+    /// gives exactly what the blocking call gives. The backend must be `Backend::Cuda` on the
+    /// stream's device.
+    #[cfg(feature = "cuda")]
+    pub fn match_descriptors_async(
+        &self,
+        stream: &crate::cuda::GpuStream,
+        query: &DescriptorSet,
+        train: &DescriptorSet,
+    ) -> Result<crate::cuda::PendingMatches> {
+        let k = if self.config.ratio.is_some() { 2 } else { 1 };
+        Self::check_sets(query, train, k)?;
+        match self.backend {
+            Backend::Cuda { device } => {
+                stream.check_device(device)?;
+                crate::cuda::match_async(stream, query, train, &self.config)
+            }
+            Backend::Cpu => Err(Error::InvalidConfig {
+                field: "backend",
+                value: "cpu".into(),
+                reason: "asynchronous matching runs on a CUDA backend",
+            }),
+        }
+    }
 }

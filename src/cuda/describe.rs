@@ -60,14 +60,14 @@ pub(crate) fn describe(
     })
 }
 
-/// Everything one launch of `clatch_describe` needs, on the device.
+/// Everything one launch of `clatch_describe` on host-supplied keypoints needs, on the device.
 struct Job {
     stream: Arc<CudaStream>,
     image: DeviceImage,
     keypoints: CudaSlice<KeyPoint>,
+    count: CudaSlice<u32>,
     weights: CudaSlice<i32>,
     out: CudaSlice<u64>,
-    size: (i32, i32),
     bits: i32,
 }
 
@@ -81,22 +81,16 @@ impl Job {
     ) -> Result<Self> {
         let stream = dev.new_stream()?;
         let device_image = DeviceImage::upload(dev, &stream, image)?;
-        let weights: Vec<i32> = config
-            .weights
-            .as_array()
-            .iter()
-            .map(|&w| w as i32)
-            .collect();
         Ok(Self {
             keypoints: upload(&stream, keypoints, "keypoint upload")?,
-            weights: upload(&stream, &weights, "weight upload")?,
+            count: upload(&stream, &[keypoints.len() as u32], "keypoint count upload")?,
+            weights: upload_weights(&stream, config)?,
             out: alloc_zeros(
                 &stream,
                 keypoints.len() * config.width.words(),
                 "descriptor allocation",
             )?,
             image: device_image,
-            size: (image.width() as i32, image.height() as i32),
             bits: config.width.bits() as i32,
             stream,
         })
@@ -104,35 +98,72 @@ impl Job {
 
     /// Queues the kernel on the job's stream.
     fn launch(&mut self, dev: &GpuDevice) -> Result<()> {
-        let count = self.keypoints.len() as i32;
-        let texture = self.image.texture();
-        let blocks = self
-            .keypoints
-            .len()
-            .min(dev.multiprocessors * BLOCKS_PER_SM) as u32;
-        let mut launch = self.stream.launch_builder(dev.kernel("clatch_describe"));
-        launch
-            .arg(&texture)
-            .arg(&self.size.0)
-            .arg(&self.size.1)
-            .arg(&self.keypoints)
-            .arg(&count)
-            .arg(&dev.rotation)
-            .arg(&dev.triplets)
-            .arg(&self.weights)
-            .arg(&self.bits)
-            .arg(&mut self.out);
-        let config = LaunchConfig {
-            grid_dim: (blocks, 1, 1),
-            block_dim: (CLATCH_DESCRIBE_WARPS * 32, 1, 1),
-            shared_mem_bytes: 0,
-        };
-        // SAFETY: the argument list matches clatch_describe's signature; every buffer holds what the
-        // kernel indexes (count keypoints, 2880 rotations, 512 triplets, 64 weights, count * words
-        // outputs).
-        unsafe { launch.launch(config) }.map_err(driver_error("launching clatch_describe"))?;
-        Ok(())
+        launch_describe(
+            dev,
+            &self.stream,
+            &self.image,
+            (&self.keypoints, &self.count),
+            &self.weights,
+            self.bits,
+            &mut self.out,
+        )
     }
+}
+
+/// The patch weights as the kernel reads them.
+pub(crate) fn upload_weights(
+    stream: &Arc<CudaStream>,
+    config: &DescriptorConfig,
+) -> Result<CudaSlice<i32>> {
+    let weights: Vec<i32> = config
+        .weights
+        .as_array()
+        .iter()
+        .map(|&w| w as i32)
+        .collect();
+    upload(stream, &weights, "weight upload")
+}
+
+/// Queues `clatch_describe` on `stream`: describes the first `min(*count, keypoints.len())` keypoints
+/// (all of which must fit) into `out` (`keypoints.len()` rows of the width's words).
+pub(crate) fn launch_describe(
+    dev: &GpuDevice,
+    stream: &Arc<CudaStream>,
+    image: &DeviceImage,
+    (keypoints, count): (&CudaSlice<KeyPoint>, &CudaSlice<u32>),
+    weights: &CudaSlice<i32>,
+    bits: i32,
+    out: &mut CudaSlice<u64>,
+) -> Result<()> {
+    let capacity = keypoints.len() as i32;
+    let texture = image.texture();
+    let (width, height) = (image.width() as i32, image.height() as i32);
+    let blocks = keypoints
+        .len()
+        .clamp(1, dev.multiprocessors * BLOCKS_PER_SM) as u32;
+    let mut launch = stream.launch_builder(dev.kernel("clatch_describe"));
+    launch
+        .arg(&texture)
+        .arg(&width)
+        .arg(&height)
+        .arg(keypoints)
+        .arg(count)
+        .arg(&capacity)
+        .arg(&dev.rotation)
+        .arg(&dev.triplets)
+        .arg(weights)
+        .arg(&bits)
+        .arg(out);
+    let config = LaunchConfig {
+        grid_dim: (blocks, 1, 1),
+        block_dim: (CLATCH_DESCRIBE_WARPS * 32, 1, 1),
+        shared_mem_bytes: 0,
+    };
+    // SAFETY: the argument list matches clatch_describe's signature; every buffer holds what the
+    // kernel indexes (capacity keypoints, one count, 2880 rotations, 512 triplets, 64 weights,
+    // capacity * words outputs).
+    unsafe { launch.launch(config) }.map_err(driver_error("launching clatch_describe"))?;
+    Ok(())
 }
 
 /// Kernel times in milliseconds of `repeats` launches after `warmup` launches, measured with CUDA

@@ -116,7 +116,7 @@ fn check_k(k: usize) -> Result<()> {
     Ok(())
 }
 
-fn check_rows(set: &DescriptorSet, what: &'static str) -> Result<()> {
+pub(crate) fn check_rows(set: &DescriptorSet, what: &'static str) -> Result<()> {
     if set.len() > MAX_ROWS {
         return Err(Error::InvalidConfig {
             field: what,
@@ -365,13 +365,13 @@ pub(crate) fn match_descriptors(
     if query.is_empty() {
         return Ok(Vec::new());
     }
-    let mut job = MatchJob::prepare(dev, query, train, config)?;
+    let mut job = MatchJob::prepare(dev, dev.new_stream()?, query, train, config)?;
     job.launch(dev)?;
     job.fetch()
 }
 
-/// Everything one `match_descriptors` needs on the device, on its own stream.
-struct MatchJob {
+/// Everything one `match_descriptors` needs on the device, on its stream.
+pub(crate) struct MatchJob {
     stream: Arc<CudaStream>,
     query: CudaSlice<u64>,
     train: CudaSlice<u64>,
@@ -387,16 +387,16 @@ struct MatchJob {
 }
 
 impl MatchJob {
-    /// Uploads both (non-empty) sets and allocates every buffer.
-    fn prepare(
+    /// Uploads both (non-empty, row-checked) sets and allocates every buffer, on `stream`.
+    pub(crate) fn prepare(
         dev: &GpuDevice,
+        stream: Arc<CudaStream>,
         query: &DescriptorSet,
         train: &DescriptorSet,
         config: &MatchConfig,
     ) -> Result<Self> {
         let (nq, nt, words) = (query.len(), train.len(), query.width().words());
         let k = if config.ratio.is_some() { 2 } else { 1 };
-        let stream = dev.new_stream()?;
         let blocks = nq.div_ceil(SELECT_THREADS);
         Ok(Self {
             query: upload(&stream, query, "query descriptor upload")?,
@@ -416,7 +416,7 @@ impl MatchJob {
 
     /// Queues the kNN (fused with the reverse 1-NN when cross-checking), the filter and the
     /// compaction.
-    fn launch(&mut self, dev: &GpuDevice) -> Result<()> {
+    pub(crate) fn launch(&mut self, dev: &GpuDevice) -> Result<()> {
         let stream = &self.stream;
         self.run
             .launch(dev, stream, &self.query, &self.train, &mut self.forward)?;
@@ -478,7 +478,7 @@ impl MatchJob {
     }
 
     /// Waits for the kernels and copies the kept matches back.
-    fn fetch(&self) -> Result<Vec<Match>> {
+    pub(crate) fn fetch(&self) -> Result<Vec<Match>> {
         let count = self.stream.clone_dtoh(&self.total).map_err(driver_error(
             "matching (running, or copying the count back)",
         ))?[0] as usize;
@@ -510,7 +510,7 @@ pub fn time_match_kernels(
             gallery: train.len(),
         });
     }
-    let mut job = MatchJob::prepare(dev, query, train, config)?;
+    let mut job = MatchJob::prepare(dev, dev.new_stream()?, query, train, config)?;
     let stream = job.stream.clone();
     time_launches(dev, &stream, warmup, repeats, || job.launch(dev))
 }

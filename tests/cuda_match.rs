@@ -44,7 +44,7 @@ mod gpu {
     };
     use libtest_mimic::Failed;
 
-    use super::common::{astronaut, random_set};
+    use super::common::{astronaut, flip_bits, random_set};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
     const WIDTHS: [usize; 7] = [8, 64, 72, 136, 256, 504, 512];
@@ -119,17 +119,6 @@ mod gpu {
 
     fn width(bits: usize) -> DescriptorWidth {
         DescriptorWidth::from_bits(bits).unwrap()
-    }
-
-    fn flip_bits(row: &mut [u64], bits: usize, count: usize, rng: &mut SplitMix64) {
-        let mut flipped = Vec::new();
-        while flipped.len() < count.min(bits) {
-            let t = rng.below(bits as u64) as usize;
-            if !flipped.contains(&t) {
-                flipped.push(t);
-                row[t / 64] ^= 1 << (t % 64);
-            }
-        }
     }
 
     /// A gallery with duplicated rows and rows equidistant from a centre, and queries that are random,

@@ -5,7 +5,7 @@ mod common;
 
 use clatch::synthetic::SplitMix64;
 use clatch::{Backend, DescriptorSet, DescriptorWidth, Match, MatchConfig, Matcher};
-use common::{naive_hamming, random_set};
+use common::{flip_bits, naive_hamming, random_set};
 
 const WIDTHS: [usize; 5] = [8, 64, 72, 256, 512];
 
@@ -84,18 +84,6 @@ fn naive_match_sorted(
 
 fn cpu(config: MatchConfig) -> Matcher {
     Matcher::new(Backend::Cpu, config).unwrap()
-}
-
-fn flip_bits(row: &mut [u64], bits: usize, count: usize, rng: &mut SplitMix64) {
-    // Flip `count` distinct bits among the first `bits`.
-    let mut flipped = Vec::new();
-    while flipped.len() < count.min(bits) {
-        let t = rng.below(bits as u64) as usize;
-        if !flipped.contains(&t) {
-            flipped.push(t);
-            row[t / 64] ^= 1 << (t % 64);
-        }
-    }
 }
 
 /// A gallery with duplicated rows and near-duplicates, and queries that are (a) random, (b) copies of

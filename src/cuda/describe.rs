@@ -2,9 +2,9 @@
 
 use std::sync::Arc;
 
-use cudarc::driver::{CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg, sys};
+use cudarc::driver::{CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg};
 
-use super::device::{GpuDevice, driver_error};
+use super::device::{GpuDevice, driver_error, time_launches};
 use super::header::CLATCH_DESCRIBE_WARPS;
 use super::memory::{alloc_zeros, upload};
 use super::texture::DeviceImage;
@@ -178,31 +178,6 @@ pub fn time_describe_kernel(
     repeats: usize,
 ) -> Result<Vec<f32>> {
     let mut job = Job::prepare(dev, image, keypoints, config)?;
-    for _ in 0..warmup {
-        job.launch(dev)?;
-    }
-    let timing = Some(sys::CUevent_flags::CU_EVENT_DEFAULT);
-    let mut times = Vec::with_capacity(repeats);
-    for _ in 0..repeats {
-        let start = dev
-            .ctx
-            .new_event(timing)
-            .map_err(driver_error("event creation"))?;
-        let end = dev
-            .ctx
-            .new_event(timing)
-            .map_err(driver_error("event creation"))?;
-        start
-            .record(&job.stream)
-            .map_err(driver_error("event record"))?;
-        job.launch(dev)?;
-        end.record(&job.stream)
-            .map_err(driver_error("event record"))?;
-        times.push(
-            start
-                .elapsed_ms(&end)
-                .map_err(driver_error("clatch_describe (timed)"))?,
-        );
-    }
-    Ok(times)
+    let stream = job.stream.clone();
+    time_launches(dev, &stream, warmup, repeats, || job.launch(dev))
 }

@@ -10,9 +10,9 @@
 
 use std::sync::Arc;
 
-use cudarc::driver::{CudaSlice, CudaStream, LaunchConfig, PushKernelArg, ValidAsZeroBits, sys};
+use cudarc::driver::{CudaSlice, CudaStream, LaunchConfig, PushKernelArg, ValidAsZeroBits};
 
-use super::device::{GpuDevice, driver_error};
+use super::device::{GpuDevice, driver_error, time_launches};
 use super::header::{
     CLATCH_DETECT_ROW_ALIGN, CLATCH_DETECT_TILE_X, CLATCH_DETECT_TILE_Y, CLATCH_DETECT_WARPS,
     CLATCH_SCAN_CHUNK, CLATCH_SCAN_THREADS, CLATCH_SCAN_TOP_THREADS,
@@ -324,31 +324,9 @@ pub fn time_detect(
     let stream = dev.new_stream()?;
     let device_image = DeviceImage::upload(dev, &stream, image)?;
     let mut job = DetectJob::new(&stream, image.width(), image.height(), config)?;
-    for _ in 0..warmup {
-        job.launch(dev, &stream, &device_image)?;
-    }
-    let timing = Some(sys::CUevent_flags::CU_EVENT_DEFAULT);
-    let mut times = Vec::with_capacity(repeats);
-    for _ in 0..repeats {
-        let start = dev
-            .ctx
-            .new_event(timing)
-            .map_err(driver_error("event creation"))?;
-        let end = dev
-            .ctx
-            .new_event(timing)
-            .map_err(driver_error("event creation"))?;
-        start
-            .record(&stream)
-            .map_err(driver_error("event record"))?;
-        job.launch(dev, &stream, &device_image)?;
-        end.record(&stream).map_err(driver_error("event record"))?;
-        times.push(
-            start
-                .elapsed_ms(&end)
-                .map_err(driver_error("detection (timed)"))?,
-        );
-    }
+    let times = time_launches(dev, &stream, warmup, repeats, || {
+        job.launch(dev, &stream, &device_image)
+    })?;
     let keypoints = job.output.download(&stream)?;
     Ok((times, keypoints))
 }

@@ -199,3 +199,38 @@ impl GpuDevice {
             .map_err(driver_error("stream creation"))
     }
 }
+
+/// Times `launch` with CUDA events on `stream`: `warmup` untimed calls, then `repeats` timed ones
+/// (milliseconds each).
+pub(crate) fn time_launches(
+    dev: &GpuDevice,
+    stream: &Arc<CudaStream>,
+    warmup: usize,
+    repeats: usize,
+    mut launch: impl FnMut() -> Result<()>,
+) -> Result<Vec<f32>> {
+    for _ in 0..warmup {
+        launch()?;
+    }
+    let timing = Some(sys::CUevent_flags::CU_EVENT_DEFAULT);
+    let mut times = Vec::with_capacity(repeats);
+    for _ in 0..repeats {
+        let start = dev
+            .ctx
+            .new_event(timing)
+            .map_err(driver_error("event creation"))?;
+        let end = dev
+            .ctx
+            .new_event(timing)
+            .map_err(driver_error("event creation"))?;
+        start.record(stream).map_err(driver_error("event record"))?;
+        launch()?;
+        end.record(stream).map_err(driver_error("event record"))?;
+        times.push(
+            start
+                .elapsed_ms(&end)
+                .map_err(driver_error("timed kernels"))?,
+        );
+    }
+    Ok(times)
+}

@@ -17,7 +17,7 @@ use cudarc::driver::{
     CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg, ValidAsZeroBits, sys,
 };
 
-use super::device::{GpuDevice, driver_error};
+use super::device::{GpuDevice, driver_error, time_launches};
 use super::header::{
     CLATCH_MATCH_MAX_K, CLATCH_MATCH_QUERIES_PER_THREAD, CLATCH_MATCH_ROW_PAD,
     CLATCH_MATCH_SCAN_THREADS, CLATCH_MATCH_SELECT_THREADS, CLATCH_MATCH_THREADS,
@@ -527,41 +527,6 @@ pub fn multiprocessors_and_clock_khz(dev: &GpuDevice) -> Result<(usize, usize)> 
     let sms = attribute(sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_MULTIPROCESSOR_COUNT)?;
     let clock = attribute(sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_CLOCK_RATE)?;
     Ok((sms.max(0) as usize, clock.max(0) as usize))
-}
-
-/// Times `launch` with CUDA events on `stream`: `warmup` untimed calls, then `repeats` timed ones
-/// (milliseconds each).
-fn time_launches(
-    dev: &GpuDevice,
-    stream: &Arc<CudaStream>,
-    warmup: usize,
-    repeats: usize,
-    mut launch: impl FnMut() -> Result<()>,
-) -> Result<Vec<f32>> {
-    for _ in 0..warmup {
-        launch()?;
-    }
-    let timing = Some(sys::CUevent_flags::CU_EVENT_DEFAULT);
-    let mut times = Vec::with_capacity(repeats);
-    for _ in 0..repeats {
-        let start = dev
-            .ctx
-            .new_event(timing)
-            .map_err(driver_error("event creation"))?;
-        let end = dev
-            .ctx
-            .new_event(timing)
-            .map_err(driver_error("event creation"))?;
-        start.record(stream).map_err(driver_error("event record"))?;
-        launch()?;
-        end.record(stream).map_err(driver_error("event record"))?;
-        times.push(
-            start
-                .elapsed_ms(&end)
-                .map_err(driver_error("clatch_knn (timed)"))?,
-        );
-    }
-    Ok(times)
 }
 
 /// Kernel times in milliseconds of `repeats` kNN runs (the kNN kernel and, when the gallery is split,

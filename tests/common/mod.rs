@@ -89,3 +89,15 @@ pub fn naive_hamming(a: &[u64], b: &[u64], bits: usize) -> u32 {
         .filter(|&t| (a[t / 64] >> (t % 64)) & 1 != (b[t / 64] >> (t % 64)) & 1)
         .count() as u32
 }
+
+/// Flips `count` distinct bits among the first `bits` of a packed row.
+pub fn flip_bits(row: &mut [u64], bits: usize, count: usize, rng: &mut SplitMix64) {
+    let mut flipped = Vec::new();
+    while flipped.len() < count.min(bits) {
+        let t = rng.below(bits as u64) as usize;
+        if !flipped.contains(&t) {
+            flipped.push(t);
+            row[t / 64] ^= 1 << (t % 64);
+        }
+    }
+}

@@ -9,7 +9,7 @@ fn main() {
 #[cfg(feature = "cuda")]
 fn main() {
     use clatch::synthetic::SplitMix64;
-    use clatch::{DescriptorConfig, GrayView, KeyPoint};
+    use clatch::{DescriptorConfig, GrayView, KeyPoint, PatchWeights};
 
     let dev = match clatch::cuda::device(0) {
         Ok(dev) => dev,
@@ -38,21 +38,26 @@ fn main() {
                     .with_angle(rng.below(2880) as f32 / 8.0)
                 })
                 .collect();
-            let times = clatch::cuda::time_describe_kernel(
-                &dev,
-                &image,
-                &keypoints,
-                &DescriptorConfig::default(),
-                3,
-                15,
-            )
-            .expect("describe kernel");
-            let ms = median(times);
-            println!(
-                "describe {name:>9} {n:>8} keypoints: median {ms:9.3} ms  {:8.1} M descriptors/s  {:6.2} ns/descriptor",
-                n as f64 / ms / 1e3,
-                ms * 1e6 / n as f64
-            );
+            // The default 0/1 mask runs the dp4a kernel; other weights run the general one.
+            let doubled = PatchWeights::new(&[2; 64]).expect("valid weights");
+            for (label, weights) in [
+                ("7x7 mask", PatchWeights::default()),
+                ("weights 2", doubled),
+            ] {
+                let config = DescriptorConfig {
+                    weights,
+                    ..DescriptorConfig::default()
+                };
+                let times =
+                    clatch::cuda::time_describe_kernel(&dev, &image, &keypoints, &config, 3, 15)
+                        .expect("describe kernel");
+                let ms = median(times);
+                println!(
+                    "describe {name:>9} {n:>8} keypoints, {label:>9}: median {ms:9.3} ms  {:8.1} M descriptors/s  {:6.2} ns/descriptor",
+                    n as f64 / ms / 1e3,
+                    ms * 1e6 / n as f64
+                );
+            }
         }
     }
 }

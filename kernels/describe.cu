@@ -1,22 +1,33 @@
 // CLATCH description on the GPU. Reproduces src/describe/cpu.rs bit for bit (docs/numerics.md, section 4).
 //
-// One block of CLATCH_DESCRIBE_WARPS warps describes keypoints blockIdx.x, blockIdx.x + gridDim.x, ...:
-// - all threads sample the 64x64 window through the texture unit (point filtering, integer reads,
-//   clamp addressing; the bilinear weights are our own integers, never the texture unit's) into one of two
-//   shared-memory windows, so sampling keypoint i+1 overlaps with warps still comparing keypoint i;
-// - warp w computes descriptor word w (triplets 64w .. 64w+63), four triplets at a time: lanes 8g..8g+7
-//   take triplet 4j+g, lane 8g+r sums row r of its three 8x8 patches, a 3-step shuffle butterfly adds the
-//   eight rows, and one ballot collects the four signs.
+// Two kernels with one signature; the host picks one by the patch weights:
+// - clatch_describe (any weights): one block of CLATCH_DESCRIBE_WARPS warps describes keypoints
+//   blockIdx.x, blockIdx.x + gridDim.x, ...; all threads sample the 64x64 window through the texture unit
+//   (point filtering, integer reads, clamp addressing; the bilinear weights are our own integers, never the
+//   texture unit's) into one of two shared-memory windows, so sampling keypoint i+1 overlaps with warps still
+//   comparing keypoint i; warp w computes descriptor word w (triplets 64w .. 64w+63), four triplets at a
+//   time: lanes 8g..8g+7 take triplet 4j+g, lane 8g+r sums row r of its three 8x8 patches, a 3-step shuffle
+//   butterfly adds the eight rows, and one ballot collects the four signs.
+// - clatch_describe_binary (every weight 0 or 1, e.g. the default 7x7 mask): the same sampling, but the
+//   window is kept as bytes and each lane computes whole triplets with dp4a, using
+//   SSD(a,b) - SSD(c,b) = sum w a^2 - sum w c^2 - 2 (sum (w b) a - sum (w b) c), where w x is x & mask.
+//   Exact integer arithmetic either way, so both give the same bits.
 #include "clatch.h"
 
 typedef long long i64;
 typedef unsigned long long u64;
 
-// Window rows are 65 ints apart. In one step the lanes of a warp read, for a fixed column s, rows
+// Int window rows are 65 ints apart. In one step the lanes of a warp read, for a fixed column s, rows
 // y_g + r (r = 0..7) of four patches g: with a row stride of 65 = 1 (mod 32) the bank is
 // (y_g + r + x_g + s) mod 32, so the eight lanes of a patch always hit eight distinct, consecutive banks
 // (a stride of 64 would put all eight in one bank). Lanes of different patches may still meet.
 #define WINDOW_STRIDE (CLATCH_WINDOW + 1)
+
+// Byte windows: four copies, copy k holding at byte j the sample of column j + k, so the 8 bytes of any
+// patch row (column x) are the two aligned words at byte x - (x & 3) of copy x & 3. Rows are 68 bytes =
+// 17 words apart: 17 is odd, so the rows of one patch (consecutive) fall in distinct banks.
+#define BYTE_STRIDE 68
+#define BYTE_COPY (CLATCH_WINDOW * BYTE_STRIDE)
 
 __device__ __forceinline__ int angle_bin(float angle) {
     double reduced = fmod((double)angle, 360.0);
@@ -24,20 +35,61 @@ __device__ __forceinline__ int angle_bin(float angle) {
     return (int)(__double2ll_rn(reduced * (double)CLATCH_BINS_PER_DEGREE) % CLATCH_ANGLE_BINS);
 }
 
-extern "C" __global__ void __launch_bounds__(CLATCH_DESCRIBE_WARPS * 32)
-clatch_describe(cudaTextureObject_t image, int width, int height,
-                const clatch_keypoint* __restrict__ keypoints,
-                const unsigned int* __restrict__ total,     // keypoints available (e.g. detection's count)
-                int capacity,                               // records in `keypoints` (and rows of `out`)
-                const int2* __restrict__ rotation,         // CLATCH_ANGLE_BINS (cos, sin), 16 fraction bits
-                const unsigned char* __restrict__ triplets, // CLATCH_TRIPLETS x 6 window coordinates
-                const int* __restrict__ weights,            // 8x8, row-major
-                int bits,                                   // 8..512, a multiple of 8
-                u64* __restrict__ out)                      // capacity x ceil(bits / 64) words
-{
-    // The count may come from a kernel queued earlier on the same stream (GPU detection), so it is read
-    // here rather than passed by the host: no round trip between detection and description.
-    const int count = min((int)min(*total, (unsigned int)capacity), capacity);
+// The keypoint's sampling frame (16.16 fixed point): origin and the step along window rows; the step
+// down window columns is (-uy, ux).
+struct Frame {
+    i64 ox, oy, ux, uy;
+};
+
+__device__ __forceinline__ Frame frame_of(const clatch_keypoint& kp, const int2* __restrict__ rotation) {
+    const int2 cs = rotation[angle_bin(kp.angle)];
+    const i64 q = __float2ll_rn(kp.size * 256.0f);
+    Frame f;
+    f.ux = (q * cs.x + (1 << 13)) >> 14;
+    f.uy = (q * cs.y + (1 << 13)) >> 14;
+    f.ox = __float2ll_rn(kp.x * 65536.0f);
+    f.oy = __float2ll_rn(kp.y * 65536.0f);
+    return f;
+}
+
+// Window sample (u, v): the bilinear value of docs/numerics.md, section 4, steps 2 and 4.
+__device__ __forceinline__ int sample(cudaTextureObject_t image, int width, int height, const Frame& f,
+                                      int u, int v) {
+    const i64 du = u - CLATCH_WINDOW / 2;
+    const i64 dv = v - CLATCH_WINDOW / 2;
+    const i64 px = (f.ox + du * f.ux - dv * f.uy + 128) >> 8;
+    const i64 py = (f.oy + du * f.uy + dv * f.ux + 128) >> 8;
+    const int x0 = (int)(px >> 8), y0 = (int)(py >> 8);
+    const int fx = (int)(px & 255), fy = (int)(py & 255);
+    const int x1 = min(x0 + 1, width - 1), y1 = min(y0 + 1, height - 1);
+    const int p00 = tex2D<unsigned char>(image, x0 + 0.5f, y0 + 0.5f);
+    const int p01 = tex2D<unsigned char>(image, x1 + 0.5f, y0 + 0.5f);
+    const int p10 = tex2D<unsigned char>(image, x0 + 0.5f, y1 + 0.5f);
+    const int p11 = tex2D<unsigned char>(image, x1 + 0.5f, y1 + 0.5f);
+    const int upper = p00 * (256 - fx) + p01 * fx;
+    const int lower = p10 * (256 - fx) + p11 * fx;
+    return (upper * (256 - fy) + lower * fy + (1 << 15)) >> 16;
+}
+
+// The count may come from a kernel queued earlier on the same stream (GPU detection), so it is read on
+// the device rather than passed by the host: no round trip between detection and description.
+__device__ __forceinline__ int keypoint_count(const unsigned int* __restrict__ total, int capacity) {
+    return (int)min(*total, (unsigned int)capacity);
+}
+
+#define DESCRIBE_PARAMS                                                                                    \
+    cudaTextureObject_t image, int width, int height,                                                     \
+        const clatch_keypoint* __restrict__ keypoints, /* capacity records */                             \
+        const unsigned int* __restrict__ total,        /* keypoints available (e.g. detection's count) */ \
+        int capacity,                                                                                      \
+        const int2* __restrict__ rotation,         /* CLATCH_ANGLE_BINS (cos, sin), 16 fraction bits */   \
+        const unsigned char* __restrict__ triplets, /* CLATCH_TRIPLETS x 6 window coordinates */          \
+        const int* __restrict__ weights,            /* 8x8, row-major */                                  \
+        int bits,                                   /* 8..512, a multiple of 8 */                         \
+        u64* __restrict__ out                       /* capacity x ceil(bits / 64) words */
+
+extern "C" __global__ void __launch_bounds__(CLATCH_DESCRIBE_WARPS * 32) clatch_describe(DESCRIBE_PARAMS) {
+    const int count = keypoint_count(total, capacity);
     __shared__ int window[2][CLATCH_WINDOW * WINDOW_STRIDE];
 
     const unsigned full = 0xffffffffu;
@@ -57,32 +109,11 @@ clatch_describe(cudaTextureObject_t image, int width, int height,
 
     int buffer = 0;
     for (int k = blockIdx.x; k < count; k += gridDim.x, buffer ^= 1) {
-        const clatch_keypoint kp = keypoints[k];
-        const int2 cs = rotation[angle_bin(kp.angle)];
-        const i64 q = __float2ll_rn(kp.size * 256.0f);
-        const i64 ux = (q * cs.x + (1 << 13)) >> 14;
-        const i64 uy = (q * cs.y + (1 << 13)) >> 14;
-        const i64 ox = __float2ll_rn(kp.x * 65536.0f);
-        const i64 oy = __float2ll_rn(kp.y * 65536.0f);
-
+        const Frame f = frame_of(keypoints[k], rotation);
         int* win = window[buffer];
         for (int i = threadIdx.x; i < CLATCH_WINDOW * CLATCH_WINDOW; i += blockDim.x) {
-            const int u = i & (CLATCH_WINDOW - 1);
-            const int v = i >> 6;
-            const i64 du = u - CLATCH_WINDOW / 2;
-            const i64 dv = v - CLATCH_WINDOW / 2;
-            const i64 px = (ox + du * ux - dv * uy + 128) >> 8;
-            const i64 py = (oy + du * uy + dv * ux + 128) >> 8;
-            const int x0 = (int)(px >> 8), y0 = (int)(py >> 8);
-            const int fx = (int)(px & 255), fy = (int)(py & 255);
-            const int x1 = min(x0 + 1, width - 1), y1 = min(y0 + 1, height - 1);
-            const int p00 = tex2D<unsigned char>(image, x0 + 0.5f, y0 + 0.5f);
-            const int p01 = tex2D<unsigned char>(image, x1 + 0.5f, y0 + 0.5f);
-            const int p10 = tex2D<unsigned char>(image, x0 + 0.5f, y1 + 0.5f);
-            const int p11 = tex2D<unsigned char>(image, x1 + 0.5f, y1 + 0.5f);
-            const int upper = p00 * (256 - fx) + p01 * fx;
-            const int lower = p10 * (256 - fx) + p11 * fx;
-            win[v * WINDOW_STRIDE + u] = (upper * (256 - fy) + lower * fy + (1 << 15)) >> 16;
+            const int u = i & (CLATCH_WINDOW - 1), v = i >> 6;
+            win[v * WINDOW_STRIDE + u] = sample(image, width, height, f, u, v);
         }
         // One barrier per keypoint is enough: the next keypoint writes the other window, and the one
         // after it cannot start before every warp has passed the next barrier, i.e. finished reading.
@@ -110,5 +141,84 @@ clatch_describe(cudaTextureObject_t image, int width, int height,
             word |= (u64)nibble << (4 * j);
         }
         if (lane == 0 && warp < words) out[(size_t)k * words + warp] = word;
+    }
+}
+
+// The 8 bytes of the patch row at window column x, row y, as two words (little-endian: byte i = column
+// x + i). Both loads are 4-byte aligned (copy offsets, row strides and x - copy are multiples of 4).
+__device__ __forceinline__ uint2 patch_row(const unsigned char* win, int x, int y) {
+    const int copy = x & 3;
+    const unsigned* p = reinterpret_cast<const unsigned*>(win + copy * BYTE_COPY + y * BYTE_STRIDE + (x - copy));
+    return make_uint2(p[0], p[1]);
+}
+
+extern "C" __global__ void __launch_bounds__(CLATCH_DESCRIBE_WARPS * 32)
+    clatch_describe_binary(DESCRIBE_PARAMS) {
+    const int count = keypoint_count(total, capacity);
+    __shared__ __align__(16) unsigned char window[2][4 * BYTE_COPY];
+
+    const int lane = threadIdx.x & 31;
+    const int warp = threadIdx.x >> 5;
+    const int words = (bits + 63) >> 6;
+
+    // Byte masks of the weights (0 or 1): row r, bytes 0..3 and 4..7.
+    unsigned mask[CLATCH_PATCH][2];
+#pragma unroll
+    for (int r = 0; r < CLATCH_PATCH; ++r) {
+#pragma unroll
+        for (int h = 0; h < 2; ++h) {
+            unsigned m = 0;
+#pragma unroll
+            for (int i = 0; i < 4; ++i) m |= (weights[r * CLATCH_PATCH + 4 * h + i] ? 0xffu : 0u) << (8 * i);
+            mask[r][h] = m;
+        }
+    }
+
+    const int first = warp * 64;  // this warp's word: lane l takes triplets first + l and first + 32 + l
+    int buffer = 0;
+    for (int k = blockIdx.x; k < count; k += gridDim.x, buffer ^= 1) {
+        const Frame f = frame_of(keypoints[k], rotation);
+        unsigned char* win = window[buffer];
+        for (int i = threadIdx.x; i < CLATCH_WINDOW * CLATCH_WINDOW; i += blockDim.x) {
+            const int u = i & (CLATCH_WINDOW - 1), v = i >> 6;
+            const unsigned char s = (unsigned char)sample(image, width, height, f, u, v);
+#pragma unroll
+            for (int copy = 0; copy < 4; ++copy) {
+                if (u >= copy) win[copy * BYTE_COPY + v * BYTE_STRIDE + u - copy] = s;
+            }
+        }
+        __syncthreads();  // as in clatch_describe: one barrier per keypoint with two windows
+
+        if (warp < words) {  // warp-uniform
+            unsigned half[2];
+#pragma unroll
+            for (int h = 0; h < 2; ++h) {
+                const unsigned char* t = triplets + 6 * (first + 32 * h + lane);
+                const int ax = t[0], ay = t[1], bx = t[2], by = t[3], cx = t[4], cy = t[5];
+                unsigned ea = 0, ec = 0, xa = 0, xc = 0;
+#pragma unroll
+                for (int r = 0; r < CLATCH_PATCH; ++r) {
+                    const uint2 a = patch_row(win, ax, ay + r);
+                    const uint2 b = patch_row(win, bx, by + r);
+                    const uint2 c = patch_row(win, cx, cy + r);
+                    const unsigned bm0 = b.x & mask[r][0], bm1 = b.y & mask[r][1];
+                    ea = __dp4a(a.x & mask[r][0], a.x, ea);
+                    ea = __dp4a(a.y & mask[r][1], a.y, ea);
+                    ec = __dp4a(c.x & mask[r][0], c.x, ec);
+                    ec = __dp4a(c.y & mask[r][1], c.y, ec);
+                    xa = __dp4a(bm0, a.x, xa);
+                    xa = __dp4a(bm1, a.y, xa);
+                    xc = __dp4a(bm0, c.x, xc);
+                    xc = __dp4a(bm1, c.y, xc);
+                }
+                const int d = (int)ea - (int)ec - 2 * ((int)xa - (int)xc);
+                half[h] = __ballot_sync(0xffffffffu, d < 0);
+            }
+            // Triplets past the width are computed (the table has all 512) but masked off here.
+            const int valid = bits - first;
+            u64 word = (u64)half[0] | ((u64)half[1] << 32);
+            if (valid < 64) word &= (1ull << valid) - 1;
+            if (lane == 0) out[(size_t)k * words + warp] = word;
+        }
     }
 }

@@ -66,7 +66,7 @@ struct Job {
     image: DeviceImage,
     keypoints: CudaSlice<KeyPoint>,
     count: CudaSlice<u32>,
-    weights: CudaSlice<i32>,
+    weights: DeviceWeights,
     out: CudaSlice<u64>,
     bits: i32,
 }
@@ -110,18 +110,28 @@ impl Job {
     }
 }
 
-/// The patch weights as the kernel reads them.
+/// The patch weights on the device, and which kernel they call for.
+pub(crate) struct DeviceWeights {
+    values: CudaSlice<i32>,
+    /// Every weight 0 or 1: `clatch_describe_binary` (byte masks and dp4a) applies.
+    binary: bool,
+}
+
+/// The patch weights as the kernels read them.
 pub(crate) fn upload_weights(
     stream: &Arc<CudaStream>,
     config: &DescriptorConfig,
-) -> Result<CudaSlice<i32>> {
+) -> Result<DeviceWeights> {
     let weights: Vec<i32> = config
         .weights
         .as_array()
         .iter()
         .map(|&w| w as i32)
         .collect();
-    upload(stream, &weights, "weight upload")
+    Ok(DeviceWeights {
+        values: upload(stream, &weights, "weight upload")?,
+        binary: config.weights.is_binary(),
+    })
 }
 
 /// Queues `clatch_describe` on `stream`: describes the first `min(*count, keypoints.len())` keypoints
@@ -131,7 +141,7 @@ pub(crate) fn launch_describe(
     stream: &Arc<CudaStream>,
     image: &DeviceImage,
     (keypoints, count): (&CudaSlice<KeyPoint>, &CudaSlice<u32>),
-    weights: &CudaSlice<i32>,
+    weights: &DeviceWeights,
     bits: i32,
     out: &mut CudaSlice<u64>,
 ) -> Result<()> {
@@ -141,7 +151,12 @@ pub(crate) fn launch_describe(
     let blocks = keypoints
         .len()
         .clamp(1, dev.multiprocessors * BLOCKS_PER_SM) as u32;
-    let mut launch = stream.launch_builder(dev.kernel("clatch_describe"));
+    let kernel = if weights.binary {
+        "clatch_describe_binary"
+    } else {
+        "clatch_describe"
+    };
+    let mut launch = stream.launch_builder(dev.kernel(kernel));
     launch
         .arg(&texture)
         .arg(&width)
@@ -151,7 +166,7 @@ pub(crate) fn launch_describe(
         .arg(&capacity)
         .arg(&dev.rotation)
         .arg(&dev.triplets)
-        .arg(weights)
+        .arg(&weights.values)
         .arg(&bits)
         .arg(out);
     let config = LaunchConfig {
@@ -162,7 +177,7 @@ pub(crate) fn launch_describe(
     // SAFETY: the argument list matches clatch_describe's signature; every buffer holds what the
     // kernel indexes (capacity keypoints, one count, 2880 rotations, 512 triplets, 64 weights,
     // capacity * words outputs).
-    unsafe { launch.launch(config) }.map_err(driver_error("launching clatch_describe"))?;
+    unsafe { launch.launch(config) }.map_err(driver_error(kernel))?;
     Ok(())
 }
 

@@ -18,7 +18,7 @@ const KERNELS: &[(&str, &str, &[u8], &[&str])] = &[
         "kernels/describe.cu",
         ptx::DESCRIBE_PTX,
         ptx::DESCRIBE_FATBIN,
-        &["clatch_describe"],
+        &["clatch_describe", "clatch_describe_binary"],
     ),
     (
         "kernels/detect.cu",

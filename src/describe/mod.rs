@@ -80,6 +80,11 @@ impl PatchWeights {
         Self([1; PATCH * PATCH])
     }
 
+    /// True when every weight is 0 or 1 (a pixel mask): the GPU then uses byte-wise dot products.
+    pub fn is_binary(&self) -> bool {
+        self.0.iter().all(|&w| w <= 1)
+    }
+
     /// The 64 weights, row-major.
     pub fn as_array(&self) -> &[u32; PATCH * PATCH] {
         &self.0

@@ -35,32 +35,39 @@ __device__ __forceinline__ int angle_bin(float angle) {
     return (int)(__double2ll_rn(reduced * (double)CLATCH_BINS_PER_DEGREE) % CLATCH_ANGLE_BINS);
 }
 
-// The keypoint's sampling frame (16.16 fixed point): origin and the step along window rows; the step
-// down window columns is (-uy, ux).
+// The keypoint's sampling frame: the 16.16 origin split into whole pixels (ix, iy) and 16-bit fractions
+// (lx, ly), and the 16.16 step along window rows (ux, uy; the step down window columns is (-uy, ux)).
+// Every sample offset fits in 32 bits (|32 * step| < 2^26 for sizes up to 1024), and
+// floor((65536 ix + l + off) / 256) = 256 ix + floor((l + off) / 256), so the inner loop needs no 64-bit
+// arithmetic yet gives exactly the CPU's 64-bit positions.
 struct Frame {
-    i64 ox, oy, ux, uy;
+    int ix, iy, lx, ly, ux, uy;
 };
 
 __device__ __forceinline__ Frame frame_of(const clatch_keypoint& kp, const int2* __restrict__ rotation) {
     const int2 cs = rotation[angle_bin(kp.angle)];
     const i64 q = __float2ll_rn(kp.size * 256.0f);
+    const i64 ox = __float2ll_rn(kp.x * 65536.0f);
+    const i64 oy = __float2ll_rn(kp.y * 65536.0f);
     Frame f;
-    f.ux = (q * cs.x + (1 << 13)) >> 14;
-    f.uy = (q * cs.y + (1 << 13)) >> 14;
-    f.ox = __float2ll_rn(kp.x * 65536.0f);
-    f.oy = __float2ll_rn(kp.y * 65536.0f);
+    f.ux = (int)((q * cs.x + (1 << 13)) >> 14);
+    f.uy = (int)((q * cs.y + (1 << 13)) >> 14);
+    f.ix = (int)(ox >> 16);
+    f.iy = (int)(oy >> 16);
+    f.lx = (int)(ox & 0xffff);
+    f.ly = (int)(oy & 0xffff);
     return f;
 }
 
 // Window sample (u, v): the bilinear value of docs/numerics.md, section 4, steps 2 and 4.
 __device__ __forceinline__ int sample(cudaTextureObject_t image, int width, int height, const Frame& f,
                                       int u, int v) {
-    const i64 du = u - CLATCH_WINDOW / 2;
-    const i64 dv = v - CLATCH_WINDOW / 2;
-    const i64 px = (f.ox + du * f.ux - dv * f.uy + 128) >> 8;
-    const i64 py = (f.oy + du * f.uy + dv * f.ux + 128) >> 8;
-    const int x0 = (int)(px >> 8), y0 = (int)(py >> 8);
-    const int fx = (int)(px & 255), fy = (int)(py & 255);
+    const int du = u - CLATCH_WINDOW / 2;
+    const int dv = v - CLATCH_WINDOW / 2;
+    const int rx = (f.lx + du * f.ux - dv * f.uy + 128) >> 8;  // 24.8, relative to 256 ix
+    const int ry = (f.ly + du * f.uy + dv * f.ux + 128) >> 8;
+    const int x0 = f.ix + (rx >> 8), y0 = f.iy + (ry >> 8);
+    const int fx = rx & 255, fy = ry & 255;
     const int x1 = min(x0 + 1, width - 1), y1 = min(y0 + 1, height - 1);
     const int p00 = tex2D<unsigned char>(image, x0 + 0.5f, y0 + 0.5f);
     const int p01 = tex2D<unsigned char>(image, x1 + 0.5f, y0 + 0.5f);

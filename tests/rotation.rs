@@ -254,7 +254,7 @@ fn window_samples_rotate_exactly_except_on_half_steps() {
                 assert!((g.step_u[axis] - su[axis]).abs() <= 1, "{k:?} {f:?} {g:?}");
                 assert!((g.step_v[axis] - sv[axis]).abs() <= 1, "{k:?} {f:?} {g:?}");
             }
-            let (mut a, mut b) = (Box::new([0i32; W * W]), Box::new([0i32; W * W]));
+            let (mut a, mut b) = (Box::new([0i16; W * W]), Box::new([0i16; W * W]));
             sample_window(&image.view(), &f, &mut a);
             sample_window(&rotated.view(), &g, &mut b);
             for v in 0..W {

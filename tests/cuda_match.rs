@@ -29,7 +29,7 @@ fn trials() -> Vec<Trial> {
         Trial::test("knn_random_every_width_and_k", gpu::knn_random),
         Trial::test("knn_planted_ties", gpu::knn_ties),
         Trial::test("knn_large_and_grid_limits", gpu::knn_large),
-        Trial::test("match_every_config", gpu::match_configs),
+        Trial::test("match_every_config", gpu::every_config),
         Trial::test("match_ratio_boundary", gpu::ratio_boundary),
         Trial::test("match_real_descriptors_rotated", gpu::real_descriptors),
     ]
@@ -44,7 +44,7 @@ mod gpu {
     };
     use libtest_mimic::Failed;
 
-    use super::common::{astronaut, flip_bits, random_set};
+    use super::common::{astronaut, flip_bits, match_configs, random_set};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
     const WIDTHS: [usize; 7] = [8, 64, 72, 136, 256, 504, 512];
@@ -246,22 +246,6 @@ mod gpu {
         Ok(())
     }
 
-    fn configs() -> Vec<MatchConfig> {
-        let mut out = Vec::new();
-        for ratio in [None, Some(0.8), Some(0.5), Some(1.0)] {
-            for cross_check in [false, true] {
-                for max_distance in [None, Some(0), Some(3), Some(100)] {
-                    out.push(MatchConfig {
-                        ratio,
-                        cross_check,
-                        max_distance,
-                    });
-                }
-            }
-        }
-        out
-    }
-
     /// match_descriptors on both backends under every configuration; returns (queries, kept matches).
     fn compare_match(
         what: &str,
@@ -269,7 +253,7 @@ mod gpu {
         train: &DescriptorSet,
     ) -> Result<(usize, usize), Failed> {
         let (mut queries, mut kept) = (0, 0);
-        for config in configs() {
+        for config in match_configs() {
             if config.ratio.is_some() && train.len() < 2 {
                 continue;
             }
@@ -340,7 +324,7 @@ mod gpu {
         if !gpu.knn(&empty, &train, 3)?.is_empty() {
             return Err("an empty query set gave matches".into());
         }
-        for config in configs() {
+        for config in match_configs() {
             if !matcher(GPU, config)
                 .match_descriptors(&empty, &train)?
                 .is_empty()
@@ -421,7 +405,7 @@ mod gpu {
         Ok(())
     }
 
-    pub fn match_configs() -> Result<(), Failed> {
+    pub fn every_config() -> Result<(), Failed> {
         let (mut queries, mut kept) = (0, 0);
         let mut rng = SplitMix64::new(7);
         for (i, bits) in WIDTHS.into_iter().enumerate() {

@@ -5,7 +5,7 @@ mod common;
 
 use clatch::synthetic::SplitMix64;
 use clatch::{Backend, DescriptorSet, DescriptorWidth, Match, MatchConfig, Matcher};
-use common::{flip_bits, naive_hamming, random_set};
+use common::{flip_bits, match_configs, naive_hamming, random_set};
 
 const WIDTHS: [usize; 5] = [8, 64, 72, 256, 512];
 
@@ -208,7 +208,7 @@ fn knn_of_an_empty_query_set_is_empty() {
         .unwrap();
     assert!(knn.is_empty());
     assert_eq!(knn.len(), 0);
-    for config in configs() {
+    for config in match_configs() {
         assert!(
             cpu(config)
                 .match_descriptors(&DescriptorSet::empty(width), &train)
@@ -238,22 +238,6 @@ fn all_equal_gallery_gives_the_lowest_indices() {
     }
 }
 
-fn configs() -> Vec<MatchConfig> {
-    let mut out = Vec::new();
-    for ratio in [None, Some(0.8), Some(1.0), Some(0.5), Some(0.95)] {
-        for cross_check in [false, true] {
-            for max_distance in [None, Some(0), Some(3), Some(100)] {
-                out.push(MatchConfig {
-                    ratio,
-                    cross_check,
-                    max_distance,
-                });
-            }
-        }
-    }
-    out
-}
-
 #[test]
 fn match_descriptors_equals_the_naive_contract() {
     let mut rejected_by = [0usize; 3]; // how often each filter alone dropped something
@@ -270,7 +254,7 @@ fn match_descriptors_equals_the_naive_contract() {
         };
         let all = naive(None, false, None).len();
         assert_eq!(all, query.len());
-        for config in configs() {
+        for config in match_configs() {
             let got = cpu(config.clone())
                 .match_descriptors(&query, &train)
                 .unwrap();
@@ -294,7 +278,7 @@ fn match_descriptors_on_random_descriptors() {
         let width = DescriptorWidth::from_bits(bits).unwrap();
         let query = random_set(width, 70, &mut rng);
         let train = random_set(width, 90, &mut rng);
-        for config in configs() {
+        for config in match_configs() {
             assert_eq!(
                 cpu(config.clone())
                     .match_descriptors(&query, &train)

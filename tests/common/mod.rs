@@ -101,3 +101,20 @@ pub fn flip_bits(row: &mut [u64], bits: usize, count: usize, rng: &mut SplitMix6
         }
     }
 }
+
+/// Every combination of ratio test, cross-check and distance limit the matcher suites run through.
+pub fn match_configs() -> Vec<clatch::MatchConfig> {
+    let mut out = Vec::new();
+    for ratio in [None, Some(0.8), Some(1.0), Some(0.5), Some(0.95)] {
+        for cross_check in [false, true] {
+            for max_distance in [None, Some(0), Some(3), Some(100)] {
+                out.push(clatch::MatchConfig {
+                    ratio,
+                    cross_check,
+                    max_distance,
+                });
+            }
+        }
+    }
+    out
+}

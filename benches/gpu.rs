@@ -1,6 +1,9 @@
 //! GPU timings: `cargo bench --features cuda --bench gpu`. Kernel times come from CUDA events around
 //! each launch, after warm-up; the median of the repeats is reported with the device's name.
 
+#[cfg(feature = "cuda")]
+mod common;
+
 #[cfg(not(feature = "cuda"))]
 fn main() {
     println!("skipped: no CUDA device (built without the `cuda` feature)");
@@ -11,12 +14,8 @@ fn main() {
     use clatch::synthetic::SplitMix64;
     use clatch::{DescriptorConfig, GrayView, KeyPoint, PatchWeights};
 
-    let dev = match clatch::cuda::device(0) {
-        Ok(dev) => dev,
-        Err(e) => {
-            println!("skipped: no CUDA device ({e})");
-            return;
-        }
+    let Some(dev) = common::device_or_skip() else {
+        return;
     };
     println!("device: {}", dev.name());
     let median = |mut v: Vec<f32>| {

@@ -9,6 +9,9 @@
 //!
 //! Medians of the repeats are reported with the device's name.
 
+#[cfg(feature = "cuda")]
+mod common;
+
 #[cfg(not(feature = "cuda"))]
 fn main() {
     println!("skipped: no CUDA device (built without the `cuda` feature)");
@@ -23,12 +26,8 @@ fn main() {
     const WARMUP: usize = 3;
     const REPEATS: usize = 15;
 
-    let dev = match clatch::cuda::device(0) {
-        Ok(dev) => dev,
-        Err(e) => {
-            println!("skipped: no CUDA device ({e})");
-            return;
-        }
+    let Some(dev) = common::device_or_skip() else {
+        return;
     };
     println!("device: {}", dev.name());
     let median = |mut v: Vec<f64>| {

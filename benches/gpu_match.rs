@@ -10,6 +10,9 @@
 //! kernels/match_variants.cu, and the end-to-end `Matcher::match_descriptors` wall time (uploads
 //! included).
 
+#[cfg(feature = "cuda")]
+mod common;
+
 #[cfg(not(feature = "cuda"))]
 fn main() {
     println!("skipped: no CUDA device (built without the `cuda` feature)");
@@ -26,12 +29,8 @@ fn main() {
     const WARMUP: usize = 3;
 
     let start = Instant::now();
-    let dev = match clatch::cuda::device(0) {
-        Ok(dev) => dev,
-        Err(e) => {
-            println!("skipped: no CUDA device ({e})");
-            return;
-        }
+    let Some(dev) = common::device_or_skip() else {
+        return;
     };
     println!(
         "device: {} (context and kernel modules loaded in {:.0} ms)",

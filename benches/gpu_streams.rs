@@ -3,6 +3,9 @@
 //! downloads included; wall-clock time of the batch (every stream synchronised), median of 10 runs after
 //! warm-up.
 
+#[cfg(feature = "cuda")]
+mod common;
+
 #[cfg(not(feature = "cuda"))]
 fn main() {
     println!("skipped: no CUDA device (built without the `cuda` feature)");
@@ -15,12 +18,8 @@ fn main() {
     use clatch::cuda::GpuStream;
     use clatch::{Backend, Extractor, ExtractorConfig, GrayView};
 
-    let dev = match clatch::cuda::device(0) {
-        Ok(dev) => dev,
-        Err(e) => {
-            println!("skipped: no CUDA device ({e})");
-            return;
-        }
+    let Some(dev) = common::device_or_skip() else {
+        return;
     };
     println!("device: {}", dev.name());
     let (w, h, n) = (1920usize, 1080usize, 8usize);

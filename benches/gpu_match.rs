@@ -57,6 +57,16 @@ fn main() {
         clock_khz as f64 / 1e3,
         tensor_bound / 1e9
     );
+    if dev.has_tensor_matcher() {
+        let rate = clatch::cuda::measure_mma_s8_rate(&dev).expect("mma rate");
+        println!(
+            "int8 mma.sync measured: {:.1} T multiply-adds/s = {:.1} G pairs/s at 512 per pair \
+             ({:.0}% of the dense tensor figure above: the bound of the mma.sync kernel)",
+            rate / 1e12,
+            rate / 512.0 / 1e9,
+            100.0 * rate / 512.0 / tensor_bound
+        );
+    }
     let families: Vec<MatchKernel> = if dev.has_tensor_matcher() {
         vec![MatchKernel::Popcount, MatchKernel::Tensor]
     } else {

@@ -22,10 +22,13 @@
 // - Each thread sees the columns 2t, 2t + 1 (mod 8) of its rows and scans them in increasing gallery
 //   index, inserting on a strictly larger dot, so its list is ordered by (distance, index). The four
 //   threads that share a row merge their lists by (distance, index) at the end (two shuffles).
-// - REVERSE (k = 1): instead of writing a list, fold (distance << 32 | index) into out_keys[query] with
-//   an atomic minimum (stored complemented, as an atomic maximum over a zeroed buffer): the role-swapped
-//   pass of the cross-check, giving every gallery row its nearest query, lowest index on ties, in the
-//   same form as the fused reverse 1-NN of match.cu.
+// - MUTUAL (the cross-check): the same dot products also give every gallery row its nearest query,
+//   lowest query index on ties. Per tile column a thread takes the best of its four rows (in increasing
+//   row order, strictly better only), the eight row groups of a warp combine by shuffles, the eight warps
+//   by a shared-memory atomic maximum of a packed key ((dot + 1024) << 8 | 255 - row in block), and one
+//   thread per column folds the block's winner into reverse[column] as a complemented
+//   (distance << 32 | query) key with a global atomic maximum, the form match.cu's fused reverse 1-NN
+//   fills. Maxima do not depend on the order of the updates: deterministic.
 #include "clatch.h"
 
 typedef unsigned long long u64;
@@ -169,18 +172,20 @@ struct TopK {
 // Grid: x over blocks of 256 queries (grid-stride), y over gallery segments of `segment` rows (a
 // multiple of TILE, every segment non-empty). Both buffers hold whole padded blocks of rows. With one
 // segment the lists go to `out` (query-major, k per query); otherwise as (distance << 32 | index) keys
-// to partial[(segment * nq + query) * k + j]; REVERSE folds complemented keys into out_keys[query].
-template <int BYTES, int K, bool REVERSE>
+// to partial[(segment * nq + query) * k + j]. MUTUAL folds each gallery row's nearest query into
+// reverse[row] (nt complemented keys, zeroed by the host).
+template <int BYTES, int K, bool MUTUAL>
 __device__ __forceinline__ void knn_tensor(const signed char* __restrict__ query, unsigned nq,
                                            const signed char* __restrict__ train, unsigned nt,
                                            unsigned segment, unsigned k, clatch_match* __restrict__ out,
-                                           u64* __restrict__ partial, u64* __restrict__ out_keys) {
+                                           u64* __restrict__ partial, u64* __restrict__ reverse) {
     constexpr int CHUNKS = BYTES / 16;           // 16-byte chunks per row
     constexpr int KSTEPS = BYTES / 32;           // k32 MMA steps per row
     constexpr int TILE_CHUNKS = TILE * CHUNKS;  // chunks per stage
     static_assert(TILE_CHUNKS % THREADS == 0, "whole chunks per thread");
-    static_assert(!REVERSE || K == 1, "the reverse pass keeps one neighbour");
     extern __shared__ uint4 stages[];
+    // MUTUAL: per tile column, the best packed (dot, row) key of the block, two tiles in flight.
+    __shared__ unsigned column_keys[2][TILE];
 
     const int lane = threadIdx.x & 31, warp = threadIdx.x >> 5;
     const int group = lane >> 2, quad = lane & 3;
@@ -201,6 +206,27 @@ __device__ __forceinline__ void knn_tensor(const signed char* __restrict__ query
         }
     };
 
+    // MUTUAL: folds the block's winners of tile t's columns into `reverse` and clears their slots
+    // (threads 0..TILE-1; between the barrier after tile t and the one closing tile t + 1).
+    const auto flush_columns = [&](unsigned t, unsigned qb) {
+        if (threadIdx.x < TILE) {
+            unsigned& slot = column_keys[t & 1][threadIdx.x];
+            const unsigned key = slot;
+            const unsigned col = first_row + t * TILE + threadIdx.x;
+            if (key != 0 && col < end_row) {
+                const int dot = (int)(key >> 8) - 1024;
+                const unsigned q = qb * BLOCK_QUERIES + (255u - (key & 255u));
+                const unsigned dist = (unsigned)(BYTES - dot) >> 1;
+                atomicMax(reverse + col, ~(((u64)dist << 32) | q));
+            }
+            slot = 0;
+        }
+    };
+    if (MUTUAL && threadIdx.x < TILE) {
+        column_keys[0][threadIdx.x] = 0;
+        column_keys[1][threadIdx.x] = 0;
+    }
+
     for (unsigned qb = blockIdx.x; qb < query_blocks; qb += gridDim.x) {
         // A-fragments of this warp's 32 queries (m16 tiles mt = 0, 1), all k-steps: row group (+8),
         // bytes 4 * quad (+16) of each 32-byte step.
@@ -218,10 +244,20 @@ __device__ __forceinline__ void knn_tensor(const signed char* __restrict__ query
         }
         // Lists of this thread's four rows: (mt, half) -> row mt * 16 + group + half * 8.
         TopK<K> best[2][2];
+        // MUTUAL: row (mt, h)'s packed column key is dot * scale + offset = (dot + 1024) << 8 | 255 - row,
+        // one multiply-add; padded rows past nq get 0 * dot + 0, which never wins a column.
+        int scale[2][2], offset[2][2];
 #pragma unroll
         for (int mt = 0; mt < 2; ++mt) {
             best[mt][0].clear();
             best[mt][1].clear();
+#pragma unroll
+            for (int h = 0; h < 2; ++h) {
+                const unsigned r = warp * 32 + mt * 16 + group + h * 8;
+                const bool real = (u64)qb * BLOCK_QUERIES + r < nq;
+                scale[mt][h] = real ? 256 : 0;
+                offset[mt][h] = real ? (1024 << 8) | (255 - (int)r) : 0;
+            }
         }
 
         __syncthreads();  // the previous query block is done with every stage
@@ -235,6 +271,7 @@ __device__ __forceinline__ void knn_tensor(const signed char* __restrict__ query
             __syncthreads();  // tile t is in; every warp has left tile t - 1, whose stage is reloaded next
             if (t + STAGES - 1 < tiles) load_tile(t + STAGES - 1);
             cp_async_commit();
+            if (MUTUAL && t > 0) flush_columns(t - 1, qb);
 
             const uint4* stage = stages + (t % STAGES) * TILE_CHUNKS;
             const unsigned tile_row = first_row + t * TILE;
@@ -290,9 +327,35 @@ __device__ __forceinline__ void knn_tensor(const signed char* __restrict__ query
                         }
                     }
                 }
+                if constexpr (MUTUAL) {
+                    // Rows of this thread in increasing order: (mt, h) = (0,0), (0,1), (1,0), (1,1).
+#pragma unroll
+                    for (int nt = 0; nt < 4; ++nt) {
+#pragma unroll
+                        for (int e = 0; e < 2; ++e) {
+                            int key = 0;
+#pragma unroll
+                            for (int mt = 0; mt < 2; ++mt) {
+#pragma unroll
+                                for (int h = 0; h < 2; ++h)
+                                    key = max(key, acc[mt][nt][2 * h + e] * scale[mt][h] + offset[mt][h]);
+                            }
+                            key = max(key, __shfl_xor_sync(0xffffffffu, key, 4));
+                            key = max(key, __shfl_xor_sync(0xffffffffu, key, 8));
+                            key = max(key, __shfl_xor_sync(0xffffffffu, key, 16));
+                            if (group == 0 && key != 0)
+                                atomicMax(&column_keys[t & 1][half * 32 + nt * 8 + 2 * quad + e], (unsigned)key);
+                        }
+                    }
+                }
             }
         }
         cp_async_wait<0>();
+        if constexpr (MUTUAL) {
+            __syncthreads();  // every warp's keys of the last tile are in
+            if (tiles > 0) flush_columns(tiles - 1, qb);
+            __syncthreads();  // slots cleared before the next query block
+        }
 
         // Merge the four lanes of each row group, then lane quad 0 writes.
 #pragma unroll
@@ -308,10 +371,7 @@ __device__ __forceinline__ void knn_tensor(const signed char* __restrict__ query
 #pragma unroll
                 for (int s = 0; s < K; ++s)
                     dist[s] = list.dot[s] == WORST ? NONE : (unsigned)(BYTES - list.dot[s]) >> 1;
-                if constexpr (REVERSE) {
-                    if (list.index[0] != NONE)
-                        atomicMax(out_keys + qi, ~(((u64)dist[0] << 32) | list.index[0]));
-                } else if (gridDim.y == 1) {
+                if (gridDim.y == 1) {
                     clatch_match* o = out + qi * k;
 #pragma unroll
                     for (int s = 0; s < K; ++s) {
@@ -356,19 +416,37 @@ clatch_expand_signs(const u64* __restrict__ bits, unsigned rows, unsigned words,
     }
 }
 
-#define CLATCH_TENSOR_KERNEL(NAME, BYTES, K, REVERSE)                                                   \
+#define CLATCH_TENSOR_KERNEL(NAME, BYTES, K, MUTUAL)                                                    \
     extern "C" __global__ void __launch_bounds__(THREADS, 1)                                             \
         NAME(const signed char* __restrict__ query, unsigned nq, const signed char* __restrict__ train, \
              unsigned nt, unsigned segment, unsigned k, clatch_match* __restrict__ out,                \
-             u64* __restrict__ partial, u64* __restrict__ out_keys) {                                  \
-        knn_tensor<BYTES, K, REVERSE>(query, nq, train, nt, segment, k, out, partial, out_keys);       \
+             u64* __restrict__ partial, u64* __restrict__ reverse) {                                   \
+        knn_tensor<BYTES, K, MUTUAL>(query, nq, train, nt, segment, k, out, partial, reverse);         \
     }
-#define CLATCH_TENSOR_KERNELS(BITS)                                        \
-    CLATCH_TENSOR_KERNEL(clatch_knn_tensor_b##BITS##_k1, BITS, 1, false)   \
-    CLATCH_TENSOR_KERNEL(clatch_knn_tensor_b##BITS##_k2, BITS, 2, false)   \
-    CLATCH_TENSOR_KERNEL(clatch_knn_tensor_reverse_b##BITS, BITS, 1, true)
+#define CLATCH_TENSOR_KERNELS(BITS)                                              \
+    CLATCH_TENSOR_KERNEL(clatch_knn_tensor_b##BITS##_k1, BITS, 1, false)         \
+    CLATCH_TENSOR_KERNEL(clatch_knn_tensor_b##BITS##_k2, BITS, 2, false)         \
+    CLATCH_TENSOR_KERNEL(clatch_knn_tensor_mutual_b##BITS##_k1, BITS, 1, true)   \
+    CLATCH_TENSOR_KERNEL(clatch_knn_tensor_mutual_b##BITS##_k2, BITS, 2, true)
 
 CLATCH_TENSOR_KERNELS(64)
 CLATCH_TENSOR_KERNELS(128)
 CLATCH_TENSOR_KERNELS(256)
 CLATCH_TENSOR_KERNELS(512)
+
+// Bench only: the int8 mma.sync rate of this GPU with nothing else in the way (no memory, no
+// selection): each warp runs `iterations` rounds of 8 independent m16n8k32 chains; `sink` keeps the
+// results alive. The host launches blocks of 8 warps, several per SM, and counts multiply-adds.
+extern "C" __global__ void __launch_bounds__(THREADS, 1) clatch_mma_s8_rate(unsigned iterations, int* sink) {
+    unsigned a[4] = {threadIdx.x, threadIdx.x * 3u, threadIdx.x * 5u, threadIdx.x * 7u};
+    const unsigned b0 = threadIdx.x * 11u, b1 = threadIdx.x * 13u;
+    int acc[8][4] = {};
+    for (unsigned i = 0; i < iterations; ++i) {
+#pragma unroll
+        for (int c = 0; c < 8; ++c) mma_s8(acc[c], a, b0 + c, b1);
+    }
+    int total = 0;
+#pragma unroll
+    for (int c = 0; c < 8; ++c) total += acc[c][0] + acc[c][1] + acc[c][2] + acc[c][3];
+    if (total == 0x7fffffff) sink[threadIdx.x] = total;
+}

@@ -44,6 +44,8 @@ pub use memory::probe_allocation;
 pub use stream::{GpuStream, PendingFeatures, PendingMatches};
 pub(crate) use stream::{detect_and_describe_async, match_async};
 pub use tensor_knn::MatchKernel;
+#[doc(hidden)]
+pub use tensor_knn::measure_mma_s8_rate;
 
 use crate::error::Result;
 

@@ -4,9 +4,9 @@
 //! Exactness strategy: descriptors are expanded on the device to one signed byte per bit (+1 for 0, -1
 //! for 1); an int8 dot product of two rows of B bytes is B - 2 * Hamming distance, computed by the
 //! tensor cores in int32, so the distance is recovered exactly. Lists are kept and merged by
-//! (distance, index) as in the CPU reference. The cross-check's reverse 1-NN is a second, role-swapped
-//! pass that folds (distance, query) keys into the same buffer the popcount kernels' fused reverse pass
-//! fills, so the filter and compaction of `matching.rs` serve both.
+//! (distance, index) as in the CPU reference. The cross-check's reverse 1-NN comes out of the same dot
+//! products (the `mutual` kernels), folded into the same buffer of (distance, query) keys the popcount
+//! kernels fill, so the filter and compaction of `matching.rs` serve both.
 
 use std::sync::Arc;
 
@@ -51,16 +51,21 @@ pub(crate) const KERNELS: &[&str] = &[
     "clatch_expand_signs",
     "clatch_knn_tensor_b64_k1",
     "clatch_knn_tensor_b64_k2",
-    "clatch_knn_tensor_reverse_b64",
+    "clatch_knn_tensor_mutual_b64_k1",
+    "clatch_knn_tensor_mutual_b64_k2",
     "clatch_knn_tensor_b128_k1",
     "clatch_knn_tensor_b128_k2",
-    "clatch_knn_tensor_reverse_b128",
+    "clatch_knn_tensor_mutual_b128_k1",
+    "clatch_knn_tensor_mutual_b128_k2",
     "clatch_knn_tensor_b256_k1",
     "clatch_knn_tensor_b256_k2",
-    "clatch_knn_tensor_reverse_b256",
+    "clatch_knn_tensor_mutual_b256_k1",
+    "clatch_knn_tensor_mutual_b256_k2",
     "clatch_knn_tensor_b512_k1",
     "clatch_knn_tensor_b512_k2",
-    "clatch_knn_tensor_reverse_b512",
+    "clatch_knn_tensor_mutual_b512_k1",
+    "clatch_knn_tensor_mutual_b512_k2",
+    "clatch_mma_s8_rate",
 ];
 
 const THREADS: u32 = CLATCH_TENSOR_WARPS * 32;
@@ -89,12 +94,9 @@ fn slot(bits: usize) -> usize {
         .expect("padded widths are 64..512")
 }
 
-fn forward_kernel(bits: usize, k: usize) -> &'static str {
-    KERNELS[1 + 3 * slot(bits) + (k - 1)]
-}
-
-fn reverse_kernel(bits: usize) -> &'static str {
-    KERNELS[1 + 3 * slot(bits) + 2]
+/// The kNN kernel for `bits`-wide rows and k (1 or 2) neighbours, with the reverse 1-NN if `mutual`.
+fn knn_kernel(bits: usize, k: usize, mutual: bool) -> &'static str {
+    KERNELS[1 + 4 * slot(bits) + 2 * mutual as usize + (k - 1)]
 }
 
 /// Lets the kNN kernels use the shared memory they need (over the default 48 KiB); called once per
@@ -166,14 +168,13 @@ impl Geometry {
 /// One tensor-core kNN on the device: the sign-expanded sets, the geometry of each pass and the
 /// per-segment lists.
 pub(crate) struct TensorKnn {
+    kernel: &'static str,
     bits: usize,
     words: u32,
     nq: u32,
     nt: u32,
     k: u32,
-    forward: Geometry,
-    /// The role-swapped pass of the cross-check (gallery rows as queries), when asked for.
-    reverse: Option<Geometry>,
+    geometry: Geometry,
     query_signs: CudaSlice<u8>,
     train_signs: CudaSlice<u8>,
     partial: CudaSlice<u64>,
@@ -181,7 +182,7 @@ pub(crate) struct TensorKnn {
 
 impl TensorKnn {
     /// Plans `nq` queries against `nt` gallery rows of `words` 64-bit words, `k` (1 or 2) neighbours,
-    /// with the reverse pass when `mutual`.
+    /// with the reverse 1-NN when `mutual`.
     pub(crate) fn new(
         dev: &GpuDevice,
         stream: &Arc<CudaStream>,
@@ -192,30 +193,29 @@ impl TensorKnn {
     ) -> Result<Self> {
         debug_assert!((1..=MAX_K).contains(&k));
         let bits = padded_bits(words);
-        let forward = Geometry::new(dev.multiprocessors, nq, nt, segment_tiles);
-        let reverse = mutual.then(|| Geometry::new(dev.multiprocessors, nt, nq, segment_tiles));
+        let geometry = Geometry::new(dev.multiprocessors, nq, nt, segment_tiles);
         let rows = |n: usize| n.div_ceil(ROW_PAD).max(1) * ROW_PAD;
-        let partial_len = if forward.segments > 1 {
-            forward.segments.saturating_mul(nq).saturating_mul(k)
+        let partial_len = if geometry.segments > 1 {
+            geometry.segments.saturating_mul(nq).saturating_mul(k)
         } else {
             1
         };
         Ok(Self {
+            kernel: knn_kernel(bits, k, mutual),
             bits,
             words: words as u32,
             nq: nq as u32,
             nt: nt as u32,
             k: k as u32,
-            forward,
-            reverse,
+            geometry,
             query_signs: alloc_zeros(stream, rows(nq) * bits, "expanded query descriptors")?,
             train_signs: alloc_zeros(stream, rows(nt) * bits, "expanded gallery descriptors")?,
             partial: alloc_zeros(stream, partial_len, "kNN segment lists")?,
         })
     }
 
-    /// Queues the expansion of both sets, the forward kNN (and the merge of its segment lists into
-    /// `out`), and the reverse pass into `reverse` (zeroed by the caller) when planned.
+    /// Queues the expansion of both sets and the kNN (and the merge of its segment lists into `out`);
+    /// the mutual kernels also fold the reverse 1-NN into `reverse` (zeroed by the caller).
     pub(crate) fn launch(
         &mut self,
         dev: &GpuDevice,
@@ -228,8 +228,8 @@ impl TensorKnn {
         expand(dev, stream, query, self.words, bits, &mut self.query_signs)?;
         expand(dev, stream, train, self.words, bits, &mut self.train_signs)?;
 
-        let g = self.forward;
-        let kernel = forward_kernel(bits, self.k as usize);
+        let g = self.geometry;
+        let kernel = self.kernel;
         let segment = g.segment as u32;
         let mut launch = stream.launch_builder(dev.kernel(kernel));
         launch
@@ -245,7 +245,7 @@ impl TensorKnn {
         // SAFETY: the arguments match clatch_knn_tensor_*'s signature. Both sign buffers hold whole
         // ROW_PAD-row blocks of `bits` bytes (every query block and tile the kernel reads is in
         // bounds), `out` holds nq * k matches, `partial` segments * nq * k keys when there is more
-        // than one segment; `reverse` is not touched by the forward kernels.
+        // than one segment, and `reverse` nt keys for the mutual kernels (the only ones that touch it).
         unsafe { launch.launch(config(g, bits)) }.map_err(driver_error(kernel))?;
         if g.segments > 1 {
             super::matching::launch_merge(
@@ -257,26 +257,44 @@ impl TensorKnn {
             )?;
         }
 
-        if let Some(g) = self.reverse {
-            let kernel = reverse_kernel(bits);
-            let (one, segment) = (1u32, g.segment as u32);
-            let mut launch = stream.launch_builder(dev.kernel(kernel));
-            launch
-                .arg(&self.train_signs)
-                .arg(&self.nt)
-                .arg(&self.query_signs)
-                .arg(&self.nq)
-                .arg(&segment)
-                .arg(&one)
-                .arg(&mut *out)
-                .arg(&mut self.partial)
-                .arg(&mut *reverse);
-            // SAFETY: as above with the roles swapped; the reverse kernel only folds keys into
-            // `reverse`, which holds nt keys (one per gallery row, its "queries").
-            unsafe { launch.launch(config(g, bits)) }.map_err(driver_error(kernel))?;
-        }
         Ok(())
     }
+}
+
+/// The device's int8 `mma.sync` rate in multiply-adds per second, measured by `clatch_mma_s8_rate`
+/// (8 warps a block, 4 blocks per multiprocessor, CUDA events, median of 5 after a warm-up): the
+/// bound of the tensor kNN, which issues the same instruction.
+#[doc(hidden)]
+pub fn measure_mma_s8_rate(dev: &GpuDevice) -> Result<f64> {
+    if !dev.has_tensor_matcher() {
+        return Err(dev
+            .check_match_kernel(MatchKernel::Tensor, 1)
+            .expect_err("no tensor cores"));
+    }
+    const ITERATIONS: u32 = 20_000;
+    let stream = dev.new_stream()?;
+    let mut sink = alloc_zeros::<i32>(&stream, THREADS as usize, "mma rate sink")?;
+    let blocks = 4 * dev.multiprocessors as u32;
+    let times = super::device::time_launches(dev, &stream, 1, 5, || {
+        let mut launch = stream.launch_builder(dev.kernel("clatch_mma_s8_rate"));
+        launch.arg(&ITERATIONS).arg(&mut sink);
+        // SAFETY: matches clatch_mma_s8_rate(unsigned, int*); `sink` holds THREADS ints.
+        unsafe {
+            launch.launch(LaunchConfig {
+                grid_dim: (blocks, 1, 1),
+                block_dim: (THREADS, 1, 1),
+                shared_mem_bytes: 0,
+            })
+        }
+        .map_err(driver_error("clatch_mma_s8_rate"))?;
+        Ok(())
+    })?;
+    let mut times = times;
+    times.sort_by(f32::total_cmp);
+    let seconds = times[times.len() / 2] as f64 * 1e-3;
+    // Per warp and iteration: 8 MMAs of 16 x 8 x 32 multiply-adds.
+    let macs = blocks as f64 * CLATCH_TENSOR_WARPS as f64 * ITERATIONS as f64 * 8.0 * 4096.0;
+    Ok(macs / seconds)
 }
 
 fn config(g: Geometry, bits: usize) -> LaunchConfig {
@@ -331,18 +349,12 @@ mod tests {
         for words in 1..=8 {
             let bits = padded_bits(words);
             assert!(bits >= words * 64 && bits.is_power_of_two());
-            assert_eq!(
-                forward_kernel(bits, 1),
-                format!("clatch_knn_tensor_b{bits}_k1")
-            );
-            assert_eq!(
-                forward_kernel(bits, 2),
-                format!("clatch_knn_tensor_b{bits}_k2")
-            );
-            assert_eq!(
-                reverse_kernel(bits),
-                format!("clatch_knn_tensor_reverse_b{bits}")
-            );
+            for k in 1..=2 {
+                let plain = format!("clatch_knn_tensor_b{bits}_k{k}");
+                let mutual = format!("clatch_knn_tensor_mutual_b{bits}_k{k}");
+                assert_eq!(knn_kernel(bits, k, false), plain);
+                assert_eq!(knn_kernel(bits, k, true), mutual);
+            }
         }
     }
 

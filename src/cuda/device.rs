@@ -19,7 +19,11 @@ const KERNELS: &[(&str, &str, &[u8], &[&str])] = &[
         "kernels/describe.cu",
         ptx::DESCRIBE_PTX,
         ptx::DESCRIBE_FATBIN,
-        &["clatch_describe", "clatch_describe_binary"],
+        &[
+            "clatch_describe",
+            "clatch_describe_binary",
+            "clatch_build_quads",
+        ],
     ),
     (
         "kernels/detect.cu",
@@ -137,6 +141,15 @@ pub fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
 impl GpuDevice {
     fn load(ordinal: usize) -> Result<Self> {
         let ctx = CudaContext::new(ordinal).map_err(driver_error("context creation"))?;
+        // cudarc by default gives every buffer two events and waits on / records them around every
+        // use, so that a buffer can hop between streams safely. clatch never lets one hop: each call
+        // allocates, uses and frees its buffers on its own stream (frees are stream-ordered), and the
+        // tables below are uploaded on the default stream and synchronised before any other stream
+        // exists; pinned staging buffers keep their own events. The tracking cost ~2 driver calls per
+        // kernel argument and most of the host time of a queued image.
+        // SAFETY: the invariant above: no buffer is used on a stream other than the one it was
+        // allocated on, except the tables, which are complete before they are shared.
+        unsafe { ctx.disable_event_tracking() };
         let mut kernels = HashMap::new();
         // The fatbin's native code loads without JIT on the GPUs it was built for (and falls back to its
         // PTX elsewhere); CLATCH_FORCE_PTX=1 loads the plain PTX instead, so tests can prove both paths.

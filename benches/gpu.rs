@@ -22,6 +22,19 @@ fn main() {
         return;
     };
     println!("device: {}", dev.name());
+    // Issue bounds for 512 triplets x 64 pixels x 2 SSDs, each term a subtract and a multiply-add:
+    // 131072 operations per descriptor; Hopper issues 64 INT32 or 128 FP32 lanes per SM and clock.
+    let (sms, clock_khz) = clatch::cuda::multiprocessors_and_clock_khz(&dev).expect("attributes");
+    let per_s = sms as f64 * clock_khz as f64 * 1e3;
+    let int32_bound = per_s * 64.0 / 131_072.0;
+    let fp32_bound = per_s * 128.0 / 131_072.0;
+    println!(
+        "bounds: {sms} SMs x {:.0} MHz, 512 x 64 x 2 SSD terms x 2 operations = 131072 per descriptor: \
+         INT32-issue-bound {:.1} M descriptors/s, FP32-issue-bound {:.1} M descriptors/s",
+        clock_khz as f64 / 1e3,
+        int32_bound / 1e6,
+        fp32_bound / 1e6
+    );
     let median = |mut v: Vec<f32>| {
         v.sort_by(f32::total_cmp);
         v[v.len() / 2] as f64
@@ -72,10 +85,14 @@ fn main() {
                     clatch::cuda::time_describe_kernel(&dev, &image, &keypoints, &config, 3, 15)
                         .expect("describe kernel");
                 let ms = median(times);
+                let rate = n as f64 / (ms * 1e-3);
                 println!(
-                    "describe {name:>9} {n:>8} keypoints, {label:>9}: median {ms:9.3} ms  {:8.1} M descriptors/s  {:6.2} ns/descriptor",
-                    n as f64 / ms / 1e3,
-                    ms * 1e6 / n as f64
+                    "describe {name:>9} {n:>8} keypoints, {label:>9}: median {ms:9.3} ms  {:8.1} M descriptors/s  \
+                     {:6.2} ns/descriptor  {:5.1}% of the INT32 bound, {:5.1}% of the FP32 bound",
+                    rate / 1e6,
+                    ms * 1e6 / n as f64,
+                    100.0 * rate / int32_bound,
+                    100.0 * rate / fp32_bound
                 );
             }
         }

@@ -58,14 +58,17 @@ fn main() {
         tensor_bound / 1e9
     );
     if dev.has_tensor_matcher() {
-        let rate = clatch::cuda::measure_mma_s8_rate(&dev).expect("mma rate");
-        println!(
-            "int8 mma.sync measured: {:.1} T multiply-adds/s = {:.1} G pairs/s at 512 per pair \
-             ({:.0}% of the dense tensor figure above: the bound of the mma.sync kernel)",
-            rate / 1e12,
-            rate / 512.0 / 1e9,
-            100.0 * rate / 512.0 / tensor_bound
-        );
+        for blocks_per_sm in [4, 1] {
+            let rate = clatch::cuda::measure_mma_s8_rate(&dev, blocks_per_sm).expect("mma rate");
+            println!(
+                "int8 mma.sync measured, {} warps per SM: {:.1} T multiply-adds/s = {:.1} G pairs/s at 512 per \
+                 pair ({:.0}% of the dense tensor figure above)",
+                8 * blocks_per_sm,
+                rate / 1e12,
+                rate / 512.0 / 1e9,
+                100.0 * rate / 512.0 / tensor_bound
+            );
+        }
     }
     let families: Vec<MatchKernel> = if dev.has_tensor_matcher() {
         vec![MatchKernel::Popcount, MatchKernel::Tensor]

@@ -262,10 +262,11 @@ impl TensorKnn {
 }
 
 /// The device's int8 `mma.sync` rate in multiply-adds per second, measured by `clatch_mma_s8_rate`
-/// (8 warps a block, 4 blocks per multiprocessor, CUDA events, median of 5 after a warm-up): the
-/// bound of the tensor kNN, which issues the same instruction.
+/// (8 warps a block, `blocks_per_sm` blocks per multiprocessor, CUDA events, median of 5 after a
+/// warm-up): the bound of the tensor kNN, which issues the same instruction (with 1 block per
+/// multiprocessor: its own occupancy).
 #[doc(hidden)]
-pub fn measure_mma_s8_rate(dev: &GpuDevice) -> Result<f64> {
+pub fn measure_mma_s8_rate(dev: &GpuDevice, blocks_per_sm: usize) -> Result<f64> {
     if !dev.has_tensor_matcher() {
         return Err(dev
             .check_match_kernel(MatchKernel::Tensor, 1)
@@ -274,7 +275,7 @@ pub fn measure_mma_s8_rate(dev: &GpuDevice) -> Result<f64> {
     const ITERATIONS: u32 = 20_000;
     let stream = dev.new_stream()?;
     let mut sink = alloc_zeros::<i32>(&stream, THREADS as usize, "mma rate sink")?;
-    let blocks = 4 * dev.multiprocessors as u32;
+    let blocks = (blocks_per_sm.max(1) * dev.multiprocessors) as u32;
     let times = super::device::time_launches(dev, &stream, 1, 5, || {
         let mut launch = stream.launch_builder(dev.kernel("clatch_mma_s8_rate"));
         launch.arg(&ITERATIONS).arg(&mut sink);

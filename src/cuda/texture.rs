@@ -2,6 +2,8 @@
 
 use std::sync::Arc;
 
+use rayon::prelude::*;
+
 use cudarc::driver::{CudaSlice, CudaStream, DevicePtr, LaunchConfig, PushKernelArg, sys};
 
 use super::device::{GpuDevice, driver_error};
@@ -86,11 +88,17 @@ impl DeviceImage {
     pub fn upload(dev: &GpuDevice, stream: &Arc<CudaStream>, image: &GrayView) -> Result<Self> {
         let (width, height) = (image.width(), image.height());
         let pitch = width.div_ceil(dev.pitch_alignment) * dev.pitch_alignment;
+        // The copy into pinned memory is host time every queued image pays (about 0.2 ms for 1080p on
+        // one core): rows in parallel.
         let pixels = upload_staged(stream, pitch * height, "image upload", |staged| {
-            for (y, row) in staged.chunks_exact_mut(pitch).enumerate() {
-                row[..width].copy_from_slice(image.row(y));
-                row[width..].fill(0);
-            }
+            staged
+                .par_chunks_exact_mut(pitch)
+                .with_min_len(64)
+                .enumerate()
+                .for_each(|(y, row)| {
+                    row[..width].copy_from_slice(image.row(y));
+                    row[width..].fill(0);
+                });
         })?;
         let texture = texture_object(&pixels, stream, (width, height, pitch), 1)?;
         Ok(Self {

@@ -144,7 +144,11 @@ mod tests {
                             sum += (kernel[i] * kernel[j]) as u64 * p as u64;
                         }
                     }
-                    assert_eq!(blurred[y * w + x] as u64, (sum + 32768) >> 16, "k {k} ({x}, {y})");
+                    assert_eq!(
+                        blurred[y * w + x] as u64,
+                        (sum + 32768) >> 16,
+                        "k {k} ({x}, {y})"
+                    );
                 }
             }
         }

@@ -78,13 +78,7 @@ pub(super) fn describe(
         .par_chunks_mut(per)
         .zip(placements.par_iter())
         .for_each(|(out, placement)| {
-            keypoint_bits(
-                &source,
-                placement,
-                latch.half_ssd_size(),
-                width.bits(),
-                out,
-            );
+            keypoint_bits(&source, placement, latch.half_ssd_size(), width.bits(), out);
         });
     Described {
         descriptors: DescriptorSet::from_words(width, words).expect("whole rows by construction"),

@@ -345,7 +345,10 @@ mod tests {
                 Err(Error::InvalidConfig { field: "sigma", .. })
             ));
         }
-        assert_eq!(OpencvLatch::default(), OpencvLatch::new(32, true, 3, 2.0).unwrap());
+        assert_eq!(
+            OpencvLatch::default(),
+            OpencvLatch::new(32, true, 3, 2.0).unwrap()
+        );
     }
 
     #[test]

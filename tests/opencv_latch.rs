@@ -4,8 +4,9 @@
 //! we skip on purpose).
 //!
 //! Without python3 + cv2 every test is reported as ignored with `skipped: opencv-contrib-python not
-//! installed`, never as passed. `CLATCH_OPENCV_EXTRA_IMAGES=a.png:b.ppm` adds a run on those images
-//! (e.g. real photographs); without it that test is ignored. `CLATCH_PYTHON` picks the interpreter.
+//! installed`, never as passed; with `CLATCH_REQUIRE_OPENCV` set (as in CI) a missing cv2 fails instead.
+//! `CLATCH_OPENCV_EXTRA_IMAGES=a.png:b.ppm` adds a run on those images (e.g. real photographs); without
+//! it that test is ignored. `CLATCH_PYTHON` picks the interpreter.
 
 mod common;
 
@@ -19,6 +20,8 @@ use common::{Gray, astronaut, rectangles};
 use libtest_mimic::{Arguments, Failed, Trial};
 
 const EXTRA_IMAGES: &str = "CLATCH_OPENCV_EXTRA_IMAGES";
+/// Set (by CI) to make a missing cv2 a failure instead of ignored tests.
+const REQUIRE: &str = "CLATCH_REQUIRE_OPENCV";
 
 fn main() {
     let args = Arguments::from_args();
@@ -35,6 +38,10 @@ fn main() {
     ];
     match python_with_cv2() {
         Ok(version) => println!("cv2 {version}"),
+        Err(reason) if std::env::var_os(REQUIRE).is_some() => {
+            eprintln!("{REQUIRE} is set but opencv-contrib-python is missing: {reason}");
+            std::process::exit(1);
+        }
         Err(reason) => {
             println!("skipped: opencv-contrib-python not installed ({reason})");
             trials = trials

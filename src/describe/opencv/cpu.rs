@@ -11,16 +11,14 @@ use crate::keypoint::KeyPoint;
 /// `SSD(a, b)` and `SSD(c, b)` of one triplet over `(2h + 1)²` patches around absolute centres.
 #[inline]
 fn triplet_ssds(image: &GrayView, centres: [(i32, i32); 3], h: i32) -> (i32, i32) {
-    let [(ax, ay), (bx, by), (cx, cy)] = centres;
+    let side = (2 * h + 1) as usize;
+    let patch_row =
+        |(x, y): (i32, i32), dy: i32| &image.row((y + dy) as usize)[(x - h) as usize..][..side];
     let (mut sum_a, mut sum_c) = (0i32, 0i32);
     for dy in -h..=h {
-        let row_a = image.row((ay + dy) as usize);
-        let row_b = image.row((by + dy) as usize);
-        let row_c = image.row((cy + dy) as usize);
-        for dx in -h..=h {
-            let b = row_b[(bx + dx) as usize] as i32;
-            let da = row_a[(ax + dx) as usize] as i32 - b;
-            let dc = row_c[(cx + dx) as usize] as i32 - b;
+        let [a, b, c] = centres.map(|centre| patch_row(centre, dy));
+        for ((&a, &b), &c) in a.iter().zip(b).zip(c) {
+            let (da, dc) = (a as i32 - b as i32, c as i32 - b as i32);
             sum_a += da * da;
             sum_c += dc * dc;
         }

@@ -158,6 +158,29 @@ mod tests {
     }
 
     #[test]
+    fn clatch_equals_opencv_latch_where_their_rules_meet() {
+        // docs/opencv_compat.md: with size 64, angle 0, integer positions, the default 7x7 weights, and
+        // OpenCV's rotation and blur off, CLATCH's window patches are OpenCV's 7x7 patches.
+        let (w, h) = (200, 160);
+        let pixels = crate::synthetic::noise(w, h, 4);
+        let image = GrayView::new(&pixels, w, h, w).unwrap();
+        let keypoints: Vec<KeyPoint> = (0..100)
+            .map(|i| KeyPoint::new((40 + i % 120) as f32, (40 + i / 2 % 80) as f32))
+            .collect();
+        let clatch = crate::describe::cpu::describe(
+            &image,
+            &keypoints,
+            &crate::describe::DescriptorConfig::default(),
+        );
+        let opencv = OpencvLatch::new(64, false, 3, 0.0)
+            .unwrap()
+            .describe(Backend::Cpu, &image, &keypoints)
+            .unwrap();
+        assert_eq!(clatch.keypoint_index.len(), keypoints.len());
+        assert_eq!(clatch, opencv);
+    }
+
+    #[test]
     fn narrower_widths_are_prefixes() {
         let (w, h) = (100, 100);
         let pixels = crate::synthetic::noise(w, h, 2);

@@ -251,6 +251,11 @@ impl OpencvLatch {
     }
 }
 
+// docs/opencv_compat.md's examples run as doctests.
+#[doc = include_str!("../../../docs/opencv_compat.md")]
+#[cfg(doctest)]
+pub struct OpencvCompatDoc;
+
 impl Default for OpencvLatch {
     /// OpenCV's defaults: `LATCH::create(32, true, 3, 2.0)`.
     fn default() -> Self {

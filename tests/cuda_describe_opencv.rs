@@ -82,21 +82,8 @@ mod gpu {
         Ok(cpu.descriptors.len())
     }
 
-    /// Keypoints anywhere (border zones included) on a 1/64-pixel grid, random angles and FAST's -1.
     fn random_keypoints(image: &Gray, count: usize, seed: u64) -> Vec<KeyPoint> {
-        let mut rng = SplitMix64::new(seed);
-        (0..count)
-            .map(|i| {
-                let x = rng.below(image.width as u64 * 64) as f32 / 64.0;
-                let y = rng.below(image.height as u64 * 64) as f32 / 64.0;
-                let angle = if i % 7 == 0 {
-                    -1.0
-                } else {
-                    (rng.below(1 << 24) as f32 / (1 << 24) as f32) * 1440.0 - 720.0
-                };
-                KeyPoint::new(x, y).with_angle(angle)
-            })
-            .collect()
+        super::common::random_subpixel_keypoints(image.width, image.height, count, seed)
     }
 
     fn latch(bytes: usize, rotation: bool, half: usize, sigma: f64) -> OpencvLatch {

@@ -292,22 +292,8 @@ fn latch(bytes: usize, rotation: bool, half: usize, sigma: f64) -> OpencvLatch {
     OpencvLatch::new(bytes, rotation, half, sigma).expect("valid settings")
 }
 
-/// Keypoints anywhere in the image (border region included), at sub-pixel positions on a 1/64 grid
-/// (half-pixel positions included), with random angles in [-720, 720) and FAST's -1.
 fn random_keypoints(image: &Gray, count: usize, seed: u64) -> Vec<KeyPoint> {
-    let mut rng = SplitMix64::new(seed);
-    (0..count)
-        .map(|i| {
-            let x = rng.below(image.width as u64 * 64) as f32 / 64.0;
-            let y = rng.below(image.height as u64 * 64) as f32 / 64.0;
-            let angle = match i % 5 {
-                0 => -1.0,
-                1 => rng.below(36_000) as f32 / 100.0,
-                _ => (rng.below(1 << 24) as f32 / (1 << 24) as f32) * 1440.0 - 720.0,
-            };
-            KeyPoint::new(x, y).with_angle(angle)
-        })
-        .collect()
+    common::random_subpixel_keypoints(image.width, image.height, count, seed)
 }
 
 /// Our FAST keypoints (angles from the detector).

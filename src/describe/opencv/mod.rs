@@ -386,6 +386,37 @@ mod tests {
         assert_eq!(column(172.4), Ok(()));
     }
 
+    /// `f32(libm cos/sin)` against `f32(platform cos/sin)` (glibc on Linux, what cv2 calls) for the
+    /// `f32` radians in `[0, bound]` whose bit patterns are `step` apart.
+    fn libm_matches_the_platform(bound: f32, step: u32) -> (u64, u64) {
+        let (mut checked, mut differ) = (0, 0);
+        let mut bits = 0u32;
+        while f32::from_bits(bits) <= bound {
+            let r = f32::from_bits(bits) as f64;
+            let ours = (libm::cos(r) as f32, libm::sin(r) as f32);
+            let platform = (r.cos() as f32, r.sin() as f32);
+            checked += 1;
+            differ += u64::from(ours != platform);
+            bits += step;
+        }
+        (checked, differ)
+    }
+
+    #[test]
+    fn libm_cos_sin_equal_the_platforms_after_rounding() {
+        let (checked, differ) = libm_matches_the_platform(12.6, 541);
+        assert!(checked > 2_000_000);
+        assert_eq!(differ, 0, "of {checked} radians");
+    }
+
+    #[test]
+    #[ignore = "1.1e9 evaluations (a minute in release): cargo test --release --lib every_f32_radian -- --ignored"]
+    fn libm_cos_sin_equal_the_platforms_for_every_f32_radian_within_720_degrees() {
+        let (checked, differ) = libm_matches_the_platform(12.6, 1);
+        println!("{checked} radians checked");
+        assert_eq!(differ, 0, "of {checked} radians");
+    }
+
     #[test]
     fn rotation_truncates_toward_zero_and_clamps() {
         let p = Placement::of(&KeyPoint::new(50.0, 50.0).with_angle(45.0), true);

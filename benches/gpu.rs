@@ -1,5 +1,9 @@
 //! GPU timings: `cargo bench --features cuda --bench gpu`. Kernel times come from CUDA events around
 //! each launch, after warm-up; the median of the repeats is reported with the device's name.
+//!
+//! With `CLATCH_BENCH_DUMP=DIR` it also writes each image (`DIR/<name>.pgm`) and its 10k keypoints
+//! (`DIR/<name>_10000.csv`: x, y, size, angle), so `bench/peers.py` can time OpenCV's LATCH on the same
+//! image and keypoints.
 
 #[cfg(feature = "cuda")]
 mod common;
@@ -25,6 +29,12 @@ fn main() {
     for (name, w, h) in [("1080p", 1920usize, 1080usize), ("5616x3744", 5616, 3744)] {
         let pixels = clatch::synthetic::rectangles(w, h, 9);
         let image = GrayView::new(&pixels, w, h, w).unwrap();
+        let dump = std::env::var_os("CLATCH_BENCH_DUMP").map(std::path::PathBuf::from);
+        if let Some(dir) = &dump {
+            let mut pgm = format!("P5\n{w} {h}\n255\n").into_bytes();
+            pgm.extend_from_slice(&pixels);
+            std::fs::write(dir.join(format!("{name}.pgm")), pgm).expect("write the image dump");
+        }
         for n in [1_000usize, 10_000, 100_000, 1_000_000] {
             let mut rng = SplitMix64::new(n as u64);
             // Upright-to-any angle, default size, positions where the window always fits.
@@ -37,6 +47,17 @@ fn main() {
                     .with_angle(rng.below(2880) as f32 / 8.0)
                 })
                 .collect();
+            if let Some(dir) = dump.as_ref().filter(|_| n == 10_000) {
+                let rows: String = keypoints
+                    .iter()
+                    .map(|k| format!("{},{},{},{}\n", k.x, k.y, k.size, k.angle))
+                    .collect();
+                std::fs::write(
+                    dir.join(format!("{name}_{n}.csv")),
+                    format!("x,y,size,angle\n{rows}"),
+                )
+                .expect("write the keypoint dump");
+            }
             // The default 0/1 mask runs the dp4a kernel; other weights run the general one.
             let doubled = PatchWeights::new(&[2; 64]).expect("valid weights");
             for (label, weights) in [

@@ -29,6 +29,12 @@
 #define CLATCH_MATCH_ROW_PAD 256 /* device descriptor buffers hold a multiple of this many rows */
 #define CLATCH_MATCH_SELECT_THREADS 256 /* clatch_match_filter / clatch_match_compact (8 warps) */
 #define CLATCH_MATCH_SCAN_THREADS 1024 /* clatch_match_scan: one block */
+/* Tensor-core matching (kernels/match_tensor.cu): descriptors as +-1 bytes, int8 MMA. */
+#define CLATCH_TENSOR_WARPS 8 /* warps per block; each holds 32 queries in registers */
+#define CLATCH_TENSOR_QUERIES 256 /* queries per block (CLATCH_TENSOR_WARPS * 32) */
+#define CLATCH_TENSOR_TILE 64 /* gallery descriptors per shared-memory stage */
+#define CLATCH_TENSOR_STAGES 3 /* cp.async pipeline depth */
+#define CLATCH_EXPAND_THREADS 256 /* clatch_expand_signs */
 
 /* Detection (kernels/detect.cu). */
 #define CLATCH_DETECT_TILE_X 32    /* clatch_detect_nms: one thread per pixel of a 32x8 tile */

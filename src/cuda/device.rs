@@ -7,6 +7,7 @@ use cudarc::driver::{CudaContext, CudaFunction, CudaSlice, CudaStream, DriverErr
 use cudarc::nvrtc::Ptx;
 
 use super::ptx;
+use super::tensor_knn::{self, MatchKernel};
 use crate::angle::{quadrant_boundaries, rotation_table};
 use crate::describe::triplets::TRIPLETS;
 use crate::error::{Error, Result};
@@ -54,6 +55,14 @@ const KERNELS: &[(&str, &str, &[u8], &[&str])] = &[
     ),
 ];
 
+/// Kernels for compute capability 8.0 and later (int8 MMA), loaded only there.
+const TENSOR_KERNELS: (&str, &str, &[u8], &[&str]) = (
+    "kernels/match_tensor.cu",
+    ptx::MATCH_TENSOR_PTX,
+    ptx::MATCH_TENSOR_FATBIN,
+    tensor_knn::KERNELS,
+);
+
 /// A CUDA device with clatch's kernels loaded and its tables uploaded.
 #[derive(Debug)]
 pub struct GpuDevice {
@@ -65,6 +74,10 @@ pub struct GpuDevice {
     pub(crate) boundaries: CudaSlice<i64>,
     pub(crate) pitch_alignment: usize,
     pub(crate) multiprocessors: usize,
+    /// Whether the tensor-core kNN kernels are loaded (compute capability 8.0 and later).
+    tensor_cores: bool,
+    /// The kNN kernels asked for with `CLATCH_MATCH_KERNEL`, if any.
+    match_kernel_override: Option<MatchKernel>,
     name: String,
 }
 
@@ -134,7 +147,14 @@ impl GpuDevice {
         // The fatbin's native code loads without JIT on the GPUs it was built for (and falls back to its
         // PTX elsewhere); CLATCH_FORCE_PTX=1 loads the plain PTX instead, so tests can prove both paths.
         let force_ptx = std::env::var_os("CLATCH_FORCE_PTX").is_some_and(|v| v == "1");
-        for &(file, source, fatbin, names) in KERNELS {
+        let (major, _) = ctx
+            .compute_capability()
+            .map_err(driver_error("reading the compute capability"))?;
+        let tensor_cores = major >= 8;
+        let files = KERNELS
+            .iter()
+            .chain(tensor_cores.then_some(&TENSOR_KERNELS));
+        for &(file, source, fatbin, names) in files {
             let image = if force_ptx {
                 Ptx::from_src(source)
             } else {
@@ -143,6 +163,7 @@ impl GpuDevice {
             let module = ctx.load_module(image).map_err(driver_error(file))?;
             for &name in names {
                 let function = module.load_function(name).map_err(driver_error(name))?;
+                tensor_knn::configure(name, &function)?;
                 kernels.insert(name, function);
             }
         }
@@ -182,8 +203,44 @@ impl GpuDevice {
             boundaries,
             pitch_alignment,
             multiprocessors,
+            tensor_cores,
+            match_kernel_override: MatchKernel::from_env(),
             name,
         })
+    }
+
+    /// The kNN kernels matching uses for `k` neighbours: the tensor cores where the device has them and
+    /// k <= 2, unless `CLATCH_MATCH_KERNEL=popcount` says otherwise; the popcount kernels elsewhere.
+    pub(crate) fn match_kernel(&self, k: usize) -> MatchKernel {
+        let tensor_ok = self.tensor_cores && k <= tensor_knn::MAX_K;
+        match self.match_kernel_override {
+            Some(MatchKernel::Popcount) => MatchKernel::Popcount,
+            _ if tensor_ok => MatchKernel::Tensor,
+            _ => MatchKernel::Popcount,
+        }
+    }
+
+    /// `kernel` if this device can run it for `k` neighbours, else a typed error.
+    pub(crate) fn check_match_kernel(&self, kernel: MatchKernel, k: usize) -> Result<MatchKernel> {
+        if kernel == MatchKernel::Tensor && !self.tensor_cores {
+            return Err(Error::BackendUnavailable {
+                backend: format!("cuda tensor-core matcher on {}", self.name),
+                reason: "needs compute capability 8.0 or later".into(),
+            });
+        }
+        if kernel == MatchKernel::Tensor && k > tensor_knn::MAX_K {
+            return Err(Error::KTooLargeForBackend {
+                k,
+                max: tensor_knn::MAX_K,
+                backend: "cuda tensor-core matcher".into(),
+            });
+        }
+        Ok(kernel)
+    }
+
+    /// Whether the tensor-core kNN kernels are loaded on this device.
+    pub fn has_tensor_matcher(&self) -> bool {
+        self.tensor_cores
     }
 
     /// A loaded kernel, by its `extern "C"` name (one listed in `KERNELS`).

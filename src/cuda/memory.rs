@@ -52,8 +52,17 @@ pub(crate) fn upload<T: DeviceRepr>(
 /// batches) are true asynchronous DMA without a fresh `cuMemHostAlloc` each time.
 type Pool = Mutex<HashMap<(usize, usize), Vec<PinnedHostSlice<u8>>>>;
 
-/// Buffers kept per size; more in flight at once are allocated and dropped.
-const KEPT_PER_SIZE: usize = 4;
+/// Most buffers kept per size, and most bytes kept per size: as many images of one size as are
+/// commonly in flight keep their staging buffers (allocating and freeing pinned memory per call
+/// costs more than the copy: with 4 kept, 8 images of 1080p in flight spent most of their host time
+/// there); more in flight at once are allocated and dropped.
+const KEPT_PER_SIZE: usize = 16;
+const KEPT_BYTES_PER_SIZE: usize = 256 << 20;
+
+/// Buffers of `len` bytes the pool keeps.
+fn kept_for(len: usize) -> usize {
+    (KEPT_BYTES_PER_SIZE / len.max(1)).clamp(1, KEPT_PER_SIZE)
+}
 
 fn pool() -> &'static Pool {
     static POOL: OnceLock<Pool> = OnceLock::new();
@@ -91,7 +100,7 @@ pub(crate) fn upload_staged(
         .map_err(|e| with_bytes(driver_error(operation)(e), len))?;
     let mut pool = pool().lock().unwrap_or_else(|p| p.into_inner());
     let kept = pool.entry(key).or_default();
-    if kept.len() < KEPT_PER_SIZE {
+    if kept.len() < kept_for(len) {
         kept.push(staging);
     }
     Ok(device)

@@ -201,7 +201,14 @@ pub(crate) fn match_async(
             done: None,
         });
     }
-    let mut job = MatchJob::prepare(&stream.dev, stream.stream.clone(), query, train, config)?;
+    let mut job = MatchJob::prepare(
+        &stream.dev,
+        stream.stream.clone(),
+        query,
+        train,
+        config,
+        None,
+    )?;
     job.launch(&stream.dev)?;
     Ok(PendingMatches {
         job: Some(job),

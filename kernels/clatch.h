@@ -45,6 +45,20 @@
 #define CLATCH_SCAN_CHUNK 4096     /* counts per block of the scan (16 per thread) */
 #define CLATCH_SCAN_TOP_THREADS 1024 /* clatch_scan_partials: one block */
 
+/* OpenCV-compatible LATCH (kernels/describe_opencv.cu). */
+#define CLATCH_OPENCV_THREADS 256        /* threads per block: one warp per 32 triplets of a keypoint */
+#define CLATCH_OPENCV_MAX_OFFSET 24      /* rotated patch centres are clamped to [-24, 24] */
+#define CLATCH_OPENCV_WINDOW_TO_CENTRE 28 /* triplet table value - 28 = OpenCV's centre offset */
+
+/* Where one keypoint's patches go, computed on the host; the same layout as
+ * clatch::describe::opencv::Placement (#[repr(C)]). */
+typedef struct clatch_opencv_placement {
+    int x;     /* (int)(x + 0.5) */
+    int y;     /* (int)(y + 0.5) */
+    float cos; /* (float)cos((double)angle_radians); 1 without rotation invariance */
+    float sin; /* likewise; 0 without rotation invariance */
+} clatch_opencv_placement;
+
 /* One keypoint; the same layout as clatch::KeyPoint (#[repr(C)]). */
 typedef struct clatch_keypoint {
     float x;

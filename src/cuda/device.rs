@@ -26,6 +26,12 @@ const KERNELS: &[(&str, &str, &[u8], &[&str])] = &[
         ],
     ),
     (
+        "kernels/describe_opencv.cu",
+        ptx::DESCRIBE_OPENCV_PTX,
+        ptx::DESCRIBE_OPENCV_FATBIN,
+        &["clatch_describe_opencv"],
+    ),
+    (
         "kernels/detect.cu",
         ptx::DETECT_PTX,
         ptx::DETECT_FATBIN,

@@ -5,6 +5,7 @@
 //! built with `cuda` still starts on a machine without one and reports `no CUDA driver` as a typed error.
 
 mod describe;
+mod describe_opencv;
 mod detect;
 mod device;
 mod matching;
@@ -28,6 +29,7 @@ pub mod ptx {
 pub(crate) use describe::describe;
 #[doc(hidden)]
 pub use describe::time_describe_kernel;
+pub(crate) use describe_opencv::describe_opencv;
 pub(crate) use detect::detect;
 #[doc(hidden)]
 pub use detect::{DetectStages, debug_detect_stages, time_detect};
@@ -76,6 +78,21 @@ mod tests {
         assert_eq!(CLATCH_ORIENTATION_RADIUS as i32, detect::ORIENTATION_RADIUS);
         assert_eq!(CLATCH_FAST_ARC as usize, detect::FAST_ARC);
         assert_eq!(describe::triplets::TRIPLETS.len(), describe::TRIPLET_COUNT);
+        assert_eq!(
+            CLATCH_OPENCV_MAX_OFFSET as i32,
+            describe::opencv::MAX_OFFSET
+        );
+        for (window, centre) in describe::triplets::TRIPLETS
+            .iter()
+            .zip(describe::opencv::OPENCV_CENTRES)
+        {
+            for i in 0..6 {
+                assert_eq!(
+                    window[i] as i32 - CLATCH_OPENCV_WINDOW_TO_CENTRE as i32,
+                    centre[i] as i32
+                );
+            }
+        }
     }
 
     #[test]
@@ -99,6 +116,24 @@ mod tests {
         assert_eq!(
             offset_of!(clatch_keypoint, octave),
             offset_of!(KeyPoint, octave)
+        );
+        use crate::describe::opencv::Placement;
+        assert_eq!(size_of::<clatch_opencv_placement>(), size_of::<Placement>());
+        assert_eq!(
+            offset_of!(clatch_opencv_placement, x),
+            offset_of!(Placement, x)
+        );
+        assert_eq!(
+            offset_of!(clatch_opencv_placement, y),
+            offset_of!(Placement, y)
+        );
+        assert_eq!(
+            offset_of!(clatch_opencv_placement, cos),
+            offset_of!(Placement, cos)
+        );
+        assert_eq!(
+            offset_of!(clatch_opencv_placement, sin),
+            offset_of!(Placement, sin)
         );
         assert_eq!(size_of::<clatch_match>(), size_of::<Match>());
         assert_eq!(offset_of!(clatch_match, query), offset_of!(Match, query));

@@ -21,7 +21,7 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use clatch::{Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, ExtractorConfig};
-use clatch::{MatchConfig, PatchWeights};
+use clatch::{MatchConfig, OpencvLatch, PatchWeights};
 
 use crate::error::CliError;
 use crate::pipeline::Settings;
@@ -120,6 +120,59 @@ pub struct ExtractArgs {
     pub backend: BackendArgs,
     #[command(flatten)]
     pub detect: DetectArgs,
+    #[command(flatten)]
+    pub opencv: OpencvLatchArgs,
+}
+
+/// OpenCV-compatible LATCH instead of CLATCH (`clatch extract --opencv-latch`).
+#[derive(Debug, Args)]
+pub struct OpencvLatchArgs {
+    /// Describe with OpenCV's LATCH: the descriptors equal
+    /// `cv2.xfeatures2d.LATCH_create(BYTES, rotation, HALF, SIGMA).compute` on the same keypoints.
+    #[arg(long, conflicts_with = "bits")]
+    pub opencv_latch: bool,
+    /// OpenCV LATCH descriptor bytes: 1, 2, 4, 8, 16, 32 or 64.
+    #[arg(
+        long,
+        default_value_t = 32,
+        value_name = "BYTES",
+        requires = "opencv_latch"
+    )]
+    pub latch_bytes: usize,
+    /// OpenCV LATCH without rotation invariance (patch centres not rotated by the keypoint angle).
+    #[arg(long, requires = "opencv_latch")]
+    pub latch_no_rotation: bool,
+    /// OpenCV LATCH patch half size: patches are (2 HALF + 1)² pixels.
+    #[arg(
+        long,
+        default_value_t = 3,
+        value_name = "HALF",
+        requires = "opencv_latch"
+    )]
+    pub latch_half_ssd_size: usize,
+    /// OpenCV LATCH pre-blur sigma (3x3 Gaussian; 0: none).
+    #[arg(
+        long,
+        default_value_t = 2.0,
+        value_name = "SIGMA",
+        requires = "opencv_latch"
+    )]
+    pub latch_sigma: f64,
+}
+
+impl OpencvLatchArgs {
+    /// The validated settings, or `None` without `--opencv-latch`.
+    pub fn latch(&self) -> Result<Option<OpencvLatch>, CliError> {
+        if !self.opencv_latch {
+            return Ok(None);
+        }
+        Ok(Some(OpencvLatch::new(
+            self.latch_bytes,
+            !self.latch_no_rotation,
+            self.latch_half_ssd_size,
+            self.latch_sigma,
+        )?))
+    }
 }
 
 /// Which backend runs detection, description and matching.
@@ -330,6 +383,25 @@ mod tests {
             &["clatch", "match", "only-one.png"],
             &["clatch", "extract", "img.png"],
             &["clatch", "demo", "--ratio", "0.7", "--no-ratio"],
+            &[
+                "clatch",
+                "extract",
+                "a.png",
+                "-o",
+                "a",
+                "--latch-bytes",
+                "64",
+            ],
+            &[
+                "clatch",
+                "extract",
+                "a.png",
+                "-o",
+                "a",
+                "--opencv-latch",
+                "--bits",
+                "256",
+            ],
         ] {
             assert!(Cli::try_parse_from(args).is_err(), "{args:?} should fail");
         }
@@ -339,6 +411,31 @@ mod tests {
         };
         assert_eq!(demo.detect.bits, 256);
         assert_eq!(demo.matching.config().ratio, None);
+        let parse = |extra: &[&str]| {
+            let args = [&["clatch", "extract", "a.png", "-o", "a"][..], extra].concat();
+            let Command::Extract(extract) = Cli::try_parse_from(args).unwrap().command else {
+                panic!("parsed the wrong subcommand")
+            };
+            extract.opencv.latch()
+        };
+        assert_eq!(parse(&[]).unwrap(), None);
+        assert_eq!(
+            parse(&["--opencv-latch"]).unwrap(),
+            Some(OpencvLatch::default())
+        );
+        assert_eq!(
+            parse(&[
+                "--opencv-latch",
+                "--latch-bytes",
+                "64",
+                "--latch-no-rotation",
+                "--latch-sigma",
+                "0"
+            ])
+            .unwrap(),
+            Some(OpencvLatch::new(64, false, 3, 0.0).unwrap())
+        );
+        assert!(parse(&["--opencv-latch", "--latch-bytes", "3"]).is_err());
     }
 
     #[cfg(not(feature = "cuda"))]

@@ -78,6 +78,7 @@ fn draw_lines(
         .x_desc(x_label)
         .y_desc(y_label)
         .label_style((FONT, 13))
+        .light_line_style(RGBColor(236, 236, 236))
         .draw()
         .map_err(|e| e.to_string())?;
     for (method, points) in series {

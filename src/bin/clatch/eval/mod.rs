@@ -84,6 +84,14 @@ fn run_opencv_script(args: &EvalArgs, python: &Path, manifest: &Path, prefix: &P
         .arg(args.check.inlier_px.to_string())
         .arg("--max-keypoints")
         .arg(args.detect.max_keypoints.to_string());
+    // The same matcher rules; the distance limit is in Hamming bits and has no SIFT counterpart.
+    match args.matching.config().ratio {
+        Some(ratio) => command.arg("--ratio").arg(ratio.to_string()),
+        None => command.arg("--no-ratio"),
+    };
+    if args.matching.no_cross_check {
+        command.arg("--no-cross-check");
+    }
     let shown = format!("{command:?}");
     let status = command.status().map_err(|e| CliError::Script {
         command: shown.clone(),

@@ -350,3 +350,105 @@ pub fn read_csv(
     }
     Ok(results)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pair(name: &str) -> EvalPair {
+        EvalPair {
+            name: name.into(),
+            group: "oxford-graf".into(),
+            param: None,
+            image_a: "a.ppm".into(),
+            image_b: "b.ppm".into(),
+            homography: "H".into(),
+        }
+    }
+
+    fn result(method: &str, pair: &str) -> PairResult {
+        PairResult {
+            method: method.into(),
+            pair: pair.into(),
+            group: "oxford-graf".into(),
+            param: None,
+            size_a: (800, 640),
+            size_b: (800, 640),
+            keypoints: (100, 90),
+            overlap: (80, 70),
+            matches: 30,
+            correct: 21,
+            curve: [(0.5f32, 5, 5), (1.0, 40, 25)]
+                .iter()
+                .map(|&(ratio, kept, correct_kept)| RatioPoint {
+                    ratio,
+                    kept,
+                    correct_kept,
+                    correct_candidates: 28,
+                })
+                .collect(),
+        }
+    }
+
+    struct Fixture {
+        dir: PathBuf,
+        pairs: Vec<EvalPair>,
+        sizes: HashMap<String, [(u32, u32); 2]>,
+    }
+
+    fn fixture(tag: &str) -> Fixture {
+        let dir = std::env::temp_dir().join(format!("clatch-results-{}-{tag}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let pairs = vec![pair("graf 1-2"), pair("graf 1-3")];
+        let sizes = pairs
+            .iter()
+            .map(|p| (p.name.clone(), [(800, 640), (800, 640)]))
+            .collect();
+        Fixture { dir, pairs, sizes }
+    }
+
+    #[test]
+    fn csv_round_trip_and_derived_columns() {
+        let f = fixture("round");
+        let written = vec![result("OpenCV ORB", "graf 1-2"), result("OpenCV ORB", "graf 1-3")];
+        let prefix = f.dir.join("opencv");
+        write_csv(&written, &prefix).unwrap();
+        let summary = std::fs::read_to_string(f.dir.join("opencv.summary.csv")).unwrap();
+        // precision 21/30, matching score 21/min(80, 70).
+        assert!(summary.lines().nth(1).unwrap().ends_with(",21,28,0.7000,0.3000"));
+        let pr = std::fs::read_to_string(f.dir.join("opencv.pr.csv")).unwrap();
+        assert_eq!(pr.lines().nth(2).unwrap(), "OpenCV ORB,graf 1-2,1,40,25,28,0.6250,0.8929");
+        let read = read_csv(&prefix, &f.pairs, &f.sizes, &[0.5, 1.0]).unwrap();
+        assert_eq!(read, written);
+        let json = to_json(&read, 3.0, "cpu");
+        assert!(json.contains("\"matching_score\": 0.3,"), "{json}");
+        assert!(json.contains("{\"ratio\": 0.5, \"kept\": 5, \"correct_kept\": 5, \"precision\": 1, \"recall\": 0.17857142857142858}"));
+        std::fs::remove_dir_all(&f.dir).ok();
+    }
+
+    #[test]
+    fn bad_results_files_are_typed_errors() {
+        let f = fixture("bad");
+        let prefix = f.dir.join("x");
+        let write = |results: &[PairResult]| write_csv(results, &prefix).unwrap();
+        let read = || read_csv(&prefix, &f.pairs, &f.sizes, &[0.5, 1.0]);
+
+        write(&[result("m", "graf 1-9")]);
+        assert!(matches!(read(), Err(CliError::ResultsFormat { line: 2, .. })));
+
+        write(&[PairResult { size_b: (640, 800), ..result("m", "graf 1-2") }]);
+        assert!(matches!(read(), Err(CliError::SizeMismatch { .. })));
+
+        write(&[result("m", "graf 1-2")]);
+        let err = read_csv(&prefix, &f.pairs, &f.sizes, &[0.5, 0.8, 1.0]).unwrap_err();
+        assert!(err.to_string().contains("thresholds"), "{err}");
+
+        let summary = f.dir.join("x.summary.csv");
+        std::fs::write(&summary, "method,pair\n").unwrap();
+        assert!(matches!(read(), Err(CliError::ResultsFormat { line: 1, .. })));
+
+        std::fs::remove_file(&summary).unwrap();
+        assert!(matches!(read(), Err(CliError::Read { .. })));
+        std::fs::remove_dir_all(&f.dir).ok();
+    }
+}

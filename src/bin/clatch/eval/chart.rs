@@ -4,6 +4,7 @@
 use std::path::Path;
 use std::sync::OnceLock;
 
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
@@ -58,14 +59,27 @@ fn colour(i: usize) -> RGBColor {
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
 
+/// Where a panel's legend goes: the PR curves leave the lower left empty; the sweeps get head room
+/// above 1 for it.
+#[derive(Clone, Copy)]
+enum Legend {
+    LowerLeft,
+    Above,
+}
+
 fn draw_lines(
     area: &Area,
     title: &str,
     (x_label, y_label): (&str, &str),
-    (x_range, y_range): (std::ops::Range<f64>, std::ops::Range<f64>),
+    x_range: std::ops::Range<f64>,
     series: &[(String, Vec<(f64, f64)>)],
     colour_of: &dyn Fn(&str) -> RGBColor,
+    legend: Legend,
 ) -> Result<(), String> {
+    let (y_range, position) = match legend {
+        Legend::LowerLeft => (0.0..1.02, SeriesLabelPosition::LowerLeft),
+        Legend::Above => (0.0..1.4, SeriesLabelPosition::UpperMiddle),
+    };
     let mut chart = ChartBuilder::on(area)
         .caption(title, (FONT, 18))
         .margin(12)
@@ -78,7 +92,9 @@ fn draw_lines(
         .x_desc(x_label)
         .y_desc(y_label)
         .label_style((FONT, 13))
-        .light_line_style(RGBColor(236, 236, 236))
+        .light_line_style(WHITE)
+        .x_label_formatter(&|x| format!("{}", (x * 100.0).round() / 100.0))
+        .y_label_formatter(&|y| if *y <= 1.0 { format!("{y:.1}") } else { String::new() })
         .draw()
         .map_err(|e| e.to_string())?;
     for (method, points) in series {
@@ -97,7 +113,7 @@ fn draw_lines(
         .label_font((FONT, 13))
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
-        .position(SeriesLabelPosition::LowerLeft)
+        .position(position)
         .draw()
         .map_err(|e| e.to_string())
 }
@@ -133,12 +149,18 @@ fn save_panels(
     }
     let picture = image::RgbImage::from_raw(width, height, buffer)
         .ok_or_else(|| chart_error("buffer size".into()))?;
-    picture
-        .save_with_format(path, image::ImageFormat::Png)
-        .map_err(|source| CliError::Encode {
-            path: path.to_path_buf(),
-            source,
-        })
+    // Charts are committed to the repository: spend time on compression, not bytes.
+    let encode_error = |source| CliError::Encode {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = std::fs::File::create(path).map_err(CliError::write(path))?;
+    let encoder = PngEncoder::new_with_quality(
+        std::io::BufWriter::new(file),
+        CompressionType::Best,
+        FilterType::Adaptive,
+    );
+    picture.write_with_encoder(encoder).map_err(encode_error)
 }
 
 /// The colour of each method, by its place in `methods`.
@@ -160,9 +182,10 @@ pub fn pr_chart(path: &Path, methods: &[String], panels: &[PrPanel]) -> Result<(
             area,
             &panel.title,
             ("recall (correct kept / correct 1-NN)", "precision"),
-            (0.0..1.0, 0.0..1.02),
+            0.0..1.0,
             &series,
             &colour_of,
+            Legend::LowerLeft,
         )
     })
 }
@@ -181,9 +204,10 @@ pub fn sweep_chart(path: &Path, methods: &[String], panels: &[SweepPanel]) -> Re
             area,
             &panel.title,
             (&panel.x_label, &panel.y_label),
-            (x_range, 0.0..1.02),
+            x_range,
             &panel.series,
             &colour_of,
+            Legend::Above,
         )
     })
 }

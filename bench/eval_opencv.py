@@ -54,9 +54,21 @@ def read_homography(path):
 
 
 def read_gray(path):
-    img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    """8-bit gray as clatch makes it: colour through cvtColor (the same integer weights as clatch's
+    luma), 16-bit samples keep their high byte. Not IMREAD_GRAYSCALE: for PNG it lets libpng convert,
+    which differs from cvtColor by 1 on about half of graf1.png's pixels, while PPM goes through
+    cvtColor, so the same photo would give different figures by file format."""
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise EvalInputError(f"{path}: cannot read the image")
+    if img.dtype == np.uint16:
+        img = (img >> 8).astype(np.uint8)
+    if img.ndim == 3 and img.shape[2] == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    elif img.ndim == 3 and img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY)
+    if img.ndim != 2 or img.dtype != np.uint8:
+        raise EvalInputError(f"{path}: unsupported image layout {img.shape} {img.dtype}")
     return img
 
 

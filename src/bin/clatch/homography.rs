@@ -218,7 +218,11 @@ mod tests {
                 .contains("not closed")
         );
         let short = OPENCV_XML.replace("0. 0. 1. ", "0. 0.");
-        assert!(Homography::parse_opencv_xml(&short).unwrap_err().contains("9"));
+        assert!(
+            Homography::parse_opencv_xml(&short)
+                .unwrap_err()
+                .contains("9")
+        );
     }
 
     #[test]

@@ -94,7 +94,13 @@ fn draw_lines(
         .label_style((FONT, 13))
         .light_line_style(WHITE)
         .x_label_formatter(&|x| format!("{}", (x * 100.0).round() / 100.0))
-        .y_label_formatter(&|y| if *y <= 1.0 { format!("{y:.1}") } else { String::new() })
+        .y_label_formatter(&|y| {
+            if *y <= 1.0 {
+                format!("{y:.1}")
+            } else {
+                String::new()
+            }
+        })
         .draw()
         .map_err(|e| e.to_string())?;
     for (method, points) in series {
@@ -221,14 +227,27 @@ mod tests {
         let path = std::env::temp_dir().join(format!("clatch-chart-{}.png", std::process::id()));
         let curve = |k: usize| {
             vec![
-                RatioPoint { ratio: 0.5, kept: 10, correct_kept: 9, correct_candidates: 40 },
-                RatioPoint { ratio: 1.0, kept: 60, correct_kept: 30 + k, correct_candidates: 40 },
+                RatioPoint {
+                    ratio: 0.5,
+                    kept: 10,
+                    correct_kept: 9,
+                    correct_candidates: 40,
+                },
+                RatioPoint {
+                    ratio: 1.0,
+                    kept: 60,
+                    correct_kept: 30 + k,
+                    correct_candidates: 40,
+                },
             ]
         };
         let methods = vec!["clatch".to_string(), "OpenCV ORB".to_string()];
         let panel = PrPanel {
             title: "test".into(),
-            curves: vec![(methods[0].clone(), curve(0)), (methods[1].clone(), curve(5))],
+            curves: vec![
+                (methods[0].clone(), curve(0)),
+                (methods[1].clone(), curve(5)),
+            ],
         };
         pr_chart(&path, &methods, &[panel]).unwrap();
         let img = image::open(&path).unwrap().to_rgb8();

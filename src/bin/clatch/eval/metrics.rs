@@ -41,7 +41,12 @@ pub fn inside(p: Option<(f64, f64)>, (width, height): (u32, u32)) -> bool {
 
 impl PairTruth {
     /// The truth for `h`; `None` if `h` is singular.
-    pub fn new(h: Homography, size_a: (u32, u32), size_b: (u32, u32), tolerance: f64) -> Option<Self> {
+    pub fn new(
+        h: Homography,
+        size_a: (u32, u32),
+        size_b: (u32, u32),
+        tolerance: f64,
+    ) -> Option<Self> {
         Some(Self {
             h_inv: h.inverse()?,
             h,
@@ -179,7 +184,13 @@ mod tests {
         // 3-4-5 triangle: exactly 5 px away is wrong at 3 px, right at 5 px.
         let off = KeyPoint::new(23.0, 14.0);
         assert!(!t.is_correct(&a, &off));
-        assert!(PairTruth { tolerance: 5.0, ..t.clone() }.is_correct(&a, &off));
+        assert!(
+            PairTruth {
+                tolerance: 5.0,
+                ..t.clone()
+            }
+            .is_correct(&a, &off)
+        );
         // Exactly at the tolerance counts as correct: 3 px along x.
         assert!(t.is_correct(&a, &KeyPoint::new(23.0, 10.0)));
         // Perspective: w = 1 + 0.01 x; (100, 0) -> (50, 0); (-100, 0) goes to infinity.
@@ -269,15 +280,30 @@ mod tests {
         };
         let knn = KnnMatches {
             k: 2,
-            matches: vec![m(0, 3, 5, ), m(0, 1, 9), m(1, 2, 4), m(1, 0, 6), m(2, 3, 1), m(2, 2, 2)],
+            matches: vec![
+                m(0, 3, 5),
+                m(0, 1, 9),
+                m(1, 2, 4),
+                m(1, 0, 6),
+                m(2, 3, 1),
+                m(2, 2, 2),
+            ],
         };
         // Keep queries whose nearest train is not 2; call train 3 correct.
         let got = candidates(&knn, |n| n.train != 2, |n| n.train == 3);
         assert_eq!(
             got,
             vec![
-                Candidate { d1: 5, d2: 9, correct: true },
-                Candidate { d1: 1, d2: 2, correct: true },
+                Candidate {
+                    d1: 5,
+                    d2: 9,
+                    correct: true
+                },
+                Candidate {
+                    d1: 1,
+                    d2: 2,
+                    correct: true
+                },
             ]
         );
     }

@@ -23,7 +23,7 @@ use results::PairResult;
 use tables::{Table, methods, pooled_curve};
 
 /// The pair whose figures head the report: OpenCV's graf1/graf3 if given, else Oxford graf 1-3.
-pub fn headline<'a>(pairs: &'a [EvalPair]) -> Option<&'a EvalPair> {
+pub fn headline(pairs: &[EvalPair]) -> Option<&EvalPair> {
     let by_group = pairs.iter().find(|p| p.group == GROUP_OPENCV_SAMPLE);
     by_group.or_else(|| pairs.iter().find(|p| p.name == "graf 1-3"))
 }
@@ -38,7 +38,11 @@ fn collect_pairs(args: &EvalArgs) -> Result<(Vec<EvalPair>, Vec<String>), CliErr
     if let Some(data) = &args.data {
         let (oxford, absent) = pairs::oxford_under(data)?;
         pairs.extend(oxford);
-        notes.extend(absent.into_iter().map(|d| format!("no Oxford sequence at {d}")));
+        notes.extend(
+            absent
+                .into_iter()
+                .map(|d| format!("no Oxford sequence at {d}")),
+        );
     }
     if !args.no_synthetic {
         let mut sources = vec![pairs::SyntheticSource {
@@ -64,15 +68,21 @@ fn collect_pairs(args: &EvalArgs) -> Result<(Vec<EvalPair>, Vec<String>), CliErr
     if pairs.is_empty() {
         return Err(CliError::EvalInput {
             path: args.out.clone(),
-            reason: "no pairs to evaluate (give --data, --opencv-samples, or allow synthetic pairs)"
-                .into(),
+            reason:
+                "no pairs to evaluate (give --data, --opencv-samples, or allow synthetic pairs)"
+                    .into(),
         });
     }
     Ok((pairs, notes))
 }
 
 /// Runs the OpenCV script on the manifest; its results go to `prefix`.summary.csv / .pr.csv.
-fn run_opencv_script(args: &EvalArgs, python: &Path, manifest: &Path, prefix: &Path) -> Result<(), CliError> {
+fn run_opencv_script(
+    args: &EvalArgs,
+    python: &Path,
+    manifest: &Path,
+    prefix: &Path,
+) -> Result<(), CliError> {
     let mut command = Command::new(python);
     command
         .arg(&args.opencv_script)
@@ -115,8 +125,10 @@ fn pr_panels(results: &[PairResult], headline: Option<&EvalPair>) -> Vec<PrPanel
         let curves: Vec<_> = methods
             .iter()
             .map(|m| {
-                let of_method: Vec<&PairResult> =
-                    results.iter().filter(|r| r.method == *m && keep(r)).collect();
+                let of_method: Vec<&PairResult> = results
+                    .iter()
+                    .filter(|r| r.method == *m && keep(r))
+                    .collect();
                 (m.clone(), pooled_curve(&of_method))
             })
             .filter(|(_, c)| !c.is_empty())
@@ -124,7 +136,11 @@ fn pr_panels(results: &[PairResult], headline: Option<&EvalPair>) -> Vec<PrPanel
         (!curves.is_empty()).then_some(PrPanel { title, curves })
     };
     let count = |keep: &dyn Fn(&PairResult) -> bool| {
-        let mut pairs: Vec<&str> = results.iter().filter(|r| keep(r)).map(|r| r.pair.as_str()).collect();
+        let mut pairs: Vec<&str> = results
+            .iter()
+            .filter(|r| keep(r))
+            .map(|r| r.pair.as_str())
+            .collect();
         pairs.dedup();
         pairs.len()
     };
@@ -185,11 +201,16 @@ fn group_table(results: &[PairResult]) -> Table {
     let rows = groups
         .iter()
         .map(|g| {
-            let pairs = results.iter().filter(|r| r.group == *g && r.method == methods[0]).count();
+            let pairs = results
+                .iter()
+                .filter(|r| r.group == *g && r.method == methods[0])
+                .count();
             let mut row = vec![g.to_string(), pairs.to_string()];
             for m in &methods {
-                let of: Vec<&PairResult> =
-                    results.iter().filter(|r| r.group == *g && r.method == *m).collect();
+                let of: Vec<&PairResult> = results
+                    .iter()
+                    .filter(|r| r.group == *g && r.method == *m)
+                    .collect();
                 let correct: usize = of.iter().map(|r| r.correct).sum();
                 let scores: Vec<f64> = of.iter().filter_map(|r| r.matching_score()).collect();
                 let mean = if scores.is_empty() {
@@ -222,7 +243,10 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
     let mut sizes = HashMap::new();
     for pair in &pairs {
         let loaded = run::load_pair(pair, tolerance)?;
-        sizes.insert(pair.name.clone(), [loaded.a.dimensions(), loaded.b.dimensions()]);
+        sizes.insert(
+            pair.name.clone(),
+            [loaded.a.dimensions(), loaded.b.dimensions()],
+        );
         for &method in &args.methods {
             results.push(run::evaluate_pair(method, &from_flags, &loaded, &ratios)?);
         }
@@ -235,17 +259,27 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
     let mut merges = args.merge.clone();
     if let Some(python) = &args.opencv_python {
         let prefix = args.out.join("opencv");
-        eprintln!("clatch eval: running {} on {} pairs", args.opencv_script.display(), pairs.len());
+        eprintln!(
+            "clatch eval: running {} on {} pairs",
+            args.opencv_script.display(),
+            pairs.len()
+        );
         run_opencv_script(args, python, &manifest_path, &prefix)?;
         merges.push(prefix);
     }
     for prefix in &merges {
         for merged in results::read_csv(prefix, &pairs, &sizes, &ratios)? {
-            if results.iter().any(|r| r.method == merged.method && r.pair == merged.pair) {
+            if results
+                .iter()
+                .any(|r| r.method == merged.method && r.pair == merged.pair)
+            {
                 return Err(CliError::ResultsFormat {
                     path: prefix.clone(),
                     line: 0,
-                    reason: format!("{} on `{}` is already in this run", merged.method, merged.pair),
+                    reason: format!(
+                        "{} on `{}` is already in this run",
+                        merged.method, merged.pair
+                    ),
                 });
             }
             results.push(merged);
@@ -261,8 +295,11 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
         crate::report::describe_matching(&from_flags.matching),
     );
     let json_path = args.out.join("results.json");
-    std::fs::write(&json_path, results::to_json(&results, tolerance, &setting_text))
-        .map_err(CliError::write(&json_path))?;
+    std::fs::write(
+        &json_path,
+        results::to_json(&results, tolerance, &setting_text),
+    )
+    .map_err(CliError::write(&json_path))?;
     written.push(json_path);
 
     let methods = methods(&results);
@@ -271,7 +308,11 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
     chart::pr_chart(&pr_path, &methods, &pr_panels(&results, headline))?;
     written.push(pr_path);
     let sweeps: Vec<SweepPanel> = [
-        (GROUP_ROTATION, "rotation (degrees)", "synthetic rotation, scale 1"),
+        (
+            GROUP_ROTATION,
+            "rotation (degrees)",
+            "synthetic rotation, scale 1",
+        ),
         (GROUP_SCALE, "scale factor", "synthetic scale, no rotation"),
     ]
     .into_iter()
@@ -293,15 +334,35 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
     let mut sections: Vec<(String, Table)> = Vec::new();
     if let Some(h) = headline {
         let of_pair: Vec<&PairResult> = results.iter().filter(|r| r.pair == h.name).collect();
-        sections.push((format!("{} (A: {}, B: {})", h.name, h.image_a.display(), h.image_b.display()), tables::pair_table(&of_pair)));
-        let curves = of_pair.iter().map(|r| (r.method.clone(), r.curve.clone())).collect::<Vec<_>>();
-        sections.push((format!("{}: ratio test, precision P and recall R", h.name), tables::ratio_table(&curves)));
+        sections.push((
+            format!(
+                "{} (A: {}, B: {})",
+                h.name,
+                h.image_a.display(),
+                h.image_b.display()
+            ),
+            tables::pair_table(&of_pair),
+        ));
+        let curves = of_pair
+            .iter()
+            .map(|r| (r.method.clone(), r.curve.clone()))
+            .collect::<Vec<_>>();
+        sections.push((
+            format!("{}: ratio test, precision P and recall R", h.name),
+            tables::ratio_table(&curves),
+        ));
     }
-    sections.push(("every pair: correct matches (matching score)".into(), tables::all_pairs_table(&results)));
+    sections.push((
+        "every pair: correct matches (matching score)".into(),
+        tables::all_pairs_table(&results),
+    ));
     sections.push(("by group".into(), group_table(&results)));
 
     let mut markdown = String::new();
-    println!("clatch eval ({} pairs; correct = within {tolerance} px of the true homography)", pairs.len());
+    println!(
+        "clatch eval ({} pairs; correct = within {tolerance} px of the true homography)",
+        pairs.len()
+    );
     println!("  clatch      {setting_text}");
     for note in &notes {
         println!("  note        {note}");

@@ -216,12 +216,11 @@ pub fn write_synthetic(source: &SyntheticSource, dir: &Path) -> Result<Vec<EvalP
     let mut pairs = Vec::new();
     for (suffix, group, param, hom) in synthetic_warps(width, height) {
         let file = format!("{}_{}", source.name, suffix.replace(' ', "_"));
-        let warped = warp(&source.image, &hom, width, height).ok_or_else(|| {
-            CliError::EvalInput {
+        let warped =
+            warp(&source.image, &hom, width, height).ok_or_else(|| CliError::EvalInput {
                 path: image_a.clone(),
                 reason: format!("warp `{suffix}` is singular"),
-            }
-        })?;
+            })?;
         let image_b = dir.join(format!("{file}.png"));
         save_png(&warped, &image_b)?;
         let homography = dir.join(format!("{file}.H"));
@@ -254,7 +253,9 @@ pub fn manifest(pairs: &[EvalPair]) -> Result<String, CliError> {
         if let Some(bad) = fields.iter().find(|f| f.contains([',', '"', '\n'])) {
             return Err(CliError::EvalInput {
                 path: p.image_a.clone(),
-                reason: format!("`{bad}` holds a comma, quote or newline; the manifest is plain CSV"),
+                reason: format!(
+                    "`{bad}` holds a comma, quote or newline; the manifest is plain CSV"
+                ),
             });
         }
         let _ = writeln!(s, "{}", fields.join(","));
@@ -278,16 +279,25 @@ mod tests {
         assert_eq!(warps.len(), 13 + SCALES.len() + 2);
         for (suffix, _, _, h) in &warps {
             let (x, y) = h.apply(50.0, 40.0).unwrap();
-            assert!((x - 50.0).abs() < 1e-9 && (y - 40.0).abs() < 1e-9, "{suffix}");
+            assert!(
+                (x - 50.0).abs() < 1e-9 && (y - 40.0).abs() < 1e-9,
+                "{suffix}"
+            );
         }
         let (name, group, param, rot90) = &warps[6];
-        assert_eq!((name.as_str(), *group, *param), ("rot 90", GROUP_ROTATION, 90.0));
+        assert_eq!(
+            (name.as_str(), *group, *param),
+            ("rot 90", GROUP_ROTATION, 90.0)
+        );
         // 10 px right of the centre goes 10 px down.
         let (x, y) = rot90.apply(60.0, 40.0).unwrap();
         assert!((x - 50.0).abs() < 1e-9 && (y - 50.0).abs() < 1e-9);
         let (name, _, _, half) = &warps[13];
         assert_eq!(name, "scale 0.50");
-        assert_eq!(half.apply(60.0, 40.0).map(|(x, _)| (x * 1e9).round() / 1e9), Some(55.0));
+        assert_eq!(
+            half.apply(60.0, 40.0).map(|(x, _)| (x * 1e9).round() / 1e9),
+            Some(55.0)
+        );
     }
 
     #[test]
@@ -313,7 +323,10 @@ mod tests {
         assert_eq!(h, synthetic_warps(70, 66)[2].3);
         let text = manifest(&pairs).unwrap();
         let second = text.lines().nth(1).unwrap();
-        assert!(second.starts_with("ramp rot 0,synthetic-rotation,0,/"), "{second}");
+        assert!(
+            second.starts_with("ramp rot 0,synthetic-rotation,0,/"),
+            "{second}"
+        );
         std::fs::remove_dir_all(&dir).ok();
 
         let bad = EvalPair {
@@ -327,7 +340,10 @@ mod tests {
     fn missing_inputs_are_typed_errors() {
         let dir = temp_dir("oxford");
         let e = oxford_pairs(&dir, "graf").unwrap_err();
-        assert!(matches!(e, CliError::EvalInput { .. }) && e.to_string().contains("img1"), "{e}");
+        assert!(
+            matches!(e, CliError::EvalInput { .. }) && e.to_string().contains("img1"),
+            "{e}"
+        );
         std::fs::write(dir.join("img1.ppm"), b"P5").unwrap();
         let e = oxford_pairs(&dir, "graf").unwrap_err();
         assert!(e.to_string().contains("H1to2p"), "{e}");

@@ -258,7 +258,10 @@ pub fn read_csv(
             return Err(format_error(
                 path,
                 line,
-                format!("pair `{}` is in group `{}`, not `{}`", f[1], pair.group, f[2]),
+                format!(
+                    "pair `{}` is in group `{}`, not `{}`",
+                    f[1], pair.group, f[2]
+                ),
             ));
         }
         let n: Vec<usize> = f[4..15]
@@ -410,14 +413,26 @@ mod tests {
     #[test]
     fn csv_round_trip_and_derived_columns() {
         let f = fixture("round");
-        let written = vec![result("OpenCV ORB", "graf 1-2"), result("OpenCV ORB", "graf 1-3")];
+        let written = vec![
+            result("OpenCV ORB", "graf 1-2"),
+            result("OpenCV ORB", "graf 1-3"),
+        ];
         let prefix = f.dir.join("opencv");
         write_csv(&written, &prefix).unwrap();
         let summary = std::fs::read_to_string(f.dir.join("opencv.summary.csv")).unwrap();
         // precision 21/30, matching score 21/min(80, 70).
-        assert!(summary.lines().nth(1).unwrap().ends_with(",21,28,0.7000,0.3000"));
+        assert!(
+            summary
+                .lines()
+                .nth(1)
+                .unwrap()
+                .ends_with(",21,28,0.7000,0.3000")
+        );
         let pr = std::fs::read_to_string(f.dir.join("opencv.pr.csv")).unwrap();
-        assert_eq!(pr.lines().nth(2).unwrap(), "OpenCV ORB,graf 1-2,1,40,25,28,0.6250,0.8929");
+        assert_eq!(
+            pr.lines().nth(2).unwrap(),
+            "OpenCV ORB,graf 1-2,1,40,25,28,0.6250,0.8929"
+        );
         let read = read_csv(&prefix, &f.pairs, &f.sizes, &[0.5, 1.0]).unwrap();
         assert_eq!(read, written);
         let json = to_json(&read, 3.0, "cpu");
@@ -434,9 +449,15 @@ mod tests {
         let read = || read_csv(&prefix, &f.pairs, &f.sizes, &[0.5, 1.0]);
 
         write(&[result("m", "graf 1-9")]);
-        assert!(matches!(read(), Err(CliError::ResultsFormat { line: 2, .. })));
+        assert!(matches!(
+            read(),
+            Err(CliError::ResultsFormat { line: 2, .. })
+        ));
 
-        write(&[PairResult { size_b: (640, 800), ..result("m", "graf 1-2") }]);
+        write(&[PairResult {
+            size_b: (640, 800),
+            ..result("m", "graf 1-2")
+        }]);
         assert!(matches!(read(), Err(CliError::SizeMismatch { .. })));
 
         write(&[result("m", "graf 1-2")]);
@@ -445,7 +466,10 @@ mod tests {
 
         let summary = f.dir.join("x.summary.csv");
         std::fs::write(&summary, "method,pair\n").unwrap();
-        assert!(matches!(read(), Err(CliError::ResultsFormat { line: 1, .. })));
+        assert!(matches!(
+            read(),
+            Err(CliError::ResultsFormat { line: 1, .. })
+        ));
 
         std::fs::remove_file(&summary).unwrap();
         assert!(matches!(read(), Err(CliError::Read { .. })));

@@ -151,7 +151,8 @@ mod tests {
 
     /// The embedded photo and its synthetic views, written to a temporary folder.
     fn astronaut_pairs(tag: &str) -> (std::path::PathBuf, Vec<EvalPair>) {
-        let dir = std::env::temp_dir().join(format!("clatch-eval-run-{}-{tag}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("clatch-eval-run-{}-{tag}", std::process::id()));
         let source = SyntheticSource {
             name: "astronaut".into(),
             image: crate::demo::embedded_image().unwrap(),
@@ -174,7 +175,10 @@ mod tests {
         assert_eq!(r.overlap, r.keypoints);
         assert!(r.matches > 0);
         assert_eq!(r.correct, r.matches);
-        assert_eq!(r.matching_score(), Some(r.matches as f64 / r.keypoints.0 as f64));
+        assert_eq!(
+            r.matching_score(),
+            Some(r.matches as f64 / r.keypoints.0 as f64)
+        );
 
         let rot = load_pair(&pairs[2], 3.0).unwrap();
         assert_eq!(rot.pair.name, "astronaut rot 30");
@@ -200,7 +204,10 @@ mod tests {
         };
         let loaded = load_pair(&pairs[15], 3.0).unwrap();
         let r = evaluate_pair(ClatchMethod::Clatch, &settings(config), &loaded, &[0.9]).unwrap();
-        assert_eq!((r.curve[0].kept, r.curve[0].correct_kept), (r.matches, r.correct));
+        assert_eq!(
+            (r.curve[0].kept, r.curve[0].correct_kept),
+            (r.matches, r.correct)
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 }

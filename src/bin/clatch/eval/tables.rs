@@ -189,7 +189,12 @@ pub fn pooled_curve(results: &[&PairResult]) -> Vec<RatioPoint> {
 mod tests {
     use super::*;
 
-    fn result(method: &str, pair: &str, correct: usize, ratio_points: &[(usize, usize)]) -> PairResult {
+    fn result(
+        method: &str,
+        pair: &str,
+        correct: usize,
+        ratio_points: &[(usize, usize)],
+    ) -> PairResult {
         PairResult {
             method: method.into(),
             pair: pair.into(),
@@ -244,12 +249,17 @@ mod tests {
         let detail = pair_table(&[&results[0]]);
         assert_eq!(
             detail.rows[0],
-            ["clatch", "8", "9", "4", "5", "3", "2", "0.667", "0.500", "4"]
+            [
+                "clatch", "8", "9", "4", "5", "3", "2", "0.667", "0.500", "4"
+            ]
         );
 
         let pooled = pooled_curve(&[&results[0], &results[2]]);
         assert_eq!(
-            pooled.iter().map(|p| (p.kept, p.correct_kept, p.correct_candidates)).collect::<Vec<_>>(),
+            pooled
+                .iter()
+                .map(|p| (p.kept, p.correct_kept, p.correct_candidates))
+                .collect::<Vec<_>>(),
             [(1, 1, 8), (4, 2, 8)]
         );
         let ratios = ratio_table(&[("clatch".into(), pooled)]);

@@ -136,13 +136,8 @@ fn pr_panels(results: &[PairResult], headline: Option<&EvalPair>) -> Vec<PrPanel
         (!curves.is_empty()).then_some(PrPanel { title, curves })
     };
     let count = |keep: &dyn Fn(&PairResult) -> bool| {
-        let mut pairs: Vec<&str> = results
-            .iter()
-            .filter(|r| keep(r))
-            .map(|r| r.pair.as_str())
-            .collect();
-        pairs.dedup();
-        pairs.len()
+        let kept: Vec<PairResult> = results.iter().filter(|r| keep(r)).cloned().collect();
+        tables::distinct(&kept, |r| &r.pair).len()
     };
     let oxford = |r: &PairResult| r.group.starts_with("oxford-");
     let synthetic = |r: &PairResult| r.group.starts_with("synthetic-");
@@ -192,13 +187,7 @@ fn group_table(results: &[PairResult]) -> Table {
     let methods = methods(results);
     let mut header = vec!["group".to_string(), "pairs".to_string()];
     header.extend(methods.iter().map(|m| format!("{m}: correct (mean m.s.)")));
-    let mut groups: Vec<&str> = Vec::new();
-    for r in results {
-        if !groups.contains(&r.group.as_str()) {
-            groups.push(&r.group);
-        }
-    }
-    let rows = groups
+    let rows = tables::distinct(results, |r| &r.group)
         .iter()
         .map(|g| {
             let pairs = results
@@ -380,4 +369,91 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
         println!("  wrote       {}", path.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use metrics::RatioPoint;
+
+    fn pair(name: &str, group: &str) -> EvalPair {
+        EvalPair {
+            name: name.into(),
+            group: group.into(),
+            param: None,
+            image_a: "a".into(),
+            image_b: "b".into(),
+            homography: "h".into(),
+        }
+    }
+
+    fn result(
+        method: &str,
+        pair: &str,
+        group: &str,
+        param: Option<f64>,
+        correct: usize,
+    ) -> PairResult {
+        PairResult {
+            method: method.into(),
+            pair: pair.into(),
+            group: group.into(),
+            param,
+            size_a: (10, 10),
+            size_b: (10, 10),
+            keypoints: (10, 10),
+            overlap: (10, 8),
+            matches: 10,
+            correct,
+            curve: vec![RatioPoint {
+                ratio: 0.8,
+                kept: 10,
+                correct_kept: correct,
+                correct_candidates: 10,
+            }],
+        }
+    }
+
+    #[test]
+    fn headline_prefers_the_opencv_sample() {
+        let oxford = pair("graf 1-3", "oxford-graf");
+        let sample = pair("opencv graf1-graf3", GROUP_OPENCV_SAMPLE);
+        assert_eq!(headline(&[oxford.clone()]), Some(&oxford));
+        assert_eq!(headline(&[oxford, sample.clone()]), Some(&sample));
+        assert_eq!(headline(&[pair("x", GROUP_ROTATION)]), None);
+    }
+
+    #[test]
+    fn panels_pool_by_family_and_count_pairs_once() {
+        let mut results = Vec::new();
+        for method in ["clatch", "OpenCV ORB"] {
+            results.push(result(method, "graf 1-2", "oxford-graf", None, 4));
+            results.push(result(method, "boat 1-2", "oxford-boat", None, 6));
+            results.push(result(method, "a rot 15", GROUP_ROTATION, Some(15.0), 8));
+        }
+        let panels = pr_panels(&results, None);
+        let titles: Vec<&str> = panels.iter().map(|p| p.title.as_str()).collect();
+        assert_eq!(
+            titles,
+            [
+                "Oxford graf, boat, bikes: 2 pairs pooled",
+                "synthetic warps: 1 pairs pooled"
+            ]
+        );
+        assert_eq!(panels[0].curves[1].0, "OpenCV ORB");
+        assert_eq!(panels[0].curves[1].1[0].correct_kept, 10);
+        assert_eq!(panels[0].curves[1].1[0].correct_candidates, 20);
+
+        // Sweep: mean matching score (correct / min(10, 8)) per parameter.
+        results.push(result("clatch", "b rot 15", GROUP_ROTATION, Some(15.0), 4));
+        let sweep = sweep_series(&results, GROUP_ROTATION);
+        assert_eq!(sweep[0], ("clatch".to_string(), vec![(15.0, 0.75)]));
+        assert_eq!(sweep[1], ("OpenCV ORB".to_string(), vec![(15.0, 1.0)]));
+
+        let groups = group_table(&results);
+        assert_eq!(
+            groups.rows[2],
+            ["synthetic-rotation", "2", "12 (0.750)", "8 (1.000)"]
+        );
+    }
 }

@@ -60,48 +60,102 @@ pub const SUMMARY_HEADER: &str = "method,pair,group,param,width_a,height_a,width
 /// Header of `PREFIX.pr.csv`.
 pub const PR_HEADER: &str = "method,pair,ratio,kept,correct_kept,correct_1nn,precision,recall";
 
-fn opt(v: Option<f64>) -> String {
-    v.map(|v| format!("{v:.4}")).unwrap_or_default()
+/// One value of a results row, written as CSV or as JSON.
+enum Field {
+    Text(String),
+    Count(usize),
+    Real(Option<f64>),
+    /// A fraction: 4 decimals in CSV.
+    Fraction(Option<f64>),
+    /// A ratio threshold, as its shortest decimal (0.55).
+    Ratio(f32),
+}
+
+impl Field {
+    fn csv(&self) -> String {
+        match self {
+            Field::Text(t) => t.clone(),
+            Field::Count(n) => n.to_string(),
+            Field::Real(v) => v.map(|v| v.to_string()).unwrap_or_default(),
+            Field::Fraction(v) => v.map(|v| format!("{v:.4}")).unwrap_or_default(),
+            Field::Ratio(r) => r.to_string(),
+        }
+    }
+
+    fn json(&self) -> String {
+        match self {
+            Field::Text(t) => json_string(t),
+            Field::Count(n) => n.to_string(),
+            Field::Real(v) | Field::Fraction(v) => v
+                .filter(|v| v.is_finite())
+                .map_or("null".into(), |v| v.to_string()),
+            Field::Ratio(r) => r.to_string(),
+        }
+    }
+}
+
+/// The values of a summary row, in [`SUMMARY_HEADER`] order.
+fn summary_fields(r: &PairResult) -> Vec<Field> {
+    use Field::{Count, Fraction, Real, Text};
+    vec![
+        Text(r.method.clone()),
+        Text(r.pair.clone()),
+        Text(r.group.clone()),
+        Real(r.param),
+        Count(r.size_a.0 as usize),
+        Count(r.size_a.1 as usize),
+        Count(r.size_b.0 as usize),
+        Count(r.size_b.1 as usize),
+        Count(r.keypoints.0),
+        Count(r.keypoints.1),
+        Count(r.overlap.0),
+        Count(r.overlap.1),
+        Count(r.matches),
+        Count(r.correct),
+        Count(r.correct_candidates()),
+        Fraction(r.precision()),
+        Fraction(r.matching_score()),
+    ]
+}
+
+/// The values of a threshold row, in [`PR_HEADER`] order.
+fn pr_fields(r: &PairResult, p: &RatioPoint) -> Vec<Field> {
+    use Field::{Count, Fraction, Ratio, Text};
+    vec![
+        Text(r.method.clone()),
+        Text(r.pair.clone()),
+        Ratio(p.ratio),
+        Count(p.kept),
+        Count(p.correct_kept),
+        Count(p.correct_candidates),
+        Fraction(p.precision()),
+        Fraction(p.recall()),
+    ]
+}
+
+fn csv_line(fields: &[Field]) -> String {
+    let cells: Vec<String> = fields.iter().map(Field::csv).collect();
+    cells.join(",") + "\n"
+}
+
+/// A JSON object with `header`'s names as keys, leaving out those in `skip`.
+fn json_object(header: &str, fields: &[Field], skip: &[&str]) -> String {
+    let members: Vec<String> = header
+        .split(',')
+        .zip(fields)
+        .filter(|(name, _)| !skip.contains(name))
+        .map(|(name, f)| format!("\"{name}\": {}", f.json()))
+        .collect();
+    format!("{{{}}}", members.join(", "))
 }
 
 /// Both CSV files' text.
 pub fn to_csv(results: &[PairResult]) -> (String, String) {
     let (mut summary, mut pr) = (format!("{SUMMARY_HEADER}\n"), format!("{PR_HEADER}\n"));
     for r in results {
-        let _ = writeln!(
-            summary,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-            r.method,
-            r.pair,
-            r.group,
-            r.param.map(|v| v.to_string()).unwrap_or_default(),
-            r.size_a.0,
-            r.size_a.1,
-            r.size_b.0,
-            r.size_b.1,
-            r.keypoints.0,
-            r.keypoints.1,
-            r.overlap.0,
-            r.overlap.1,
-            r.matches,
-            r.correct,
-            r.correct_candidates(),
-            opt(r.precision()),
-            opt(r.matching_score()),
-        );
+        summary.push_str(&csv_line(&summary_fields(r)));
         for p in &r.curve {
-            let _ = writeln!(
-                pr,
-                "{},{},{},{},{},{},{},{}",
-                r.method,
-                r.pair,
-                p.ratio,
-                p.kept,
-                p.correct_kept,
-                p.correct_candidates,
-                opt(p.precision()),
-                opt(p.recall()),
-            );
+            pr.push_str(&csv_line(&pr_fields(r, p)));
         }
     }
     (summary, pr)
@@ -136,12 +190,8 @@ fn json_string(s: &str) -> String {
     out
 }
 
-fn json_number(v: Option<f64>) -> String {
-    v.filter(|v| v.is_finite())
-        .map_or("null".into(), |v| v.to_string())
-}
-
-/// Everything as one JSON document: the settings that decide correctness, then one object a result.
+/// Everything as one JSON document: the settings that decide correctness, then one object a result
+/// with the summary file's columns as keys and its thresholds under `ratio_test`.
 pub fn to_json(results: &[PairResult], tolerance: f64, settings: &str) -> String {
     let mut s = format!(
         "{{\n  \"tolerance_px\": {tolerance},\n  \"clatch_settings\": {},\n  \"results\": [",
@@ -152,40 +202,19 @@ pub fn to_json(results: &[PairResult], tolerance: f64, settings: &str) -> String
             .curve
             .iter()
             .map(|p| {
-                format!(
-                    "{{\"ratio\": {}, \"kept\": {}, \"correct_kept\": {}, \"precision\": {}, \"recall\": {}}}",
-                    p.ratio,
-                    p.kept,
-                    p.correct_kept,
-                    json_number(p.precision()),
-                    json_number(p.recall())
+                json_object(
+                    PR_HEADER,
+                    &pr_fields(r, p),
+                    &["method", "pair", "correct_1nn"],
                 )
             })
             .collect();
+        let summary = json_object(SUMMARY_HEADER, &summary_fields(r), &[]);
         let _ = write!(
             s,
-            "{}\n    {{\"method\": {}, \"pair\": {}, \"group\": {}, \"param\": {}, \
-             \"size_a\": [{}, {}], \"size_b\": [{}, {}], \"keypoints\": [{}, {}], \
-             \"overlap\": [{}, {}], \"matches\": {}, \"correct\": {}, \"correct_1nn\": {}, \
-             \"precision\": {}, \"matching_score\": {},\n     \"ratio_test\": [{}]}}",
+            "{}\n    {}, \"ratio_test\": [{}]}}",
             if i == 0 { "" } else { "," },
-            json_string(&r.method),
-            json_string(&r.pair),
-            json_string(&r.group),
-            json_number(r.param),
-            r.size_a.0,
-            r.size_a.1,
-            r.size_b.0,
-            r.size_b.1,
-            r.keypoints.0,
-            r.keypoints.1,
-            r.overlap.0,
-            r.overlap.1,
-            r.matches,
-            r.correct,
-            r.correct_candidates(),
-            json_number(r.precision()),
-            json_number(r.matching_score()),
+            &summary[..summary.len() - 1],
             curve.join(", "),
         );
     }

@@ -64,15 +64,20 @@ fn strings(cells: &[&str]) -> Vec<String> {
     cells.iter().map(|c| c.to_string()).collect()
 }
 
-/// The methods in order of first appearance.
-pub fn methods(results: &[PairResult]) -> Vec<String> {
+/// The distinct values of `key` in order of first appearance.
+pub fn distinct(results: &[PairResult], key: impl Fn(&PairResult) -> &str) -> Vec<String> {
     let mut seen: Vec<String> = Vec::new();
     for r in results {
-        if !seen.contains(&r.method) {
-            seen.push(r.method.clone());
+        if !seen.iter().any(|s| s == key(r)) {
+            seen.push(key(r).to_string());
         }
     }
     seen
+}
+
+/// The methods in order of first appearance.
+pub fn methods(results: &[PairResult]) -> Vec<String> {
+    distinct(results, |r| &r.method)
 }
 
 /// One row a method for one pair: counts, precision, matching score, correct 1-NN candidates.
@@ -135,13 +140,7 @@ pub fn all_pairs_table(results: &[PairResult]) -> Table {
     let methods = methods(results);
     let mut header = vec!["pair".to_string()];
     header.extend(methods.iter().cloned());
-    let mut pairs: Vec<&str> = Vec::new();
-    for r in results {
-        if !pairs.contains(&r.pair.as_str()) {
-            pairs.push(&r.pair);
-        }
-    }
-    let rows = pairs
+    let rows = distinct(results, |r| &r.pair)
         .iter()
         .map(|pair| {
             let mut row = vec![pair.to_string()];

@@ -418,7 +418,7 @@ mod tests {
     fn headline_prefers_the_opencv_sample() {
         let oxford = pair("graf 1-3", "oxford-graf");
         let sample = pair("opencv graf1-graf3", GROUP_OPENCV_SAMPLE);
-        assert_eq!(headline(&[oxford.clone()]), Some(&oxford));
+        assert_eq!(headline(std::slice::from_ref(&oxford)), Some(&oxford));
         assert_eq!(headline(&[oxford, sample.clone()]), Some(&sample));
         assert_eq!(headline(&[pair("x", GROUP_ROTATION)]), None);
     }

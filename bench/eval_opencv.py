@@ -25,10 +25,8 @@ import numpy as np
 
 TESTED_OPENCV = "4.12.0"
 RATIOS = [np.float32((50 + 5 * i) / 100) for i in range(11)]
-SUMMARY_HEADER = (
-    "method,pair,group,param,width_a,height_a,width_b,height_b,keypoints_a,keypoints_b,"
-    "overlap_a,overlap_b,matches,correct,correct_1nn,precision,matching_score"
-)
+# The same headers as src/bin/clatch/eval/results.rs (a Rust test compares them).
+SUMMARY_HEADER = "method,pair,group,param,width_a,height_a,width_b,height_b,keypoints_a,keypoints_b,overlap_a,overlap_b,matches,correct,correct_1nn,precision,matching_score"  # noqa: E501
 PR_HEADER = "method,pair,ratio,kept,correct_kept,correct_1nn,precision,recall"
 
 

@@ -471,6 +471,13 @@ mod tests {
     }
 
     #[test]
+    fn the_opencv_script_writes_the_same_columns() {
+        let script = include_str!("../../../../bench/eval_opencv.py");
+        assert!(script.contains(&format!("SUMMARY_HEADER = \"{SUMMARY_HEADER}\"")));
+        assert!(script.contains(&format!("PR_HEADER = \"{PR_HEADER}\"")));
+    }
+
+    #[test]
     fn bad_results_files_are_typed_errors() {
         let f = fixture("bad");
         let prefix = f.dir.join("x");

@@ -67,7 +67,7 @@ enum Field {
     Real(Option<f64>),
     /// A fraction: 4 decimals in CSV.
     Fraction(Option<f64>),
-    /// A ratio threshold, as its shortest decimal (0.55).
+    /// A ratio threshold of the grid: two decimals (0.55), as the script writes it.
     Ratio(f32),
 }
 
@@ -78,7 +78,7 @@ impl Field {
             Field::Count(n) => n.to_string(),
             Field::Real(v) => v.map(|v| v.to_string()).unwrap_or_default(),
             Field::Fraction(v) => v.map(|v| format!("{v:.4}")).unwrap_or_default(),
-            Field::Ratio(r) => r.to_string(),
+            Field::Ratio(r) => format!("{r:.2}"),
         }
     }
 
@@ -89,7 +89,7 @@ impl Field {
             Field::Real(v) | Field::Fraction(v) => v
                 .filter(|v| v.is_finite())
                 .map_or("null".into(), |v| v.to_string()),
-            Field::Ratio(r) => r.to_string(),
+            Field::Ratio(r) => format!("{r:.2}"),
         }
     }
 }
@@ -460,13 +460,13 @@ mod tests {
         let pr = std::fs::read_to_string(f.dir.join("opencv.pr.csv")).unwrap();
         assert_eq!(
             pr.lines().nth(2).unwrap(),
-            "OpenCV ORB,graf 1-2,1,40,25,28,0.6250,0.8929"
+            "OpenCV ORB,graf 1-2,1.00,40,25,28,0.6250,0.8929"
         );
         let read = read_csv(&prefix, &f.pairs, &f.sizes, &[0.5, 1.0]).unwrap();
         assert_eq!(read, written);
         let json = to_json(&read, 3.0, "cpu");
         assert!(json.contains("\"matching_score\": 0.3,"), "{json}");
-        assert!(json.contains("{\"ratio\": 0.5, \"kept\": 5, \"correct_kept\": 5, \"precision\": 1, \"recall\": 0.17857142857142858}"));
+        assert!(json.contains("{\"ratio\": 0.50, \"kept\": 5, \"correct_kept\": 5, \"precision\": 1, \"recall\": 0.17857142857142858}"));
         std::fs::remove_dir_all(&f.dir).ok();
     }
 

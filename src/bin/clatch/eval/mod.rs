@@ -395,22 +395,15 @@ mod tests {
         correct: usize,
     ) -> PairResult {
         PairResult {
-            method: method.into(),
-            pair: pair.into(),
-            group: group.into(),
             param,
-            size_a: (10, 10),
-            size_b: (10, 10),
-            keypoints: (10, 10),
             overlap: (10, 8),
-            matches: 10,
-            correct,
             curve: vec![RatioPoint {
                 ratio: 0.8,
                 kept: 10,
                 correct_kept: correct,
                 correct_candidates: 10,
             }],
+            ..PairResult::for_test(method, pair, group, 10, correct)
         }
     }
 

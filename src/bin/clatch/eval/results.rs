@@ -38,6 +38,30 @@ pub struct PairResult {
 }
 
 impl PairResult {
+    /// A result with the given counts and a one-threshold curve (ratio 0.8, everything kept), for
+    /// tests to adjust with struct update syntax.
+    #[cfg(test)]
+    pub fn for_test(method: &str, pair: &str, group: &str, matches: usize, correct: usize) -> Self {
+        Self {
+            method: method.into(),
+            pair: pair.into(),
+            group: group.into(),
+            param: None,
+            size_a: (10, 10),
+            size_b: (10, 10),
+            keypoints: (matches, matches),
+            overlap: (matches, matches),
+            matches,
+            correct,
+            curve: vec![RatioPoint {
+                ratio: 0.8,
+                kept: matches,
+                correct_kept: correct,
+                correct_candidates: correct,
+            }],
+        }
+    }
+
     /// Correct 1-NN candidates (the recall's denominator).
     pub fn correct_candidates(&self) -> usize {
         self.curve.first().map_or(0, |p| p.correct_candidates)
@@ -400,16 +424,10 @@ mod tests {
 
     fn result(method: &str, pair: &str) -> PairResult {
         PairResult {
-            method: method.into(),
-            pair: pair.into(),
-            group: "oxford-graf".into(),
-            param: None,
             size_a: (800, 640),
             size_b: (800, 640),
             keypoints: (100, 90),
             overlap: (80, 70),
-            matches: 30,
-            correct: 21,
             curve: [(0.5f32, 5, 5), (1.0, 40, 25)]
                 .iter()
                 .map(|&(ratio, kept, correct_kept)| RatioPoint {
@@ -419,6 +437,7 @@ mod tests {
                     correct_candidates: 28,
                 })
                 .collect(),
+            ..PairResult::for_test(method, pair, "oxford-graf", 30, 21)
         }
     }
 

@@ -195,16 +195,8 @@ mod tests {
         ratio_points: &[(usize, usize)],
     ) -> PairResult {
         PairResult {
-            method: method.into(),
-            pair: pair.into(),
-            group: "g".into(),
-            param: None,
-            size_a: (10, 10),
-            size_b: (10, 10),
             keypoints: (8, 9),
             overlap: (4, 5),
-            matches: 3,
-            correct,
             curve: ratio_points
                 .iter()
                 .zip([0.5f32, 1.0])
@@ -215,6 +207,7 @@ mod tests {
                     correct_candidates: 4,
                 })
                 .collect(),
+            ..PairResult::for_test(method, pair, "g", 3, correct)
         }
     }
 

@@ -6,6 +6,7 @@
 mod demo;
 mod draw;
 mod error;
+mod eval;
 mod extract;
 mod homography;
 mod input;
@@ -60,6 +61,60 @@ enum Command {
     /// one uint8 row per keypoint in OpenCV LATCH's byte layout, so it can go straight into
     /// `cv2.BFMatcher(cv2.NORM_HAMMING)`.
     Extract(ExtractArgs),
+    /// Descriptor quality on image pairs with ground-truth homographies, optionally beside OpenCV.
+    ///
+    /// Pairs: OpenCV's graf1/graf3 sample (--opencv-samples), the Oxford graf, boat and bikes
+    /// sequences, img1 against img2..img6 (--data), and synthetic warps (rotations 0-180 degrees,
+    /// scales 0.5-2, two perspective tilts) of the embedded photo and of --synthetic-image photos.
+    /// Per pair and method: keypoints in the overlap, matches, correct matches (within --inlier-px
+    /// of the true homography), matching score, and precision and recall of the ratio test at
+    /// thresholds 0.50..1.00. Writes OUT/pairs.csv (the pairs, for bench/eval_opencv.py),
+    /// OUT/clatch.summary.csv and OUT/clatch.pr.csv, OUT/results.json, OUT/tables.md, and the charts
+    /// OUT/pr.png and OUT/synthetic.png. EVALUATION.md defines every figure.
+    Eval(EvalArgs),
+}
+
+/// Arguments of `clatch eval`.
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// Folder holding oxford_graf/, oxford_boat/, oxford_bikes/ (img1..img6, H1to2p..H1to6p each).
+    #[arg(long, value_name = "DIR")]
+    pub data: Option<PathBuf>,
+    /// Folder holding OpenCV's graf1.png, graf3.png and H1to3p.xml (Debian's opencv-doc package
+    /// installs them in /usr/share/doc/opencv-doc/examples/data).
+    #[arg(long, value_name = "DIR")]
+    pub opencv_samples: Option<PathBuf>,
+    /// A photo to warp synthetically besides the embedded one: PATH, or NAME=PATH (repeatable).
+    #[arg(long = "synthetic-image", value_name = "[NAME=]PATH")]
+    pub synthetic_images: Vec<String>,
+    /// No synthetic pairs at all.
+    #[arg(long, conflicts_with = "synthetic_images")]
+    pub no_synthetic: bool,
+    /// Output folder.
+    #[arg(short, long, default_value = "clatch-eval", value_name = "DIR")]
+    pub out: PathBuf,
+    /// clatch configurations to evaluate (repeatable).
+    #[arg(long = "method", value_enum, default_values_t = [eval::run::ClatchMethod::Clatch])]
+    pub methods: Vec<eval::run::ClatchMethod>,
+    /// Run the OpenCV script with this Python (which needs opencv-contrib-python-headless) and merge
+    /// its results.
+    #[arg(long, value_name = "PYTHON")]
+    pub opencv_python: Option<PathBuf>,
+    /// The OpenCV script.
+    #[arg(long, default_value = "bench/eval_opencv.py", value_name = "FILE")]
+    pub opencv_script: PathBuf,
+    /// Merge results written earlier for the same pairs: PREFIX.summary.csv and PREFIX.pr.csv
+    /// (repeatable).
+    #[arg(long, value_name = "PREFIX")]
+    pub merge: Vec<PathBuf>,
+    #[command(flatten)]
+    pub backend: BackendArgs,
+    #[command(flatten)]
+    pub detect: DetectArgs,
+    #[command(flatten)]
+    pub matching: MatchingArgs,
+    #[command(flatten)]
+    pub check: CheckArgs,
 }
 
 /// Arguments of `clatch demo`.
@@ -350,6 +405,7 @@ fn main() -> ExitCode {
         Command::Demo(args) => demo::main(&args),
         Command::Match(args) => match_cmd::main(&args),
         Command::Extract(args) => extract::main(&args),
+        Command::Eval(args) => eval::main(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -102,7 +102,10 @@ fn main() -> Result<(), Failure> {
             let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
             let result = extractor.describe(&view, &keypoints)?;
             for (row, &i) in result.keypoint_index.iter().enumerate() {
-                let words = result.descriptors.get(row).expect("a row per described keypoint");
+                let words = result
+                    .descriptors
+                    .get(row)
+                    .expect("a row per described keypoint");
                 let hex: String = words.iter().map(|w| format!("{w:016x}")).collect();
                 println!("{i} {hex}");
             }

@@ -1,0 +1,274 @@
+//! AVX2 kernels (x86-64): bilinear sampling with 8-lane gathers, and the 0/1-weight triplet sums with
+//! two patch rows per 256-bit register. Same integers as the reference, lane by lane.
+//!
+//! Why `unsafe`: the intrinsics need AVX2, which [`Avx2::detect`] checks at run time (holding an
+//! [`Avx2`] value is the proof), and the loads/gathers read through raw pointers, whose bounds are
+//! checked once per window ([`GatherPlan::new`]) or once per crate build (the triplet table, see
+//! `fast::OFFSETS`) instead of per pixel.
+
+use std::arch::x86_64::*;
+
+use super::Window;
+use super::fast::{PatchOffsets, PixelMask};
+use crate::describe::{PATCH, SamplingFrame, WINDOW};
+use crate::image::GrayView;
+
+/// Proof that the CPU runs AVX2 (only [`Avx2::detect`] makes one).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Avx2(());
+
+impl Avx2 {
+    /// `Some` iff the CPU reports AVX2.
+    pub(super) fn detect() -> Option<Self> {
+        is_x86_feature_detected!("avx2").then_some(Avx2(()))
+    }
+
+    /// Exactly [`super::sample_window`] for a frame whose plan the image allows.
+    pub(super) fn sample_window(self, img: &GrayView, plan: &GatherPlan, window: &mut Window) {
+        let data = img.data();
+        // A plan made for another image is refused here rather than read out of bounds.
+        assert!(plan.end <= data.len() && plan.stride == img.stride());
+        // SAFETY: AVX2 is present (self); every gather reads inside `data` (checked just above, by
+        // the plan's construction: see `GatherPlan::end`).
+        unsafe { sample_window(data, plan, window) }
+    }
+
+    /// Exactly [`super::window_bits`] for 0/1 weights (`mask`), for the triplets `offsets` (a multiple
+    /// of 8 of them, as every [`crate::DescriptorWidth`] is).
+    pub(super) fn masked_bits(
+        self,
+        window: &Window,
+        offsets: &[PatchOffsets],
+        mask: &PixelMask,
+        out: &mut [u64],
+    ) {
+        assert!(offsets.len() % 8 == 0 && out.len() * 64 >= offsets.len());
+        // SAFETY: AVX2 is present (self); every offset comes from `fast::OFFSETS`, whose patches lie
+        // inside the window (a const assertion), and the loads read only those patches.
+        unsafe { masked_bits(window, offsets, mask, out) }
+    }
+}
+
+/// A window's sample positions in 32-bit lanes, relative to the pixel of the keypoint, with the
+/// checks that make the gathers safe. `None` (the portable kernel then samples) only for windows
+/// that come within a row of the end of the buffer, or for images too large for 32-bit offsets.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct GatherPlan {
+    /// Index in the image data of the keypoint's whole-pixel position `(x0, y0)`.
+    base: usize,
+    /// Row stride of the image.
+    stride: usize,
+    /// One past the last byte any gather reads.
+    end: usize,
+    /// Relative 16.16 position plus the 24.8 rounding half (`frac + 128 + (u - 32) eu + (v - 32) ev`)
+    /// of window pixel `(0, 0)`.
+    start: [i32; 2],
+    /// Steps along a window row and down a column (16.16).
+    step_u: [i32; 2],
+    step_v: [i32; 2],
+}
+
+impl GatherPlan {
+    /// The plan of a frame that [`SamplingFrame::fits`] the image.
+    ///
+    /// With `o = 65536 O + f` (`O` whole pixels), `P8 = (o + d + 128) >> 8 = 256 O + ((f + d + 128) >> 8)`
+    /// exactly, so the sample's pixel is `O + (R >> 16)` and its fraction `(R >> 8) & 255` for the
+    /// relative `R = f + d + 128`, which fits 32 bits for any supported size.
+    pub(super) fn new(img: &GrayView, frame: &SamplingFrame) -> Option<Self> {
+        let whole = frame.origin.map(|o| o >> 16);
+        let half = (WINDOW / 2) as i64;
+        let start: [i64; 2] = [0, 1].map(|axis| {
+            (frame.origin[axis] & 0xffff) + 128 - half * (frame.step_u[axis] + frame.step_v[axis])
+        });
+        // The relative position and pixel offset of each corner (the extremes: both are monotone in
+        // u and v); `as i32` below is exact because every lane value lies between them.
+        let last = (WINDOW - 1) as i64;
+        let stride = img.stride() as i64;
+        let corners = [(0, 0), (last, 0), (0, last), (last, last)].map(|(u, v)| {
+            let r =
+                [0, 1].map(|axis| start[axis] + u * frame.step_u[axis] + v * frame.step_v[axis]);
+            (r, (r[1] >> 16) * stride + (r[0] >> 16))
+        });
+        let fits_i32 = |v: i64| i32::try_from(v).is_ok();
+        let lanes_fit = corners.iter().all(|(r, offset)| {
+            // `(y >> 16) · stride` alone is also computed in a lane.
+            r.iter().all(|&r| fits_i32(r)) && fits_i32(*offset) && fits_i32((r[1] >> 16) * stride)
+        });
+        let lowest = corners.iter().map(|c| c.1).min()?;
+        let highest = corners.iter().map(|c| c.1).max()?;
+        let base = whole[1] * stride + whole[0];
+        // A gather reads 4 bytes from each sample's top-left pixel and from the one below it.
+        let end = base + highest + stride + 4;
+        let steps_fit = frame
+            .step_u
+            .iter()
+            .chain(&frame.step_v)
+            .all(|&s| fits_i32(s * 8));
+        if !(lanes_fit && steps_fit && base + lowest >= 0 && end <= img.data().len() as i64) {
+            return None;
+        }
+        Some(Self {
+            base: base as usize,
+            stride: img.stride(),
+            end: end as usize,
+            start: start.map(|s| s as i32),
+            step_u: frame.step_u.map(|s| s as i32),
+            step_v: frame.step_v.map(|s| s as i32),
+        })
+    }
+}
+
+/// See [`Avx2::sample_window`].
+///
+/// # Safety
+/// AVX2 must be present, and `plan` must be a plan for an image whose data is `data`.
+#[target_feature(enable = "avx2")]
+unsafe fn sample_window(data: &[u8], plan: &GatherPlan, window: &mut Window) {
+    // SAFETY: `base` and `base + stride` lie inside `data` (`plan.end` is past both).
+    let top = unsafe { data.as_ptr().add(plan.base) } as *const i32;
+    let below = unsafe { data.as_ptr().add(plan.base + plan.stride) } as *const i32;
+    let stride = _mm256_set1_epi32(plan.stride as i32);
+    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let lane_x = _mm256_mullo_epi32(lane, _mm256_set1_epi32(plan.step_u[0]));
+    let lane_y = _mm256_mullo_epi32(lane, _mm256_set1_epi32(plan.step_u[1]));
+    let eight = [0, 1].map(|axis| _mm256_set1_epi32(8 * plan.step_u[axis]));
+    for (v, out_row) in window.chunks_exact_mut(WINDOW).enumerate() {
+        let row = [0, 1].map(|axis| plan.start[axis] + v as i32 * plan.step_v[axis]);
+        let mut x = _mm256_add_epi32(_mm256_set1_epi32(row[0]), lane_x);
+        let mut y = _mm256_add_epi32(_mm256_set1_epi32(row[1]), lane_y);
+        for out in out_row.chunks_exact_mut(16) {
+            let mut halves = [_mm256_setzero_si256(); 2];
+            for half in &mut halves {
+                // SAFETY: the lanes are window samples, whose reads the plan checked.
+                *half = unsafe { bilinear8(top, below, stride, x, y) };
+                x = _mm256_add_epi32(x, eight[0]);
+                y = _mm256_add_epi32(y, eight[1]);
+            }
+            // Samples are 0..=255, so the saturating pack is exact; it interleaves 128-bit halves,
+            // which the permutation undoes.
+            let packed = _mm256_packs_epi32(halves[0], halves[1]);
+            let ordered = _mm256_permute4x64_epi64::<0b11_01_10_00>(packed);
+            // SAFETY: `out` holds exactly 16 i16 = 32 bytes.
+            unsafe { _mm256_storeu_si256(out.as_mut_ptr() as *mut __m256i, ordered) };
+        }
+    }
+}
+
+/// Eight bilinear samples at the relative positions `x, y` (see [`GatherPlan`]), as `i32` lanes.
+///
+/// # Safety
+/// AVX2; for each lane, 4 bytes at `top + offset` and `below + offset` must be readable.
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn bilinear8(
+    top: *const i32,
+    below: *const i32,
+    stride: __m256i,
+    x: __m256i,
+    y: __m256i,
+) -> __m256i {
+    let byte = _mm256_set1_epi32(255);
+    let (fx, fy) = (
+        _mm256_and_si256(_mm256_srli_epi32::<8>(x), byte),
+        _mm256_and_si256(_mm256_srli_epi32::<8>(y), byte),
+    );
+    let offset = _mm256_add_epi32(
+        _mm256_mullo_epi32(_mm256_srai_epi32::<16>(y), stride),
+        _mm256_srai_epi32::<16>(x),
+    );
+    // Each gather brings the sample's pixel in byte 0 and its right neighbour in byte 1 (when the
+    // reference clamps that neighbour, fx = 0 and the byte read is multiplied by 0).
+    // SAFETY: the caller's contract.
+    let (upper, lower) = unsafe {
+        (
+            _mm256_i32gather_epi32::<1>(top, offset),
+            _mm256_i32gather_epi32::<1>(below, offset),
+        )
+    };
+    // Bytes 0, 1 of each lane -> 16-bit halves, times (256 - fx, fx) pairwise: p0 (256 - fx) + p1 fx.
+    let spread = _mm256_setr_epi8(
+        0, -128, 1, -128, 4, -128, 5, -128, 8, -128, 9, -128, 12, -128, 13, -128, //
+        0, -128, 1, -128, 4, -128, 5, -128, 8, -128, 9, -128, 12, -128, 13, -128,
+    );
+    let weights = _mm256_or_si256(
+        _mm256_sub_epi32(_mm256_set1_epi32(256), fx),
+        _mm256_slli_epi32::<16>(fx),
+    );
+    let upper = _mm256_madd_epi16(_mm256_shuffle_epi8(upper, spread), weights);
+    let lower = _mm256_madd_epi16(_mm256_shuffle_epi8(lower, spread), weights);
+    // upper (256 - fy) + lower fy + 2^15, the same integer as the reference, then >> 16.
+    let sum = _mm256_add_epi32(
+        _mm256_slli_epi32::<8>(upper),
+        _mm256_mullo_epi32(_mm256_sub_epi32(lower, upper), fy),
+    );
+    _mm256_srai_epi32::<16>(_mm256_add_epi32(sum, _mm256_set1_epi32(1 << 15)))
+}
+
+/// See [`Avx2::masked_bits`].
+///
+/// # Safety
+/// AVX2 must be present; every patch of `offsets` must lie inside the window.
+#[target_feature(enable = "avx2")]
+unsafe fn masked_bits(
+    window: &Window,
+    offsets: &[PatchOffsets],
+    mask: &PixelMask,
+    out: &mut [u64],
+) {
+    // Patch rows 2k and 2k + 1 share a register: mask rows likewise.
+    // SAFETY: reads 4 x 32 bytes of the 128-byte mask.
+    let pair_masks: [__m256i; PATCH / 2] = std::array::from_fn(|k| unsafe {
+        _mm256_loadu_si256(mask.as_ptr().add(2 * k * PATCH) as *const __m256i)
+    });
+    let pixels = window.as_ptr();
+    out.fill(0);
+    for (group, triplets) in offsets.chunks_exact(8).enumerate() {
+        let triplets: &[PatchOffsets; 8] = triplets.try_into().expect("chunks of 8");
+        let mut sums = [_mm256_setzero_si256(); 8];
+        for (sum, &triplet) in sums.iter_mut().zip(triplets) {
+            // SAFETY: the caller's contract (patches inside the window).
+            *sum = unsafe { triplet_sums(pixels, triplet, &pair_masks) };
+        }
+        // Horizontal sums of the 8 registers, lane j = triplet j: three rounds of pairwise adds.
+        let h = |a, b| _mm256_hadd_epi32(a, b);
+        let quads = [h(sums[0], sums[1]), h(sums[2], sums[3])];
+        let quads_hi = [h(sums[4], sums[5]), h(sums[6], sums[7])];
+        let (lo, hi) = (h(quads[0], quads[1]), h(quads_hi[0], quads_hi[1]));
+        // lo = [t0..t3 of the low 128 bits | t0..t3 of the high], hi likewise for t4..t7.
+        let totals = _mm256_add_epi32(
+            _mm256_permute2x128_si256::<0x20>(lo, hi),
+            _mm256_permute2x128_si256::<0x31>(lo, hi),
+        );
+        // Bit j = sign of triplet j's total, i.e. total < 0.
+        let bits = _mm256_movemask_ps(_mm256_castsi256_ps(totals)) as u8 as u64;
+        out[group / 8] |= bits << (8 * (group % 8));
+    }
+}
+
+/// Per-lane partial sums of `mask · (a - c)(a + c - 2b)` over one triplet's patches (8 lanes whose
+/// total is the reference's value).
+///
+/// # Safety
+/// AVX2; the patches at `offsets` lie inside the window `pixels` points to.
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn triplet_sums(
+    pixels: *const i16,
+    [a, b, c]: PatchOffsets,
+    pair_masks: &[__m256i; PATCH / 2],
+) -> __m256i {
+    // Rows `2k` (low half) and `2k + 1` (high half) of the patch at `at`.
+    // SAFETY: both rows lie in the patch, inside the window (the caller's contract).
+    let rows = |at: usize, k: usize| unsafe {
+        let p = pixels.add(at + 2 * k * WINDOW);
+        _mm256_loadu2_m128i(p.add(WINDOW) as *const __m128i, p as *const __m128i)
+    };
+    let mut sum = _mm256_setzero_si256();
+    for (k, &m) in pair_masks.iter().enumerate() {
+        let (ra, rb, rc) = (rows(a, k), rows(b, k), rows(c, k));
+        let p = _mm256_and_si256(_mm256_sub_epi16(ra, rc), m);
+        let q = _mm256_sub_epi16(_mm256_add_epi16(ra, rc), _mm256_add_epi16(rb, rb));
+        sum = _mm256_add_epi32(sum, _mm256_madd_epi16(p, q));
+    }
+    sum
+}

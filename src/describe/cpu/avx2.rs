@@ -42,7 +42,7 @@ impl Avx2 {
         mask: &PixelMask,
         out: &mut [u64],
     ) {
-        assert!(offsets.len() % 8 == 0 && out.len() * 64 >= offsets.len());
+        assert!(offsets.len().is_multiple_of(8) && out.len() * 64 >= offsets.len());
         // SAFETY: AVX2 is present (self); every offset comes from `fast::OFFSETS`, whose patches lie
         // inside the window (a const assertion), and the loads read only those patches.
         unsafe { masked_bits(window, offsets, mask, out) }

@@ -60,10 +60,10 @@ impl Kernels {
     /// Samples the window of a frame that fits the image: exactly [`super::sample_window`].
     pub(super) fn sample(self, img: &GrayView, frame: &SamplingFrame, window: &mut Window) {
         #[cfg(target_arch = "x86_64")]
-        if let Kernels::Avx2(avx2) = self {
-            if let Some(plan) = super::avx2::GatherPlan::new(img, frame) {
-                return avx2.sample_window(img, &plan, window);
-            }
+        if let Kernels::Avx2(avx2) = self
+            && let Some(plan) = super::avx2::GatherPlan::new(img, frame)
+        {
+            return avx2.sample_window(img, &plan, window);
         }
         super::portable::sample_window(img, frame, window)
     }

@@ -3,14 +3,14 @@
 //!
 //! Why `unsafe`: the intrinsics need AVX2, which [`Avx2::detect`] checks at run time (holding an
 //! [`Avx2`] value is the proof), and the loads/gathers read through raw pointers, whose bounds are
-//! checked once per window ([`GatherPlan::new`]) or once per crate build (the triplet table, see
+//! checked once per window ([`SamplePlan::new`]) or once per crate build (the triplet table, see
 //! `fast::OFFSETS`) instead of per pixel.
 
 use std::arch::x86_64::*;
 
 use super::Window;
-use super::fast::{PatchOffsets, PixelMask};
-use crate::describe::{PATCH, SamplingFrame, WINDOW};
+use super::fast::{PatchOffsets, PixelMask, SamplePlan};
+use crate::describe::{PATCH, WINDOW};
 use crate::image::GrayView;
 
 /// Proof that the CPU runs AVX2 (only [`Avx2::detect`] makes one).
@@ -24,12 +24,12 @@ impl Avx2 {
     }
 
     /// Exactly [`super::sample_window`] for a frame whose plan the image allows.
-    pub(super) fn sample_window(self, img: &GrayView, plan: &GatherPlan, window: &mut Window) {
+    pub(super) fn sample_window(self, img: &GrayView, plan: &SamplePlan, window: &mut Window) {
         let data = img.data();
         // A plan made for another image is refused here rather than read out of bounds.
         assert!(plan.end <= data.len() && plan.stride == img.stride());
         // SAFETY: AVX2 is present (self); every gather reads inside `data` (checked just above, by
-        // the plan's construction: see `GatherPlan::end`).
+        // the plan's construction: see `SamplePlan::end`).
         unsafe { sample_window(data, plan, window) }
     }
 
@@ -49,81 +49,12 @@ impl Avx2 {
     }
 }
 
-/// A window's sample positions in 32-bit lanes, relative to the pixel of the keypoint, with the
-/// checks that make the gathers safe. `None` (the portable kernel then samples) only for windows
-/// that come within a row of the end of the buffer, or for images too large for 32-bit offsets.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct GatherPlan {
-    /// Index in the image data of the keypoint's whole-pixel position `(x0, y0)`.
-    base: usize,
-    /// Row stride of the image.
-    stride: usize,
-    /// One past the last byte any gather reads.
-    end: usize,
-    /// Relative 16.16 position plus the 24.8 rounding half (`frac + 128 + (u - 32) eu + (v - 32) ev`)
-    /// of window pixel `(0, 0)`.
-    start: [i32; 2],
-    /// Steps along a window row and down a column (16.16).
-    step_u: [i32; 2],
-    step_v: [i32; 2],
-}
-
-impl GatherPlan {
-    /// The plan of a frame that [`SamplingFrame::fits`] the image.
-    ///
-    /// With `o = 65536 O + f` (`O` whole pixels), `P8 = (o + d + 128) >> 8 = 256 O + ((f + d + 128) >> 8)`
-    /// exactly, so the sample's pixel is `O + (R >> 16)` and its fraction `(R >> 8) & 255` for the
-    /// relative `R = f + d + 128`, which fits 32 bits for any supported size.
-    pub(super) fn new(img: &GrayView, frame: &SamplingFrame) -> Option<Self> {
-        let whole = frame.origin.map(|o| o >> 16);
-        let half = (WINDOW / 2) as i64;
-        let start: [i64; 2] = [0, 1].map(|axis| {
-            (frame.origin[axis] & 0xffff) + 128 - half * (frame.step_u[axis] + frame.step_v[axis])
-        });
-        // The relative position and pixel offset of each corner (the extremes: both are monotone in
-        // u and v); `as i32` below is exact because every lane value lies between them.
-        let last = (WINDOW - 1) as i64;
-        let stride = img.stride() as i64;
-        let corners = [(0, 0), (last, 0), (0, last), (last, last)].map(|(u, v)| {
-            let r =
-                [0, 1].map(|axis| start[axis] + u * frame.step_u[axis] + v * frame.step_v[axis]);
-            (r, (r[1] >> 16) * stride + (r[0] >> 16))
-        });
-        let fits_i32 = |v: i64| i32::try_from(v).is_ok();
-        let lanes_fit = corners.iter().all(|(r, offset)| {
-            // `(y >> 16) · stride` alone is also computed in a lane.
-            r.iter().all(|&r| fits_i32(r)) && fits_i32(*offset) && fits_i32((r[1] >> 16) * stride)
-        });
-        let lowest = corners.iter().map(|c| c.1).min()?;
-        let highest = corners.iter().map(|c| c.1).max()?;
-        let base = whole[1] * stride + whole[0];
-        // A gather reads 4 bytes from each sample's top-left pixel and from the one below it.
-        let end = base + highest + stride + 4;
-        let steps_fit = frame
-            .step_u
-            .iter()
-            .chain(&frame.step_v)
-            .all(|&s| fits_i32(s * 8));
-        if !(lanes_fit && steps_fit && base + lowest >= 0 && end <= img.data().len() as i64) {
-            return None;
-        }
-        Some(Self {
-            base: base as usize,
-            stride: img.stride(),
-            end: end as usize,
-            start: start.map(|s| s as i32),
-            step_u: frame.step_u.map(|s| s as i32),
-            step_v: frame.step_v.map(|s| s as i32),
-        })
-    }
-}
-
 /// See [`Avx2::sample_window`].
 ///
 /// # Safety
 /// AVX2 must be present, and `plan` must be a plan for an image whose data is `data`.
 #[target_feature(enable = "avx2")]
-unsafe fn sample_window(data: &[u8], plan: &GatherPlan, window: &mut Window) {
+unsafe fn sample_window(data: &[u8], plan: &SamplePlan, window: &mut Window) {
     // SAFETY: `base` and `base + stride` lie inside `data` (`plan.end` is past both).
     let top = unsafe { data.as_ptr().add(plan.base) } as *const i32;
     let below = unsafe { data.as_ptr().add(plan.base + plan.stride) } as *const i32;
@@ -154,7 +85,7 @@ unsafe fn sample_window(data: &[u8], plan: &GatherPlan, window: &mut Window) {
     }
 }
 
-/// Eight bilinear samples at the relative positions `x, y` (see [`GatherPlan`]), as `i32` lanes.
+/// Eight bilinear samples at the relative positions `x, y` (see [`SamplePlan`]), as `i32` lanes.
 ///
 /// # Safety
 /// AVX2; for each lane, 4 bytes at `top + offset` and `below + offset` must be readable.

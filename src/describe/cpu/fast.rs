@@ -60,12 +60,14 @@ impl Kernels {
     /// Samples the window of a frame that fits the image: exactly [`super::sample_window`].
     pub(super) fn sample(self, img: &GrayView, frame: &SamplingFrame, window: &mut Window) {
         #[cfg(target_arch = "x86_64")]
-        if let Kernels::Avx2(avx2) = self
-            && let Some(plan) = super::avx2::GatherPlan::new(img, frame)
-        {
-            return avx2.sample_window(img, &plan, window);
+        let Some(plan) = SamplePlan::new(img, frame) else {
+            return super::sample_window(img, frame, window);
+        };
+        match self {
+            #[cfg(target_arch = "x86_64")]
+            Kernels::Avx2(avx2) => avx2.sample_window(img, &plan, window),
+            Kernels::Portable => super::portable::sample_window(img, &plan, window),
         }
-        super::portable::sample_window(img, frame, window)
     }
 
     /// The first `width` bits for 0/1 weights given as a mask: exactly [`super::window_bits`].
@@ -82,6 +84,95 @@ impl Kernels {
             Kernels::Avx2(avx2) => avx2.masked_bits(window, offsets, mask, out),
             Kernels::Portable => super::portable::masked_bits(window, offsets, mask, out),
         }
+    }
+}
+
+/// A window's sample positions in 32-bit integers, relative to the pixel of the keypoint, with the
+/// bounds of what the fast samplers read: for each sample, 4 bytes from its top-left pixel and 4 from
+/// the pixel below (the clamped neighbours of the reference have weight 0, so reading the next pixel
+/// instead is exact). `None` (the reference then samples) only for windows that come within a row of
+/// the end of the buffer, or for images too large for 32-bit offsets.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct SamplePlan {
+    /// Index in the image data of the keypoint's whole-pixel position `(x0, y0)`.
+    pub(super) base: usize,
+    /// Row stride of the image.
+    pub(super) stride: usize,
+    /// One past the last byte any gather reads.
+    pub(super) end: usize,
+    /// Relative 16.16 position plus the 24.8 rounding half (`frac + 128 + (u - 32) eu + (v - 32) ev`)
+    /// of window pixel `(0, 0)`.
+    pub(super) start: [i32; 2],
+    /// Steps along a window row and down a column (16.16).
+    pub(super) step_u: [i32; 2],
+    pub(super) step_v: [i32; 2],
+}
+
+impl SamplePlan {
+    /// The plan of a frame that [`SamplingFrame::fits`] the image.
+    ///
+    /// With `o = 65536 O + f` (`O` whole pixels), `P8 = (o + d + 128) >> 8 = 256 O + ((f + d + 128) >> 8)`
+    /// exactly, so the sample's pixel is `O + (R >> 16)` and its fraction `(R >> 8) & 255` for the
+    /// relative `R = f + d + 128`, which fits 32 bits for any supported size.
+    pub(super) fn new(img: &GrayView, frame: &SamplingFrame) -> Option<Self> {
+        let whole = frame.origin.map(|o| o >> 16);
+        let half = (WINDOW / 2) as i64;
+        let start: [i64; 2] = [0, 1].map(|axis| {
+            (frame.origin[axis] & 0xffff) + 128 - half * (frame.step_u[axis] + frame.step_v[axis])
+        });
+        // Each coordinate is monotone in u and v, so its extremes over the window are at corners
+        // (`as i32` below is exact because every value lies between them). The pixel offset
+        // `(y >> 16) stride + (x >> 16)` is not (the floors), so it is bounded from the separate
+        // extremes of its two terms.
+        let last = (WINDOW - 1) as i64;
+        let corners = [(0, 0), (last, 0), (0, last), (last, last)].map(|(u, v)| {
+            [0, 1].map(|axis| start[axis] + u * frame.step_u[axis] + v * frame.step_v[axis])
+        });
+        let extreme = |axis: usize, pick: fn(i64, i64) -> i64| {
+            corners
+                .iter()
+                .map(|r| r[axis])
+                .reduce(pick)
+                .expect("four corners")
+        };
+        let (low, high) = (
+            [0, 1].map(|a| extreme(a, i64::min)),
+            [0, 1].map(|a| extreme(a, i64::max)),
+        );
+        let stride = img.stride() as i64;
+        let lowest = (low[1] >> 16) * stride + (low[0] >> 16);
+        let highest = (high[1] >> 16) * stride + (high[0] >> 16);
+        let fits_i32 = |v: i64| i32::try_from(v).is_ok();
+        // Every lane value (positions, `(y >> 16) stride`, offsets) lies between these.
+        let lanes_fit = [low, high].iter().flatten().all(|&r| fits_i32(r))
+            && [
+                lowest,
+                highest,
+                (low[1] >> 16) * stride,
+                (high[1] >> 16) * stride,
+            ]
+            .iter()
+            .all(|&v| fits_i32(v));
+        // Products `u · step` (u < 64) and the 8-lane strides stay in range too.
+        let steps_fit = frame
+            .step_u
+            .iter()
+            .chain(&frame.step_v)
+            .all(|&s| fits_i32(s * WINDOW as i64));
+        let base = whole[1] * stride + whole[0];
+        // A sample reads 4 bytes from its top-left pixel and 4 from the pixel below.
+        let end = base + highest + stride + 4;
+        if !(lanes_fit && steps_fit && base + lowest >= 0 && end <= img.data().len() as i64) {
+            return None;
+        }
+        Some(Self {
+            base: base as usize,
+            stride: img.stride(),
+            end: end as usize,
+            start: start.map(|s| s as i32),
+            step_u: frame.step_u.map(|s| s as i32),
+            step_v: frame.step_v.map(|s| s as i32),
+        })
     }
 }
 
@@ -166,19 +257,16 @@ mod tests {
                 .map(|bin| random_frame(&mut rng, w, h, bin))
                 .collect();
             frames.extend(edge_frames(w, h));
-            // The AVX2 kernel gathers for all but the windows that reach the buffer's last row.
-            #[cfg(target_arch = "x86_64")]
-            {
-                let planned = frames
-                    .iter()
-                    .filter(|f| super::super::avx2::GatherPlan::new(&img, f).is_some())
-                    .count();
-                assert!(
-                    planned * 10 > frames.len() * 9,
-                    "{planned} of {}",
-                    frames.len()
-                );
-            }
+            // The fast samplers take all but the windows that reach the buffer's last row.
+            let planned = frames
+                .iter()
+                .filter(|f| SamplePlan::new(&img, f).is_some())
+                .count();
+            assert!(
+                planned * 10 > frames.len() * 9,
+                "{planned} of {}",
+                frames.len()
+            );
             for frame in frames {
                 let mut expected: Window = [0; WINDOW * WINDOW];
                 sample_window(&img, &frame, &mut expected);

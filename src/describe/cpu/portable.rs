@@ -2,35 +2,40 @@
 //! loops and the compiler vectorises the patch sums (any target; the fallback where AVX2 is absent).
 
 use super::Window;
-use super::fast::{PatchOffsets, PixelMask};
-use crate::describe::{PATCH, SamplingFrame, WINDOW};
+use super::fast::{PatchOffsets, PixelMask, SamplePlan};
+use crate::describe::{PATCH, WINDOW};
 use crate::image::GrayView;
 
-/// Exactly [`super::sample_window`]: one index computation per sample instead of two row slices,
-/// and the clamp as a 0 step (the clamped neighbour's weight is 0 anyway, but it must be readable).
-pub(super) fn sample_window(img: &GrayView, frame: &SamplingFrame, window: &mut Window) {
-    let (data, stride) = (img.data(), img.stride());
-    let (last_x, last_y) = (img.width() - 1, img.height() - 1);
-    let half = (WINDOW / 2) as i64;
+/// Exactly [`super::sample_window`] for a window with a plan, in three passes per window row: the
+/// positions (vectorised), the pixel pairs (scalar loads, one bounds check per pair) and the
+/// interpolation (vectorised).
+pub(super) fn sample_window(img: &GrayView, plan: &SamplePlan, window: &mut Window) {
+    let data = &img.data()[..plan.end];
+    let (base, stride) = (plan.base as isize, plan.stride as isize);
     for (v, out_row) in window.chunks_exact_mut(WINDOW).enumerate() {
-        let dv = v as i64 - half;
-        let mut p = [0, 1].map(|axis| {
-            frame.origin[axis] - half * frame.step_u[axis] + dv * frame.step_v[axis] + 128
+        let row = [0, 1].map(|axis| plan.start[axis] + v as i32 * plan.step_v[axis]);
+        let position = |u: usize, axis: usize| row[axis] + u as i32 * plan.step_u[axis];
+        let offset: [isize; WINDOW] = std::array::from_fn(|u| {
+            let (x, y) = (position(u, 0), position(u, 1));
+            base + (y >> 16) as isize * stride + (x >> 16) as isize
         });
-        for out in out_row.iter_mut() {
-            let (sx, sy) = (p[0] >> 8, p[1] >> 8);
-            p[0] += frame.step_u[0];
-            p[1] += frame.step_u[1];
-            let (x0, y0) = ((sx >> 8) as usize, (sy >> 8) as usize);
-            let (fx, fy) = ((sx & 255) as i32, (sy & 255) as i32);
-            let right = usize::from(x0 < last_x);
-            let down = if y0 < last_y { stride } else { 0 };
-            let i = y0 * stride + x0;
-            let pixel = |j: usize| data[j] as i32;
-            // p00 (256 - f) + p01 f = 256 p00 + (p01 - p00) f: the same integer.
-            let upper = 256 * pixel(i) + (pixel(i + right) - pixel(i)) * fx;
-            let lower = 256 * pixel(i + down) + (pixel(i + down + right) - pixel(i + down)) * fx;
-            *out = ((256 * upper + (lower - upper) * fy + (1 << 15)) >> 16) as i16;
+        let fraction =
+            |axis| -> [i32; WINDOW] { std::array::from_fn(|u| (position(u, axis) >> 8) & 255) };
+        let (fx, fy) = (fraction(0), fraction(1));
+        // Bytes 0, 1 of each pair: the sample's pixel and its right neighbour.
+        let pair = |at: isize| -> [u8; 2] {
+            let at = at as usize;
+            data[at..at + 2]
+                .try_into()
+                .expect("inside the plan's bounds")
+        };
+        let top: [[u8; 2]; WINDOW] = std::array::from_fn(|u| pair(offset[u]));
+        let bottom: [[u8; 2]; WINDOW] = std::array::from_fn(|u| pair(offset[u] + stride));
+        for (u, out) in out_row.iter_mut().enumerate() {
+            // p0 (256 - f) + p1 f = 256 p0 + (p1 - p0) f: the same integer.
+            let lerp = |[p0, p1]: [u8; 2]| 256 * p0 as i32 + (p1 as i32 - p0 as i32) * fx[u];
+            let (upper, lower) = (lerp(top[u]), lerp(bottom[u]));
+            *out = ((256 * upper + (lower - upper) * fy[u] + (1 << 15)) >> 16) as i16;
         }
     }
 }

@@ -280,6 +280,32 @@ mod tests {
     }
 
     #[test]
+    fn a_plan_bounds_every_read_of_its_window() {
+        // Each sample reads 4 bytes at its top-left pixel and 4 at the pixel below: all must lie
+        // before `end` (the AVX2 gathers rely on it), for any bin, size and position.
+        let mut rng = SplitMix64::new(29);
+        let (w, h, stride) = (300, 260, 311);
+        let data = vec![0u8; stride * h];
+        let img = GrayView::new(&data, w, h, stride).unwrap();
+        let mut planned = 0;
+        for bin in (0..ANGLE_BINS).step_by(7) {
+            let frame = random_frame(&mut rng, w, h, bin);
+            let Some(plan) = SamplePlan::new(&img, &frame) else {
+                continue;
+            };
+            planned += 1;
+            for (u, v) in (0..WINDOW * WINDOW).map(|i| (i % WINDOW, i / WINDOW)) {
+                let [x, y] = frame.sample_position(u, v).map(|p| (p >> 8) as usize);
+                let top_left = y * stride + x;
+                assert!(top_left + stride + 4 <= plan.end, "{frame:?} ({u}, {v})");
+                let relative = top_left as i64 - plan.base as i64;
+                assert!(i32::try_from(relative).is_ok(), "{frame:?} ({u}, {v})");
+            }
+        }
+        assert!(planned > 300, "{planned}");
+    }
+
+    #[test]
     fn masked_bits_equal_the_reference_for_every_mask_and_width() {
         let mut rng = SplitMix64::new(23);
         for round in 0..60 {

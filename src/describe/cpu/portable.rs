@@ -11,30 +11,35 @@ use crate::image::GrayView;
 /// interpolation (vectorised).
 pub(super) fn sample_window(img: &GrayView, plan: &SamplePlan, window: &mut Window) {
     let data = &img.data()[..plan.end];
-    let (base, stride) = (plan.base as isize, plan.stride as isize);
+    let (step, stride) = (plan.step_u, plan.stride as i32);
+    let (mut offset, mut fx, mut fy) = ([0i32; WINDOW], [0i32; WINDOW], [0i32; WINDOW]);
+    let mut pixels = [[0i32; WINDOW]; 4];
     for (v, out_row) in window.chunks_exact_mut(WINDOW).enumerate() {
         let row = [0, 1].map(|axis| plan.start[axis] + v as i32 * plan.step_v[axis]);
-        let position = |u: usize, axis: usize| row[axis] + u as i32 * plan.step_u[axis];
-        let offset: [isize; WINDOW] = std::array::from_fn(|u| {
-            let (x, y) = (position(u, 0), position(u, 1));
-            base + (y >> 16) as isize * stride + (x >> 16) as isize
-        });
-        let fraction =
-            |axis| -> [i32; WINDOW] { std::array::from_fn(|u| (position(u, axis) >> 8) & 255) };
-        let (fx, fy) = (fraction(0), fraction(1));
-        // Bytes 0, 1 of each pair: the sample's pixel and its right neighbour.
-        let pair = |at: isize| -> [u8; 2] {
-            let at = at as usize;
-            data[at..at + 2]
-                .try_into()
-                .expect("inside the plan's bounds")
-        };
-        let top: [[u8; 2]; WINDOW] = std::array::from_fn(|u| pair(offset[u]));
-        let bottom: [[u8; 2]; WINDOW] = std::array::from_fn(|u| pair(offset[u] + stride));
+        for u in 0..WINDOW {
+            let (x, y) = (row[0] + u as i32 * step[0], row[1] + u as i32 * step[1]);
+            // In range by the plan's construction.
+            offset[u] = (y >> 16) * stride + (x >> 16);
+            fx[u] = (x >> 8) & 255;
+            fy[u] = (y >> 8) & 255;
+        }
+        for (u, &relative) in offset.iter().enumerate() {
+            let at = plan.base.wrapping_add_signed(relative as isize);
+            // The sample's pixel and its right neighbour, in its row and the next.
+            let (top, bottom) = (
+                &data[at..at + 2],
+                &data[at + plan.stride..at + plan.stride + 2],
+            );
+            pixels[0][u] = top[0] as i32;
+            pixels[1][u] = top[1] as i32;
+            pixels[2][u] = bottom[0] as i32;
+            pixels[3][u] = bottom[1] as i32;
+        }
         for (u, out) in out_row.iter_mut().enumerate() {
             // p0 (256 - f) + p1 f = 256 p0 + (p1 - p0) f: the same integer.
-            let lerp = |[p0, p1]: [u8; 2]| 256 * p0 as i32 + (p1 as i32 - p0 as i32) * fx[u];
-            let (upper, lower) = (lerp(top[u]), lerp(bottom[u]));
+            let lerp = |p0: i32, p1: i32| 256 * p0 + (p1 - p0) * fx[u];
+            let upper = lerp(pixels[0][u], pixels[1][u]);
+            let lower = lerp(pixels[2][u], pixels[3][u]);
             *out = ((256 * upper + (lower - upper) * fy[u] + (1 << 15)) >> 16) as i16;
         }
     }

@@ -28,6 +28,10 @@ impl Avx2 {
         let data = img.data();
         // A plan made for another image is refused here rather than read out of bounds.
         assert!(plan.end <= data.len() && plan.stride == img.stride());
+        if plan.stride > i16::MAX as usize {
+            // Offsets are 16-bit multiply-adds here; rows this long take the portable kernel.
+            return super::portable::sample_window(img, plan, window);
+        }
         // SAFETY: AVX2 is present (self); every gather reads inside `data` (checked just above, by
         // the plan's construction: see `SamplePlan::end`).
         unsafe { sample_window(data, plan, window) }
@@ -58,7 +62,8 @@ unsafe fn sample_window(data: &[u8], plan: &SamplePlan, window: &mut Window) {
     // SAFETY: `base` and `base + stride` lie inside `data` (`plan.end` is past both).
     let top = unsafe { data.as_ptr().add(plan.base) } as *const i32;
     let below = unsafe { data.as_ptr().add(plan.base + plan.stride) } as *const i32;
-    let stride = _mm256_set1_epi32(plan.stride as i32);
+    // (1, stride) in the 16-bit halves of each lane.
+    let stride = _mm256_set1_epi32(1 | (plan.stride as i32) << 16);
     let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     let lane_x = _mm256_mullo_epi32(lane, _mm256_set1_epi32(plan.step_u[0]));
     let lane_y = _mm256_mullo_epi32(lane, _mm256_set1_epi32(plan.step_u[1]));
@@ -87,6 +92,8 @@ unsafe fn sample_window(data: &[u8], plan: &SamplePlan, window: &mut Window) {
 
 /// Eight bilinear samples at the relative positions `x, y` (see [`SamplePlan`]), as `i32` lanes.
 ///
+/// `stride` holds `(1, stride)` in the 16-bit halves of each lane (`stride` ≤ `i16::MAX`).
+///
 /// # Safety
 /// AVX2; for each lane, 4 bytes at `top + offset` and `below + offset` must be readable.
 #[target_feature(enable = "avx2")]
@@ -103,10 +110,10 @@ unsafe fn bilinear8(
         _mm256_and_si256(_mm256_srli_epi32::<8>(x), byte),
         _mm256_and_si256(_mm256_srli_epi32::<8>(y), byte),
     );
-    let offset = _mm256_add_epi32(
-        _mm256_mullo_epi32(_mm256_srai_epi32::<16>(y), stride),
-        _mm256_srai_epi32::<16>(x),
-    );
+    // The whole-pixel parts `x >> 16`, `y >> 16` are the high halves of the lanes, as i16: put them
+    // side by side and `(x >> 16) + (y >> 16) stride` is one 16-bit multiply-add with (1, stride).
+    let whole = _mm256_blend_epi16::<0b1010_1010>(_mm256_srli_epi32::<16>(x), y);
+    let offset = _mm256_madd_epi16(whole, stride);
     // Each gather brings the sample's pixel in byte 0 and its right neighbour in byte 1 (when the
     // reference clamps that neighbour, fx = 0 and the byte read is multiplied by 0).
     // SAFETY: the caller's contract.
@@ -146,11 +153,49 @@ unsafe fn masked_bits(
     mask: &PixelMask,
     out: &mut [u64],
 ) {
-    // Patch rows 2k and 2k + 1 share a register: mask rows likewise.
-    // SAFETY: reads 4 x 32 bytes of the 128-byte mask.
-    let pair_masks: [__m256i; PATCH / 2] = std::array::from_fn(|k| unsafe {
-        _mm256_loadu_si256(mask.as_ptr().add(2 * k * PATCH) as *const __m256i)
-    });
+    // Rows of weight 0 need no loads: the default weights' row 0 is skipped.
+    // SAFETY: forwarded.
+    if mask[..PATCH].iter().all(|&m| m == 0) {
+        unsafe { masked_bits_from::<1>(window, offsets, mask, out) }
+    } else {
+        unsafe { masked_bits_from::<0>(window, offsets, mask, out) }
+    }
+}
+
+/// Patch rows `FIRST..PATCH` as the kernel loads them: pairs of rows in one register each, then the
+/// last row alone when an odd number remain.
+struct RowMasks {
+    pairs: [__m256i; PATCH / 2],
+    last: __m128i,
+}
+
+/// [`masked_bits`] summing patch rows `FIRST..PATCH` only (the mask is 0 on the rows before).
+///
+/// # Safety
+/// As [`masked_bits`].
+#[target_feature(enable = "avx2")]
+unsafe fn masked_bits_from<const FIRST: usize>(
+    window: &Window,
+    offsets: &[PatchOffsets],
+    mask: &PixelMask,
+    out: &mut [u64],
+) {
+    // SAFETY: reads whole rows of the 8 x 8 mask (pair k: rows FIRST + 2k and FIRST + 2k + 1, only
+    // for those pairs that lie inside it; the last row).
+    let masks = unsafe {
+        let row = |r: usize| mask.as_ptr().add(r * PATCH);
+        RowMasks {
+            pairs: std::array::from_fn(|k| {
+                let r = FIRST + 2 * k;
+                if r + 1 < PATCH {
+                    _mm256_loadu_si256(row(r) as *const __m256i)
+                } else {
+                    _mm256_setzero_si256()
+                }
+            }),
+            last: _mm_loadu_si128(row(PATCH - 1) as *const __m128i),
+        }
+    };
     let pixels = window.as_ptr();
     out.fill(0);
     for (group, triplets) in offsets.chunks_exact(8).enumerate() {
@@ -158,7 +203,7 @@ unsafe fn masked_bits(
         let mut sums = [_mm256_setzero_si256(); 8];
         for (sum, &triplet) in sums.iter_mut().zip(triplets) {
             // SAFETY: the caller's contract (patches inside the window).
-            *sum = unsafe { triplet_sums(pixels, triplet, &pair_masks) };
+            *sum = unsafe { triplet_sums::<FIRST>(pixels, triplet, &masks) };
         }
         // Horizontal sums of the 8 registers, lane j = triplet j: three rounds of pairwise adds.
         let h = |a, b| _mm256_hadd_epi32(a, b);
@@ -176,30 +221,41 @@ unsafe fn masked_bits(
     }
 }
 
-/// Per-lane partial sums of `mask · (a - c)(a + c - 2b)` over one triplet's patches (8 lanes whose
-/// total is the reference's value).
+/// Per-lane partial sums of `mask · (a - c)(a + c - 2b)` over rows `FIRST..PATCH` of one triplet's
+/// patches (8 lanes whose total is the reference's value when the mask is 0 on the rows before).
 ///
 /// # Safety
 /// AVX2; the patches at `offsets` lie inside the window `pixels` points to.
 #[target_feature(enable = "avx2")]
 #[inline]
-unsafe fn triplet_sums(
+unsafe fn triplet_sums<const FIRST: usize>(
     pixels: *const i16,
     [a, b, c]: PatchOffsets,
-    pair_masks: &[__m256i; PATCH / 2],
+    masks: &RowMasks,
 ) -> __m256i {
-    // Rows `2k` (low half) and `2k + 1` (high half) of the patch at `at`.
+    // Rows `r` (low half) and `r + 1` (high half) of the patch at `at`.
     // SAFETY: both rows lie in the patch, inside the window (the caller's contract).
-    let rows = |at: usize, k: usize| unsafe {
-        let p = pixels.add(at + 2 * k * WINDOW);
+    let two_rows = |at: usize, r: usize| unsafe {
+        let p = pixels.add(at + r * WINDOW);
         _mm256_loadu2_m128i(p.add(WINDOW) as *const __m128i, p as *const __m128i)
     };
     let mut sum = _mm256_setzero_si256();
-    for (k, &m) in pair_masks.iter().enumerate() {
-        let (ra, rb, rc) = (rows(a, k), rows(b, k), rows(c, k));
-        let p = _mm256_and_si256(_mm256_sub_epi16(ra, rc), m);
+    for k in 0..(PATCH - FIRST) / 2 {
+        let r = FIRST + 2 * k;
+        let (ra, rb, rc) = (two_rows(a, r), two_rows(b, r), two_rows(c, r));
+        let p = _mm256_and_si256(_mm256_sub_epi16(ra, rc), masks.pairs[k]);
         let q = _mm256_sub_epi16(_mm256_add_epi16(ra, rc), _mm256_add_epi16(rb, rb));
         sum = _mm256_add_epi32(sum, _mm256_madd_epi16(p, q));
+    }
+    if (PATCH - FIRST) % 2 == 1 {
+        // SAFETY: the patch's last row, inside the window.
+        let last_row = |at: usize| unsafe {
+            _mm_loadu_si128(pixels.add(at + (PATCH - 1) * WINDOW) as *const __m128i)
+        };
+        let (ra, rb, rc) = (last_row(a), last_row(b), last_row(c));
+        let p = _mm_and_si128(_mm_sub_epi16(ra, rc), masks.last);
+        let q = _mm_sub_epi16(_mm_add_epi16(ra, rc), _mm_add_epi16(rb, rb));
+        sum = _mm256_add_epi32(sum, _mm256_zextsi128_si256(_mm_madd_epi16(p, q)));
     }
     sum
 }

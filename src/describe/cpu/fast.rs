@@ -247,8 +247,14 @@ mod tests {
     #[test]
     fn fast_sampling_equals_the_reference_for_every_bin() {
         let mut rng = SplitMix64::new(17);
-        // Square, wide, tall images; strides equal to and larger than the width.
-        let shapes = [(97, 89, 97), (160, 70, 171), (70, 150, 70), (400, 300, 403)];
+        // Square, wide, tall images; strides equal to and larger than the width, one longer than the
+        // AVX2 sampler's 16-bit offsets take.
+        let shapes = [
+            (97, 89, 97),
+            (160, 70, 171),
+            (70, 150, 70),
+            (400, 300, 40_003),
+        ];
         for (shape, &(w, h, stride)) in shapes.iter().enumerate() {
             let data: Vec<u8> = (0..stride * h).map(|_| rng.next_u64() as u8).collect();
             let img = GrayView::new(&data, w, h, stride).unwrap();

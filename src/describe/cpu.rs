@@ -1,4 +1,9 @@
 //! The reference descriptor (see the parent module for the numeric contract).
+//!
+//! [`sample_window`] and [`window_bits`] are the contract written out plainly. [`describe`] computes
+//! the same integers faster (`cpu/fast.rs`): AVX2 kernels when the CPU has them (`cpu/avx2.rs`,
+//! detected at run time), portable ones otherwise (`cpu/portable.rs`), each tested equal to the two
+//! reference functions. `BENCHMARKS.md` has the figures.
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
@@ -13,7 +18,7 @@ use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::image::GrayView;
 use crate::keypoint::KeyPoint;
 
-/// A sampled window, row-major `WINDOW x WINDOW` (values 0..=255, widened to `i16` so the patch loops
+/// A sampled window, row-major `WINDOW x WINDOW` (values 0..=255, widened to `i16` so the patch sums
 /// vectorise with 16-bit lanes).
 pub type Window = [i16; WINDOW * WINDOW];
 
@@ -78,7 +83,7 @@ pub fn window_bits(
 
 /// Describes validated keypoints on the CPU, in parallel over keypoints.
 ///
-/// Each keypoint goes through the fast kernels of [`fast`] (the same integers as [`sample_window`]
+/// Each keypoint goes through the fast kernels (`cpu/fast.rs`) (the same integers as [`sample_window`]
 /// and [`window_bits`], tested equal), into one window buffer per worker.
 pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfig) -> Described {
     let width = config.width;

@@ -83,8 +83,9 @@ pub fn window_bits(
 
 /// Describes validated keypoints on the CPU, in parallel over keypoints.
 ///
-/// Each keypoint goes through the fast kernels (`cpu/fast.rs`) (the same integers as [`sample_window`]
-/// and [`window_bits`], tested equal), into one window buffer per worker.
+/// Each keypoint goes through the fast kernels of `cpu/fast.rs` (the same integers as
+/// [`sample_window`] and [`window_bits`], tested equal), into one window buffer per worker; weights
+/// other than 0/1 use [`window_bits`] itself.
 pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfig) -> Described {
     let width = config.width;
     let per = width.words();

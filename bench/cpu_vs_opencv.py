@@ -4,6 +4,7 @@
     python3 -m pip install opencv-contrib-python-headless==5.0.0.93   # numpy comes with it
     cargo build --release --example cpu_describe
     python3 bench/cpu_vs_opencv.py [--rounds 7] [--repeats 5] [--keypoints 5000] [--threshold 6]
+                                   [--baseline OTHER_BUILD_OF_cpu_describe]
 
 The image is assets/astronaut.png (512x512 gray) resized to 1024x768 (bilinear), as in the project's
 LATCH reference measurements. clatch's detector (threshold lowered to reach the keypoint count) picks the
@@ -14,7 +15,9 @@ OpenCV's 27-pixel border filter (clatch's margin is 48), so both describe the sa
 
 Each round times OpenCV (1 thread: its LATCH has no threading), clatch on 1 thread and clatch on all
 threads, `--repeats` times each; the figures are medians over rounds of the per-round medians, in
-microseconds per descriptor. Ratios > 1 mean clatch is faster.
+microseconds per descriptor. Ratios > 1 mean clatch is faster. `--baseline` adds, in each round, the
+1-thread time of another build of the timer (e.g. one built from an older commit), for before/after
+figures from the same run.
 """
 
 import argparse
@@ -42,13 +45,13 @@ def cpu_model():
     return platform.processor() or "unknown"
 
 
-def clatch(args):
-    out = subprocess.run([EXAMPLE, *map(str, args)], capture_output=True, text=True, check=True)
+def clatch(args, timer=EXAMPLE):
+    out = subprocess.run([timer, *map(str, args)], capture_output=True, text=True, check=True)
     return out.stdout.split()
 
 
-def time_clatch(image, keypoints, threads, repeats):
-    fields = clatch(["time", image, keypoints, threads, repeats])
+def time_clatch(image, keypoints, threads, repeats, timer=EXAMPLE):
+    fields = clatch(["time", image, keypoints, threads, repeats], timer)
     values = dict(zip(fields[::2], fields[1::2]))
     return int(values["descriptors"]), float(values["median_us"])
 
@@ -73,6 +76,7 @@ def main():
     parser.add_argument("--keypoints", type=int, default=5000)
     parser.add_argument("--threshold", type=int, default=6)
     parser.add_argument("--threads", type=int, default=os.cpu_count())
+    parser.add_argument("--baseline", help="another build of examples/cpu_describe, timed on 1 thread")
     args = parser.parse_args()
     try:
         import cv2
@@ -94,6 +98,8 @@ def main():
         keypoints = [cv2.KeyPoint(x, y, size, angle) for x, y, size, angle in rows]
 
         rounds = {"opencv": [], "clatch 1 thread": [], f"clatch {args.threads} threads": []}
+        if args.baseline:
+            rounds["baseline 1 thread"] = []
         counts = set()
         for _ in range(args.rounds):
             n, us = time_opencv(cv2, gray, keypoints, args.repeats)
@@ -103,6 +109,10 @@ def main():
                 n, us = time_clatch(image, keypoint_file, threads, args.repeats)
                 rounds[name].append(us)
                 counts.add(("clatch", n))
+            if args.baseline:
+                n, us = time_clatch(image, keypoint_file, 1, args.repeats, args.baseline)
+                rounds["baseline 1 thread"].append(us)
+                counts.add(("baseline", n))
 
     print(f"CPU: {cpu_model()}, {os.cpu_count()} logical CPUs; OpenCV {cv2.__version__}")
     print(f"image: astronaut 1024x768, {len(keypoints)} keypoints; described: {sorted(counts)}")
@@ -116,6 +126,9 @@ def main():
     for name, value in medians.items():
         if name != "opencv":
             print(f"  OpenCV / {name}: {opencv / value:.2f}x")
+    if args.baseline:
+        speedup = medians["baseline 1 thread"] / medians["clatch 1 thread"]
+        print(f"  baseline / clatch, 1 thread: {speedup:.2f}x")
 
 
 if __name__ == "__main__":

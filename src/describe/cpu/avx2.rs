@@ -3,14 +3,15 @@
 //!
 //! Why `unsafe`: the intrinsics need AVX2, which [`Avx2::detect`] checks at run time (holding an
 //! [`Avx2`] value is the proof), and the loads/gathers read through raw pointers, whose bounds are
-//! checked once per window ([`SamplePlan::new`]) or once per crate build (the triplet table, see
-//! `fast::OFFSETS`) instead of per pixel.
+//! checked once per window ([`SamplePlan::new`]) or once per crate build (the triplet table,
+//! [`OFFSETS`]) instead of per pixel.
 
 use std::arch::x86_64::*;
 
 use super::Window;
-use super::fast::{PatchOffsets, PixelMask, SamplePlan};
+use super::fast::{OFFSETS, PatchOffsets, PixelMask, SamplePlan};
 use crate::describe::{PATCH, WINDOW};
+use crate::descriptor::DescriptorWidth;
 use crate::image::GrayView;
 
 /// Proof that the CPU runs AVX2 (only [`Avx2::detect`] makes one).
@@ -37,18 +38,19 @@ impl Avx2 {
         unsafe { sample_window(data, plan, window) }
     }
 
-    /// Exactly [`super::window_bits`] for 0/1 weights (`mask`), for the triplets `offsets` (a multiple
-    /// of 8 of them, as every [`crate::DescriptorWidth`] is).
+    /// Exactly [`super::window_bits`] for 0/1 weights (`mask`).
     pub(super) fn masked_bits(
         self,
         window: &Window,
-        offsets: &[PatchOffsets],
+        width: DescriptorWidth,
         mask: &PixelMask,
         out: &mut [u64],
     ) {
+        // Every width is a multiple of 8 bits: whole groups of 8 triplets.
+        let offsets = &OFFSETS[..width.bits()];
         assert!(offsets.len().is_multiple_of(8) && out.len() * 64 >= offsets.len());
-        // SAFETY: AVX2 is present (self); every offset comes from `fast::OFFSETS`, whose patches lie
-        // inside the window (a const assertion), and the loads read only those patches.
+        // SAFETY: AVX2 is present (self); the offsets come from `OFFSETS`, whose patches lie inside
+        // the window (a const assertion), and the loads read only those patches.
         unsafe { masked_bits(window, offsets, mask, out) }
     }
 }

@@ -78,11 +78,12 @@ impl Kernels {
         mask: &PixelMask,
         out: &mut [u64],
     ) {
-        let offsets = &OFFSETS[..width.bits()];
         match self {
             #[cfg(target_arch = "x86_64")]
-            Kernels::Avx2(avx2) => avx2.masked_bits(window, offsets, mask, out),
-            Kernels::Portable => super::portable::masked_bits(window, offsets, mask, out),
+            Kernels::Avx2(avx2) => avx2.masked_bits(window, width, mask, out),
+            Kernels::Portable => {
+                super::portable::masked_bits(window, &OFFSETS[..width.bits()], mask, out)
+            }
         }
     }
 }
@@ -92,8 +93,15 @@ impl Kernels {
 /// the pixel below (the clamped neighbours of the reference have weight 0, so reading the next pixel
 /// instead is exact). `None` (the reference then samples) only for windows that come within a row of
 /// the end of the buffer, or for images too large for 32-bit offsets.
+///
+/// Only [`SamplePlan::new`] makes one (the field is private), so holding one means its bounds were
+/// checked; the unsafe AVX2 sampler relies on that.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct SamplePlan {
+pub(super) struct SamplePlan(PlanFields);
+
+/// What a [`SamplePlan`] holds (readable through it).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct PlanFields {
     /// Index in the image data of the keypoint's whole-pixel position `(x0, y0)`.
     pub(super) base: usize,
     /// Row stride of the image.
@@ -162,17 +170,27 @@ impl SamplePlan {
         let base = whole[1] * stride + whole[0];
         // A sample reads 4 bytes from its top-left pixel and 4 from the pixel below.
         let end = base + highest + stride + 4;
-        if !(lanes_fit && steps_fit && base + lowest >= 0 && end <= img.data().len() as i64) {
+        // `highest >= 0` (the keypoint's own pixel is sampled) puts `base + stride` before `end`.
+        let inside = base + lowest >= 0 && highest >= 0 && end <= img.data().len() as i64;
+        if !(lanes_fit && steps_fit && inside) {
             return None;
         }
-        Some(Self {
+        Some(Self(PlanFields {
             base: base as usize,
             stride: img.stride(),
             end: end as usize,
             start: start.map(|s| s as i32),
             step_u: frame.step_u.map(|s| s as i32),
             step_v: frame.step_v.map(|s| s as i32),
-        })
+        }))
+    }
+}
+
+impl std::ops::Deref for SamplePlan {
+    type Target = PlanFields;
+
+    fn deref(&self) -> &PlanFields {
+        &self.0
     }
 }
 

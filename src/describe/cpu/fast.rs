@@ -59,7 +59,6 @@ impl Kernels {
 
     /// Samples the window of a frame that fits the image: exactly [`super::sample_window`].
     pub(super) fn sample(self, img: &GrayView, frame: &SamplingFrame, window: &mut Window) {
-        #[cfg(target_arch = "x86_64")]
         let Some(plan) = SamplePlan::new(img, frame) else {
             return super::sample_window(img, frame, window);
         };

@@ -1,5 +1,7 @@
 //! Extraction benchmarks on a 1024x768 synthetic image: description of ~2000 and ~10000 keypoints
-//! (throughput in keypoints = descriptors per second) and detection alone.
+//! (throughput in keypoints = descriptors per second) and detection alone; and the CPU describe on
+//! one thread and on all threads, same photograph and keypoints (`assets/astronaut.png` enlarged to
+//! 1024x768, 5000 detected keypoints: the image `bench/cpu_vs_opencv.py` compares with OpenCV).
 //!
 //! `cargo bench --bench extract`
 
@@ -62,5 +64,58 @@ fn extraction(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, extraction);
+/// The embedded photograph enlarged to 1024x768 (bilinear) and its 5000 strongest keypoints.
+fn astronaut_and_keypoints() -> (image::GrayImage, Vec<KeyPoint>) {
+    let decoded = image::load_from_memory(include_bytes!("../assets/astronaut.png")).unwrap();
+    let gray = clatch::image::gray_from_dynamic(&decoded);
+    let big = image::imageops::resize(
+        &gray,
+        WIDTH as u32,
+        HEIGHT as u32,
+        image::imageops::FilterType::Triangle,
+    );
+    let mut config = ExtractorConfig::default();
+    config.detector.max_keypoints = 5000;
+    config.detector.threshold = 6;
+    let view = GrayView::new(big.as_raw(), WIDTH, HEIGHT, WIDTH).unwrap();
+    let keypoints = Extractor::new(Backend::Cpu, config)
+        .unwrap()
+        .detect(&view)
+        .unwrap();
+    (big, keypoints)
+}
+
+fn describe_threads(c: &mut Criterion) {
+    let (big, kps) = astronaut_and_keypoints();
+    let image = GrayView::new(big.as_raw(), WIDTH, HEIGHT, WIDTH).unwrap();
+    let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
+    let all = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut group = c.benchmark_group(format!(
+        "cpu describe astronaut 1024x768, {} keypoints",
+        kps.len()
+    ));
+    group
+        .measurement_time(Duration::from_secs(4))
+        .sample_size(20)
+        .throughput(Throughput::Elements(kps.len() as u64));
+    for threads in [1, all] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        assert!(extractor.describe(&image, &kps).unwrap().skipped.is_empty());
+        group.bench_function(BenchmarkId::new("threads", threads), |b| {
+            b.iter(|| {
+                pool.install(|| {
+                    extractor
+                        .describe(black_box(&image), black_box(&kps))
+                        .unwrap()
+                })
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, extraction, describe_threads);
 criterion_main!(benches);

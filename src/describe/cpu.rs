@@ -1,4 +1,14 @@
 //! The reference descriptor (see the parent module for the numeric contract).
+//!
+//! [`sample_window`] and [`window_bits`] are the contract written out plainly. [`describe`] computes
+//! the same integers faster (`cpu/fast.rs`): AVX2 kernels when the CPU has them (`cpu/avx2.rs`,
+//! detected at run time), portable ones otherwise (`cpu/portable.rs`), each tested equal to the two
+//! reference functions. `BENCHMARKS.md` has the figures.
+
+#[cfg(target_arch = "x86_64")]
+mod avx2;
+mod fast;
+mod portable;
 
 use rayon::prelude::*;
 
@@ -8,7 +18,7 @@ use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::image::GrayView;
 use crate::keypoint::KeyPoint;
 
-/// A sampled window, row-major `WINDOW x WINDOW` (values 0..=255, widened to `i16` so the patch loops
+/// A sampled window, row-major `WINDOW x WINDOW` (values 0..=255, widened to `i16` so the patch sums
 /// vectorise with 16-bit lanes).
 pub type Window = [i16; WINDOW * WINDOW];
 
@@ -56,31 +66,6 @@ fn triplet_difference(window: &Window, triplet: &[u8; 6], weights: &[i32; PATCH 
     d
 }
 
-/// The same value when every weight is 0 or 1 (`mask` = -1 where the weight is 1), by the identity
-/// `(a - b)² - (c - b)² = (a - c)(a + c - 2b)`: both factors fit `i16`, so the loop is a 16-bit
-/// multiply-add that vectorises (SSE2 `pmaddwd`); the sum is exact in `i32` like the reference.
-#[inline]
-fn triplet_difference_masked(
-    window: &Window,
-    triplet: &[u8; 6],
-    mask: &[i16; PATCH * PATCH],
-) -> i32 {
-    let [ax, ay, bx, by, cx, cy] = triplet.map(|v| v as usize);
-    let mut lanes = [0i32; PATCH];
-    for r in 0..PATCH {
-        let a = &window[(ay + r) * WINDOW + ax..][..PATCH];
-        let b = &window[(by + r) * WINDOW + bx..][..PATCH];
-        let c = &window[(cy + r) * WINDOW + cx..][..PATCH];
-        let m = &mask[r * PATCH..][..PATCH];
-        for s in 0..PATCH {
-            let p = (a[s] - c[s]) & m[s];
-            let q = a[s] + c[s] - b[s] - b[s];
-            lanes[s] += p as i32 * q as i32;
-        }
-    }
-    lanes.iter().sum()
-}
-
 /// The first `width` bits of the descriptor of a sampled window, packed least significant bit first.
 pub fn window_bits(
     window: &Window,
@@ -89,28 +74,24 @@ pub fn window_bits(
     out: &mut [u64],
 ) {
     out.fill(0);
-    let triplets = TRIPLETS[..width.bits()].iter().enumerate();
-    if weights.iter().all(|&w| w == 0 || w == 1) {
-        let mask = weights.map(|w| -(w as i16));
-        for (t, triplet) in triplets {
-            if triplet_difference_masked(window, triplet, &mask) < 0 {
-                out[t / 64] |= 1 << (t % 64);
-            }
-        }
-    } else {
-        for (t, triplet) in triplets {
-            if triplet_difference(window, triplet, weights) < 0 {
-                out[t / 64] |= 1 << (t % 64);
-            }
+    for (t, triplet) in TRIPLETS[..width.bits()].iter().enumerate() {
+        if triplet_difference(window, triplet, weights) < 0 {
+            out[t / 64] |= 1 << (t % 64);
         }
     }
 }
 
 /// Describes validated keypoints on the CPU, in parallel over keypoints.
+///
+/// Each keypoint goes through the fast kernels of `cpu/fast.rs` (the same integers as
+/// [`sample_window`] and [`window_bits`], tested equal), into one window buffer per worker; weights
+/// other than 0/1 use [`window_bits`] itself.
 pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfig) -> Described {
     let width = config.width;
     let per = width.words();
     let weights = config.weights.as_array().map(|w| w as i32);
+    let kernels = fast::Kernels::detect();
+    let mask = fast::pixel_mask(&weights);
     let frames: Vec<Option<SamplingFrame>> = keypoints
         .iter()
         .map(|kp| Some(SamplingFrame::of(kp)).filter(|f| f.fits(img.width(), img.height())))
@@ -135,8 +116,11 @@ pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfi
                 let frame = frames[i]
                     .as_ref()
                     .expect("only fitting frames are described");
-                sample_window(img, frame, window);
-                window_bits(window, width, &weights, out);
+                kernels.sample(img, frame, window);
+                match &mask {
+                    Some(mask) => kernels.masked_bits(window, width, mask, out),
+                    None => window_bits(window, width, &weights, out),
+                }
             },
         );
     Described {
@@ -259,40 +243,79 @@ mod tests {
     }
 
     #[test]
-    fn mask_form_equals_the_reference_form() {
-        // The 16-bit (a - c)(a + c - 2b) form must give exactly the reference's value for every triplet,
-        // and non-binary weights (here the mask doubled: same signs) must give the same bits.
+    fn scaling_the_weights_keeps_the_bits() {
+        // d scales with the weights, so its sign, the bit, does not change.
         let mut rng = crate::synthetic::SplitMix64::new(9);
-        for round in 0..40 {
+        for round in 0..20 {
             let mut window: Window = [0; WINDOW * WINDOW];
             for p in window.iter_mut() {
                 *p = (rng.next_u64() % 256) as i16;
             }
-            let random_mask: Vec<u32> = (0..64).map(|_| (rng.next_u64() % 2) as u32).collect();
-            let masks = [
+            let random: Vec<u32> = (0..64).map(|_| 1 + (rng.next_u64() % 9) as u32).collect();
+            for weights in [
                 PatchWeights::latch_7x7(),
-                PatchWeights::uniform(),
-                PatchWeights::new(&random_mask).unwrap_or_else(|_| PatchWeights::uniform()),
-            ];
-            for weights in masks {
+                PatchWeights::new(&random).unwrap(),
+            ] {
                 let w = weights.as_array().map(|w| w as i32);
-                let mask = w.map(|w| -(w as i16));
-                for triplet in &TRIPLETS {
-                    assert_eq!(
-                        triplet_difference_masked(&window, triplet, &mask),
-                        triplet_difference(&window, triplet, &w),
-                        "round {round}, triplet {triplet:?}"
-                    );
-                }
-                let (mut fast, mut general) = ([0u64; 8], [0u64; 8]);
-                window_bits(&window, DescriptorWidth::FULL, &w, &mut fast);
+                let (mut once, mut thrice) = ([0u64; 8], [0u64; 8]);
+                window_bits(&window, DescriptorWidth::FULL, &w, &mut once);
                 window_bits(
                     &window,
                     DescriptorWidth::FULL,
-                    &w.map(|w| 2 * w),
-                    &mut general,
+                    &w.map(|w| 3 * w),
+                    &mut thrice,
                 );
-                assert_eq!(fast, general, "round {round}");
+                assert_eq!(once, thrice, "round {round}");
+                assert_ne!(once, [0; 8], "round {round}: some bit is set");
+            }
+        }
+    }
+
+    #[test]
+    fn describe_equals_the_reference_for_every_weighting() {
+        // The fast path of `describe` against `sample_window` + `window_bits`, keypoint by keypoint, on
+        // a strided image: random positions (1/64 pixel), sizes and angles, some windows outside.
+        let (w, h, stride) = (300, 220, 307);
+        let mut rng = crate::synthetic::SplitMix64::new(5);
+        let data: Vec<u8> = (0..stride * h).map(|_| rng.next_u64() as u8).collect();
+        let img = GrayView::new(&data, w, h, stride).unwrap();
+        let keypoints: Vec<KeyPoint> = (0..300)
+            .map(|_| {
+                let x = rng.below(64 * (w as u64 - 1)) as f32 / 64.0;
+                let y = rng.below(64 * (h as u64 - 1)) as f32 / 64.0;
+                let kp = KeyPoint::new(x, y).with_angle(rng.below(2880) as f32 / 8.0);
+                KeyPoint {
+                    size: 1.0 + rng.below(160) as f32 / 2.0,
+                    ..kp
+                }
+            })
+            .collect();
+        let random_mask: Vec<u32> = (0..64).map(|_| (rng.next_u64() % 2) as u32).collect();
+        let random_weights: Vec<u32> = (0..64).map(|_| (rng.next_u64() % 7) as u32).collect();
+        for (weights, bits) in [
+            (PatchWeights::latch_7x7(), 512),
+            (PatchWeights::latch_7x7(), 136),
+            (PatchWeights::uniform(), 512),
+            (PatchWeights::new(&random_mask).unwrap(), 256),
+            (PatchWeights::new(&random_weights).unwrap(), 512),
+        ] {
+            let config = DescriptorConfig {
+                width: DescriptorWidth::from_bits(bits).unwrap(),
+                weights,
+            };
+            let described = describe(&img, &keypoints, &config);
+            assert!(described.keypoint_index.len() > 100 && !described.skipped.is_empty());
+            let w32 = config.weights.as_array().map(|w| w as i32);
+            for (row, &i) in described.keypoint_index.iter().enumerate() {
+                let mut window: Window = [0; WINDOW * WINDOW];
+                sample_window(&img, &SamplingFrame::of(&keypoints[i]), &mut window);
+                let mut expected = vec![0u64; config.width.words()];
+                window_bits(&window, config.width, &w32, &mut expected);
+                assert_eq!(
+                    described.descriptors.get(row).unwrap(),
+                    &expected[..],
+                    "{i}"
+                );
             }
         }
     }

@@ -8,7 +8,9 @@ mod common;
 use std::path::PathBuf;
 
 use clatch::colmap::{ColmapError, Database, MatchList, PinholeCamera};
-use clatch::{Backend, Extractor, ExtractorConfig, Features, KeyPoint, Match, MatchConfig, Matcher};
+use clatch::{
+    Backend, Extractor, ExtractorConfig, Features, KeyPoint, Match, MatchConfig, Matcher,
+};
 use common::{Gray, astronaut};
 use rusqlite::Connection;
 
@@ -35,7 +37,11 @@ fn features() -> Vec<Features> {
     let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
     OFFSETS
         .iter()
-        .map(|&o| extractor.detect_and_describe(&crop(&photo, o).view()).unwrap())
+        .map(|&o| {
+            extractor
+                .detect_and_describe(&crop(&photo, o).view())
+                .unwrap()
+        })
         .collect()
 }
 
@@ -69,7 +75,10 @@ fn database_holds_colmap_ids_blobs_and_conventions() {
     let camera = PinholeCamera::from_k_text("500 0 192\n0 510 191\n0 0 1", 384, 384).unwrap();
     let camera_id = db.add_camera(&camera).unwrap();
     let names = ["crop0.png", "crop1.png", "crop2.png"];
-    let ids: Vec<u32> = names.iter().map(|n| db.add_image(n, camera_id).unwrap()).collect();
+    let ids: Vec<u32> = names
+        .iter()
+        .map(|n| db.add_image(n, camera_id).unwrap())
+        .collect();
     for (id, f) in ids.iter().zip(&features) {
         db.set_keypoints(*id, &f.keypoints).unwrap();
     }
@@ -93,19 +102,37 @@ fn database_holds_colmap_ids_blobs_and_conventions() {
     // COLMAP 3.8's columns.
     assert_eq!(
         columns(&sql, "cameras"),
-        ["camera_id", "model", "width", "height", "params", "prior_focal_length"]
+        [
+            "camera_id",
+            "model",
+            "width",
+            "height",
+            "params",
+            "prior_focal_length"
+        ]
     );
-    assert_eq!(columns(&sql, "images")[..3], ["image_id", "name", "camera_id"]);
+    assert_eq!(
+        columns(&sql, "images")[..3],
+        ["image_id", "name", "camera_id"]
+    );
     assert_eq!(columns(&sql, "images").len(), 10);
-    assert_eq!(columns(&sql, "keypoints"), ["image_id", "rows", "cols", "data"]);
-    assert_eq!(columns(&sql, "matches"), ["pair_id", "rows", "cols", "data"]);
+    assert_eq!(
+        columns(&sql, "keypoints"),
+        ["image_id", "rows", "cols", "data"]
+    );
+    assert_eq!(
+        columns(&sql, "matches"),
+        ["pair_id", "rows", "cols", "data"]
+    );
     assert_eq!(columns(&sql, "two_view_geometries").len(), 10);
 
     // The camera: PINHOLE (model 1), float64 params, a known focal length.
     let (model, width, height, params, prior): (i64, i64, i64, Vec<u8>, i64) = sql
-        .query_row("SELECT model, width, height, params, prior_focal_length FROM cameras", [], |r| {
-            Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?))
-        })
+        .query_row(
+            "SELECT model, width, height, params, prior_focal_length FROM cameras",
+            [],
+            |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?)),
+        )
         .unwrap();
     assert_eq!((model, width, height, prior), (1, 384, 384, 1));
     let params: Vec<f64> = params
@@ -115,7 +142,9 @@ fn database_holds_colmap_ids_blobs_and_conventions() {
     assert_eq!(params, [500.0, 510.0, 192.0, 191.0]);
 
     // Images: ids from 1, in insertion order, all on camera 1.
-    let mut stmt = sql.prepare("SELECT image_id, name, camera_id FROM images ORDER BY image_id").unwrap();
+    let mut stmt = sql
+        .prepare("SELECT image_id, name, camera_id FROM images ORDER BY image_id")
+        .unwrap();
     let images: Vec<(i64, String, i64)> = stmt
         .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
         .unwrap()
@@ -123,16 +152,22 @@ fn database_holds_colmap_ids_blobs_and_conventions() {
         .collect();
     assert_eq!(
         images,
-        [(1, "crop0.png".into(), 1), (2, "crop1.png".into(), 1), (3, "crop2.png".into(), 1)]
+        [
+            (1, "crop0.png".into(), 1),
+            (2, "crop1.png".into(), 1),
+            (3, "crop2.png".into(), 1)
+        ]
     );
 
     // Keypoints: rows x 4 float32, centre of the first pixel at (0.5, 0.5), angle in radians.
     let mut stored_keypoints = Vec::new();
     for (id, f) in ids.iter().zip(&features) {
         let (rows, cols, data): (i64, i64, Vec<u8>) = sql
-            .query_row("SELECT rows, cols, data FROM keypoints WHERE image_id = ?1", [id], |r| {
-                Ok((r.get(0)?, r.get(1)?, r.get(2)?))
-            })
+            .query_row(
+                "SELECT rows, cols, data FROM keypoints WHERE image_id = ?1",
+                [id],
+                |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)),
+            )
             .unwrap();
         assert_eq!((rows as usize, cols), (f.keypoints.len(), 4));
         assert_eq!(data.len(), rows as usize * 4 * 4);
@@ -149,7 +184,9 @@ fn database_holds_colmap_ids_blobs_and_conventions() {
 
     // Matches: one row per pair under 2147483647 * min + max, rows x 2 uint32, first column the
     // smaller image id's keypoint, every index in range, and the pairs agree with the crop offsets.
-    let mut stmt = sql.prepare("SELECT pair_id, rows, cols, data FROM matches ORDER BY pair_id").unwrap();
+    let mut stmt = sql
+        .prepare("SELECT pair_id, rows, cols, data FROM matches ORDER BY pair_id")
+        .unwrap();
     let stored: Vec<(i64, i64, i64, Vec<u8>)> = stmt
         .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)))
         .unwrap()
@@ -169,7 +206,11 @@ fn database_holds_colmap_ids_blobs_and_conventions() {
         let (lo, hi) = if id_a < id_b { (*a, *b) } else { (*b, *a) };
         let mut agreeing = 0;
         for (row, mm) in indices.chunks_exact(2).zip(m) {
-            let expected = if id_a < id_b { [mm.query, mm.train] } else { [mm.train, mm.query] };
+            let expected = if id_a < id_b {
+                [mm.query, mm.train]
+            } else {
+                [mm.train, mm.query]
+            };
             assert_eq!(row, expected);
             let (kl, kh) = (&stored_keypoints[lo], &stored_keypoints[hi]);
             assert!((row[0] as usize) < kl.len() / 4 && (row[1] as usize) < kh.len() / 4);
@@ -198,36 +239,78 @@ fn database_holds_colmap_ids_blobs_and_conventions() {
 fn bad_input_is_a_typed_error() {
     let path = temp_db("errors");
     let mut db = Database::create(&path).unwrap();
-    let camera = db.add_camera(&PinholeCamera::guess(100, 80).unwrap()).unwrap();
+    let camera = db
+        .add_camera(&PinholeCamera::guess(100, 80).unwrap())
+        .unwrap();
     let a = db.add_image("a.png", camera).unwrap();
     let b = db.add_image("b.png", camera).unwrap();
-    assert!(matches!(db.add_image("a.png", camera), Err(ColmapError::InvalidImageName { .. })));
-    assert!(matches!(db.add_image("/abs.png", camera), Err(ColmapError::InvalidImageName { .. })));
-    let m = [Match { query: 1, train: 0, distance: 3 }];
+    assert!(matches!(
+        db.add_image("a.png", camera),
+        Err(ColmapError::InvalidImageName { .. })
+    ));
+    assert!(matches!(
+        db.add_image("/abs.png", camera),
+        Err(ColmapError::InvalidImageName { .. })
+    ));
+    let m = [Match {
+        query: 1,
+        train: 0,
+        distance: 3,
+    }];
     // Keypoints first.
-    assert!(matches!(db.add_matches(a, b, &m), Err(ColmapError::UnknownImage { .. })));
-    db.set_keypoints(a, &[KeyPoint::new(1.0, 2.0), KeyPoint::new(3.0, 4.0)]).unwrap();
+    assert!(matches!(
+        db.add_matches(a, b, &m),
+        Err(ColmapError::UnknownImage { .. })
+    ));
+    db.set_keypoints(a, &[KeyPoint::new(1.0, 2.0), KeyPoint::new(3.0, 4.0)])
+        .unwrap();
     db.set_keypoints(b, &[KeyPoint::new(5.0, 6.0)]).unwrap();
-    assert!(matches!(db.set_keypoints(b, &[]), Err(ColmapError::Duplicate { .. })));
-    assert!(matches!(db.set_keypoints(99, &[]), Err(ColmapError::UnknownImage { image_id: 99 })));
+    assert!(matches!(
+        db.set_keypoints(b, &[]),
+        Err(ColmapError::Duplicate { .. })
+    ));
+    assert!(matches!(
+        db.set_keypoints(99, &[]),
+        Err(ColmapError::UnknownImage { image_id: 99 })
+    ));
     // Index 1 exists in a (2 keypoints) but not in b (1 keypoint).
     let e = db.add_matches(b, a, &m).unwrap_err();
     assert!(
         matches!(e, ColmapError::MatchOutOfRange { image_id, keypoint: 1, keypoints: 1, .. } if image_id == b),
         "{e}"
     );
-    assert!(matches!(db.add_matches(a, a, &m), Err(ColmapError::SamePair { .. })));
+    assert!(matches!(
+        db.add_matches(a, a, &m),
+        Err(ColmapError::SamePair { .. })
+    ));
     db.add_matches(a, b, &m).unwrap();
-    assert!(matches!(db.add_matches(b, a, &[]), Err(ColmapError::Duplicate { .. })));
+    assert!(matches!(
+        db.add_matches(b, a, &[]),
+        Err(ColmapError::Duplicate { .. })
+    ));
     db.finish().unwrap();
     // An existing file is never overwritten.
-    assert!(matches!(Database::create(&path), Err(ColmapError::DatabaseExists { .. })));
+    assert!(matches!(
+        Database::create(&path),
+        Err(ColmapError::DatabaseExists { .. })
+    ));
     std::fs::remove_file(&path).ok();
 }
 
 #[test]
 fn match_list_is_colmaps_text_format() {
-    let m = [Match { query: 4, train: 0, distance: 1 }, Match { query: 2, train: 9, distance: 5 }];
+    let m = [
+        Match {
+            query: 4,
+            train: 0,
+            distance: 1,
+        },
+        Match {
+            query: 2,
+            train: 9,
+            distance: 5,
+        },
+    ];
     let mut list = MatchList::new(Vec::new());
     list.add_pair("b.jpg", "a.jpg", &m).unwrap();
     list.add_pair("a.jpg", "c.jpg", &[]).unwrap();

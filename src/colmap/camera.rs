@@ -122,12 +122,18 @@ mod tests {
     #[test]
     fn k_files_are_parsed_and_checked() {
         // Trailing spaces and a missing final newline, as in real K.txt files.
-        let camera = PinholeCamera::from_k_text("2905.88 0 1416 \n0 2905.88 1064\n0 0 1", 2832, 2128)
-            .unwrap();
+        let camera =
+            PinholeCamera::from_k_text("2905.88 0 1416 \n0 2905.88 1064\n0 0 1", 2832, 2128)
+                .unwrap();
         assert_eq!(camera.fx, 2905.88);
         assert_eq!(camera.cx, 1416.0);
         assert!(camera.focal_is_known);
-        for bad in ["1 0 1 0 1 1 0 0", "1 0 1 0 1 1 0 0 2", "1 0 x 0 1 1 0 0 1", "0 0 1 0 1 1 0 0 1"] {
+        for bad in [
+            "1 0 1 0 1 1 0 0",
+            "1 0 1 0 1 1 0 0 2",
+            "1 0 x 0 1 1 0 0 1",
+            "0 0 1 0 1 1 0 0 1",
+        ] {
             assert!(
                 PinholeCamera::from_k_text(bad, 10, 10).is_err(),
                 "{bad} should be refused"
@@ -138,7 +144,10 @@ mod tests {
     #[test]
     fn guess_follows_colmap() {
         let camera = PinholeCamera::guess(3000, 2000).unwrap();
-        assert_eq!((camera.fx, camera.fy, camera.cx, camera.cy), (3600.0, 3600.0, 1500.0, 1000.0));
+        assert_eq!(
+            (camera.fx, camera.fy, camera.cx, camera.cy),
+            (3600.0, 3600.0, 1500.0, 1000.0)
+        );
         assert!(!camera.focal_is_known);
         assert!(PinholeCamera::guess(0, 10).is_err());
         let blob = camera.params_blob();

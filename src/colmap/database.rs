@@ -219,8 +219,7 @@ pub fn check_match_indices(
     n2: usize,
 ) -> Result<(), ColmapError> {
     for (index, m) in matches.iter().enumerate() {
-        for (image_id, keypoint, keypoints) in
-            [(image_id1, m.query, n1), (image_id2, m.train, n2)]
+        for (image_id, keypoint, keypoints) in [(image_id1, m.query, n1), (image_id2, m.train, n2)]
         {
             if keypoint as usize >= keypoints {
                 return Err(ColmapError::MatchOutOfRange {

@@ -55,14 +55,7 @@ pub fn image_ids_of_pair(pair_id: u64) -> (u32, u32) {
 pub fn keypoints_blob(keypoints: &[KeyPoint]) -> Vec<u8> {
     keypoints
         .iter()
-        .flat_map(|k| {
-            [
-                k.x + 0.5,
-                k.y + 0.5,
-                k.size / 2.0,
-                k.angle.to_radians(),
-            ]
-        })
+        .flat_map(|k| [k.x + 0.5, k.y + 0.5, k.size / 2.0, k.angle.to_radians()])
         .flat_map(f32::to_le_bytes)
         .collect()
 }

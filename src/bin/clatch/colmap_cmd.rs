@@ -72,16 +72,30 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let progress = Progress::counter(images.len() as u64, "extracting features");
     let start = Instant::now();
     let extract_one = |(path, name): (&PathBuf, &String)| {
-        let photo = extract(&extractor, path, name, settings.extractor.detector.max_keypoints, args.grid);
+        let photo = extract(
+            &extractor,
+            path,
+            name,
+            settings.extractor.detector.max_keypoints,
+            args.grid,
+        );
         progress.done();
         photo
     };
     // The CPU extractor is parallel inside; decoding a JPEG is not, so on the CPU photos go two by two
     // through rayon too. A GPU extractor is fed one photo at a time.
     let photos: Vec<Photo> = if settings.backend == Backend::Cpu {
-        images.par_iter().zip(names.par_iter()).map(extract_one).collect::<Result<_, _>>()?
+        images
+            .par_iter()
+            .zip(names.par_iter())
+            .map(extract_one)
+            .collect::<Result<_, _>>()?
     } else {
-        images.iter().zip(names.iter()).map(extract_one).collect::<Result<_, _>>()?
+        images
+            .iter()
+            .zip(names.iter())
+            .map(extract_one)
+            .collect::<Result<_, _>>()?
     };
     times.extract = start.elapsed();
     progress.finish();
@@ -93,10 +107,17 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
         .collect();
     let progress = Progress::counter(pairs.len() as u64, "matching pairs");
     let start = Instant::now();
-    let needed = if settings.matching.ratio.is_some() { 2 } else { 1 };
+    let needed = if settings.matching.ratio.is_some() {
+        2
+    } else {
+        1
+    };
     let mut matches: Vec<Vec<Match>> = Vec::with_capacity(pairs.len());
     for &(i, j) in &pairs {
-        let (a, b) = (&photos[i].features.descriptors, &photos[j].features.descriptors);
+        let (a, b) = (
+            &photos[i].features.descriptors,
+            &photos[j].features.descriptors,
+        );
         // The ratio test needs two gallery descriptors; a featureless photo simply matches nothing.
         matches.push(if a.is_empty() || b.len() < needed {
             Vec::new()
@@ -111,7 +132,12 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     // Write the database and the match list.
     let start = Instant::now();
     let match_list = workspace.join("matches.txt");
-    write_database(&args.database, k_text.as_deref(), args.camera_k.as_deref(), &photos)?;
+    write_database(
+        &args.database,
+        k_text.as_deref(),
+        args.camera_k.as_deref(),
+        &photos,
+    )?;
     write_match_list(&match_list, &photos, &pairs, &matches)?;
     times.write = start.elapsed();
 
@@ -163,7 +189,10 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let start = Instant::now();
     let mut models = Vec::new();
     for model in model_dirs(&sparse)? {
-        let output = colmap.run("model_analyzer", &[OsString::from("--path"), model.clone().into()])?;
+        let output = colmap.run(
+            "model_analyzer",
+            &[OsString::from("--path"), model.clone().into()],
+        )?;
         models.push(parse_model_analyzer(&model, &output)?);
     }
     times.analyze = start.elapsed();
@@ -330,7 +359,12 @@ fn verified_pairs(database: &Path) -> Result<(usize, usize), CliError> {
     db.query_row(
         "SELECT COUNT(*), COALESCE(SUM(rows), 0) FROM two_view_geometries WHERE rows > 0",
         [],
-        |row| Ok((row.get::<_, i64>(0)? as usize, row.get::<_, i64>(1)? as usize)),
+        |row| {
+            Ok((
+                row.get::<_, i64>(0)? as usize,
+                row.get::<_, i64>(1)? as usize,
+            ))
+        },
     )
     .map_err(|e| sql(e).into())
 }
@@ -362,7 +396,11 @@ fn print_extraction_report(
     let keypoints: usize = photos.iter().map(|p| p.features.keypoints.len()).sum();
     let putative: usize = matches.iter().map(Vec::len).sum();
     println!("clatch colmap (COLMAP 3.8 database)");
-    println!("  images      {} in {}", photos.len(), args.images.display());
+    println!(
+        "  images      {} in {}",
+        photos.len(),
+        args.images.display()
+    );
     println!("  backend     {backend}");
     println!(
         "  keypoints   {keypoints} ({:.0} per image)",
@@ -397,10 +435,21 @@ fn print_colmap_report(
     match models.iter().max_by_key(|m| m.registered) {
         None => println!("  model       none: the mapper registered no image"),
         Some(best) => {
-            println!("  model       {} ({} in all)", best.path.display(), models.len());
-            println!("  registered  {} of {} images", best.registered, photos.len());
+            println!(
+                "  model       {} ({} in all)",
+                best.path.display(),
+                models.len()
+            );
+            println!(
+                "  registered  {} of {} images",
+                best.registered,
+                photos.len()
+            );
             println!("  points      {}", best.points);
-            println!("  track       {:.2} observations per point", best.mean_track_length);
+            println!(
+                "  track       {:.2} observations per point",
+                best.mean_track_length
+            );
             println!("  reproj.     {:.3} px mean", best.mean_reprojection_error);
         }
     }

@@ -58,7 +58,14 @@ mod tests {
     fn a_crowded_corner_gives_way_to_the_rest_of_the_image() {
         // 10 strong keypoints in the top-left cell, then 2 weaker ones in each other cell of a 2x2 grid.
         let mut kps: Vec<KeyPoint> = (0..10).map(|i| KeyPoint::new(i as f32, 1.0)).collect();
-        for (x, y) in [(60.0, 1.0), (61.0, 1.0), (1.0, 60.0), (2.0, 60.0), (60.0, 60.0), (61.0, 61.0)] {
+        for (x, y) in [
+            (60.0, 1.0),
+            (61.0, 1.0),
+            (1.0, 60.0),
+            (2.0, 60.0),
+            (60.0, 60.0),
+            (61.0, 61.0),
+        ] {
             kps.push(KeyPoint::new(x, y));
         }
         let kept = spread(&kps, 100, 100, 2, 8);

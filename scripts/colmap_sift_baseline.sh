@@ -6,7 +6,8 @@
 # model_analyzer's figures. SIFT must run with use_gpu 0 on a machine without a display or GPU.
 set -euo pipefail
 images=$1 k_file=$2 out=$3
-read -r fx _ cx _ fy cy _ < <(tr -s ' \n' ' ' < "$k_file")
+k=($(tr -d '\r' < "$k_file"))  # 9 numbers, row-major; some K.txt files end lines with CRLF
+fx=${k[0]} cx=${k[2]} fy=${k[4]} cy=${k[5]}
 mkdir -p "$out/sparse"
 rm -f "$out/database.db"
 stage() { # stage NAME COMMAND...: runs it, logs it, prints its wall time

@@ -18,6 +18,7 @@ use crate::input::load_gray;
 use crate::progress::Progress;
 use crate::settings;
 use crate::spread::spread;
+use crate::subpixel;
 
 /// One photo's features.
 struct Photo {
@@ -77,7 +78,7 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
             path,
             name,
             settings.extractor.detector.max_keypoints,
-            args.grid,
+            (args.grid, args.subpixel, args.subpixel_radius),
         );
         progress.done();
         photo
@@ -225,7 +226,7 @@ fn extract(
     path: &Path,
     name: &str,
     max_keypoints: usize,
-    grid: u32,
+    (grid, method, subpixel_radius): (u32, subpixel::Subpixel, u32),
 ) -> Result<Photo, CliError> {
     let img = load_gray(path)?;
     let view = GrayView::try_from(&img).map_err(CliError::in_image(path))?;
@@ -238,12 +239,16 @@ fn extract(
     let described = extractor
         .describe(&view, &keypoints)
         .map_err(CliError::in_image(path))?;
+    let features = Features::from_described(keypoints, described);
     Ok(Photo {
         path: path.to_path_buf(),
         name: name.to_owned(),
         width: img.width(),
         height: img.height(),
-        features: Features::from_described(keypoints, described),
+        features: Features {
+            keypoints: subpixel::refine_with(&img, &features.keypoints, method, subpixel_radius),
+            ..features
+        },
     })
 }
 

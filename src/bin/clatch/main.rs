@@ -18,6 +18,7 @@ mod pipeline;
 mod progress;
 mod report;
 mod spread;
+mod subpixel;
 mod warp;
 
 use std::path::PathBuf;
@@ -154,6 +155,13 @@ pub struct ColmapArgs {
     /// Spread keypoints over a GRID x GRID division of each image (1: the strongest anywhere).
     #[arg(long, default_value_t = 1, value_name = "GRID", value_parser = clap::value_parser!(u32).range(1..=64))]
     pub grid: u32,
+    /// How the keypoint positions written to COLMAP are refined below a pixel (descriptors and
+    /// matches do not change).
+    #[arg(long, value_enum, default_value_t = subpixel::Subpixel::None)]
+    pub subpixel: subpixel::Subpixel,
+    /// Half side of the window of --subpixel corner.
+    #[arg(long, default_value_t = 3, value_name = "R", value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub subpixel_radius: u32,
     /// Replace an existing database and model.
     #[arg(long)]
     pub force: bool,

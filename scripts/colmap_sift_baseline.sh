@@ -10,11 +10,12 @@ k=($(tr -d '\r' < "$k_file"))  # 9 numbers, row-major; some K.txt files end line
 fx=${k[0]} cx=${k[2]} fy=${k[4]} cy=${k[5]}
 mkdir -p "$out/sparse"
 rm -f "$out/database.db"
-stage() { # stage NAME COMMAND...: runs it, logs it, prints its wall time
+stage() { # stage NAME COMMAND...: runs it, logs it, prints its wall and CPU (user + system) time
     local name=$1; shift
-    local start=$(date +%s.%N)
-    "$@" > "$out/$name.log" 2>&1 || { tail -n 20 "$out/$name.log"; exit 1; }
-    printf '%-10s %.1f s\n' "$name" "$(echo "$(date +%s.%N) - $start" | bc)"
+    /usr/bin/time -f "%e %U %S" -o "$out/$name.time" "$@" > "$out/$name.log" 2>&1 \
+        || { tail -n 20 "$out/$name.log"; exit 1; }
+    read -r wall user sys < "$out/$name.time"
+    printf '%-10s %.1f s (cpu %.1f s)\n' "$name" "$wall" "$(echo "$user + $sys" | bc)"
 }
 stage extract colmap feature_extractor --database_path "$out/database.db" --image_path "$images" \
     --ImageReader.camera_model PINHOLE --ImageReader.single_camera 1 \

@@ -4,7 +4,6 @@
 use std::ffi::OsString;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
 
 use clatch::colmap::{Database, MatchList, PinholeCamera};
 use clatch::{Backend, Extractor, Features, GrayView, Match, Matcher};
@@ -12,6 +11,7 @@ use rayon::prelude::*;
 
 use crate::ColmapArgs;
 use crate::colmap_program::{ColmapProgram, ModelStats, parse_model_analyzer};
+use crate::cpu_time::{StageTime, Stopwatch};
 use crate::error::CliError;
 use crate::image_dir::{colmap_name, list_images};
 use crate::input::load_gray;
@@ -29,15 +29,15 @@ struct Photo {
     features: Features,
 }
 
-/// Wall time of each stage.
+/// Wall and CPU time of each stage.
 #[derive(Default)]
 struct Times {
-    extract: Duration,
-    matching: Duration,
-    write: Duration,
-    verify: Duration,
-    map: Duration,
-    analyze: Duration,
+    extract: StageTime,
+    matching: StageTime,
+    write: StageTime,
+    verify: StageTime,
+    map: StageTime,
+    analyze: StageTime,
 }
 
 /// Runs `clatch colmap`.
@@ -71,7 +71,7 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     // Detect and describe every photo.
     let extractor = Extractor::new(settings.backend, extraction_config(&settings, args.grid))?;
     let progress = Progress::counter(images.len() as u64, "extracting features");
-    let start = Instant::now();
+    let watch = Stopwatch::start();
     let extract_one = |(path, name): (&PathBuf, &String)| {
         let photo = extract(
             &extractor,
@@ -98,7 +98,7 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
             .map(extract_one)
             .collect::<Result<_, _>>()?
     };
-    times.extract = start.elapsed();
+    times.extract = watch.stop();
     progress.finish();
 
     // Match every pair.
@@ -107,7 +107,7 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
         .flat_map(|i| (i + 1..photos.len()).map(move |j| (i, j)))
         .collect();
     let progress = Progress::counter(pairs.len() as u64, "matching pairs");
-    let start = Instant::now();
+    let watch = Stopwatch::start();
     let needed = if settings.matching.ratio.is_some() {
         2
     } else {
@@ -127,11 +127,11 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
         });
         progress.done();
     }
-    times.matching = start.elapsed();
+    times.matching = watch.stop();
     progress.finish();
 
     // Write the database and the match list.
-    let start = Instant::now();
+    let watch = Stopwatch::start();
     let match_list = workspace.join("matches.txt");
     write_database(
         &args.database,
@@ -140,7 +140,7 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
         &photos,
     )?;
     write_match_list(&match_list, &photos, &pairs, &matches)?;
-    times.write = start.elapsed();
+    times.write = watch.stop();
 
     print_extraction_report(args, &settings.backend, &photos, &pairs, &matches, &times);
 
@@ -174,20 +174,20 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     };
 
     let [(_, import_args), (_, mapper_args)] = &steps;
-    let start = Instant::now();
+    let watch = Stopwatch::start();
     colmap.run("matches_importer", import_args)?;
-    times.verify = start.elapsed();
+    times.verify = watch.stop();
     let (verified, inliers) = verified_pairs(&args.database)?;
 
     if args.force && sparse.exists() {
         std::fs::remove_dir_all(&sparse).map_err(CliError::write(&sparse))?;
     }
     std::fs::create_dir_all(&sparse).map_err(CliError::write(&sparse))?;
-    let start = Instant::now();
+    let watch = Stopwatch::start();
     colmap.run("mapper", mapper_args)?;
-    times.map = start.elapsed();
+    times.map = watch.stop();
 
-    let start = Instant::now();
+    let watch = Stopwatch::start();
     let mut models = Vec::new();
     for model in model_dirs(&sparse)? {
         let output = colmap.run(
@@ -196,13 +196,9 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
         )?;
         models.push(parse_model_analyzer(&model, &output)?);
     }
-    times.analyze = start.elapsed();
+    times.analyze = watch.stop();
     print_colmap_report(&photos, &pairs, verified, inliers, &models, &times);
     Ok(())
-}
-
-fn secs(d: Duration) -> String {
-    format!("{:.2} s", d.as_secs_f64())
 }
 
 /// `out.db` → `out-colmap/` beside it.
@@ -417,9 +413,9 @@ fn print_extraction_report(
         matches.iter().filter(|m| m.is_empty()).count()
     );
     println!("  database    {}", args.database.display());
-    println!("  extract     {}", secs(times.extract));
-    println!("  match       {}", secs(times.matching));
-    println!("  write       {}", secs(times.write));
+    println!("  extract     {}", times.extract);
+    println!("  match       {}", times.matching);
+    println!("  write       {}", times.write);
 }
 
 fn print_colmap_report(
@@ -434,9 +430,9 @@ fn print_colmap_report(
         "  verified    {verified} of {} pairs, {inliers} inlier matches (colmap matches_importer)",
         pairs.len()
     );
-    println!("  verify      {}", secs(times.verify));
-    println!("  map         {}", secs(times.map));
-    println!("  analyze     {}", secs(times.analyze));
+    println!("  verify      {}", times.verify);
+    println!("  map         {}", times.map);
+    println!("  analyze     {}", times.analyze);
     match models.iter().max_by_key(|m| m.registered) {
         None => println!("  model       none: the mapper registered no image"),
         Some(best) => {

@@ -5,6 +5,7 @@
 
 mod colmap_cmd;
 mod colmap_program;
+mod cpu_time;
 mod demo;
 mod draw;
 mod error;
@@ -152,12 +153,13 @@ pub struct ColmapArgs {
     /// Folder for the match list, COLMAP's logs and its model (default: DATABASE's name + `-colmap`).
     #[arg(long, value_name = "DIR")]
     pub workspace: Option<PathBuf>,
-    /// Spread keypoints over a GRID x GRID division of each image (1: the strongest anywhere).
-    #[arg(long, default_value_t = 1, value_name = "GRID", value_parser = clap::value_parser!(u32).range(1..=64))]
+    /// Spread keypoints over a GRID x GRID division of each image (1: the strongest anywhere). The
+    /// default 8 keeps textured corners of a photo (foliage, gravel) from taking every keypoint.
+    #[arg(long, default_value_t = 8, value_name = "GRID", value_parser = clap::value_parser!(u32).range(1..=64))]
     pub grid: u32,
     /// How the keypoint positions written to COLMAP are refined below a pixel (descriptors and
     /// matches do not change).
-    #[arg(long, value_enum, default_value_t = subpixel::Subpixel::None)]
+    #[arg(long, value_enum, default_value_t = subpixel::Subpixel::Score)]
     pub subpixel: subpixel::Subpixel,
     /// Half side of the window of --subpixel corner.
     #[arg(long, default_value_t = 3, value_name = "R", value_parser = clap::value_parser!(u32).range(1..=16))]

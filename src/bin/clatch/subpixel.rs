@@ -24,7 +24,12 @@ pub enum Subpixel {
 }
 
 /// `keypoints` with sub-pixel positions by `method` (`radius`: the corner window's half side).
-pub fn refine_with(img: &GrayImage, keypoints: &[KeyPoint], method: Subpixel, radius: u32) -> Vec<KeyPoint> {
+pub fn refine_with(
+    img: &GrayImage,
+    keypoints: &[KeyPoint],
+    method: Subpixel,
+    radius: u32,
+) -> Vec<KeyPoint> {
     match method {
         Subpixel::None => keypoints.to_vec(),
         Subpixel::Score => refine_by_score(img, keypoints),

@@ -13,8 +13,9 @@ use crate::ColmapArgs;
 use crate::colmap_program::{ColmapProgram, ModelStats, parse_model_analyzer};
 use crate::cpu_time::{StageTime, Stopwatch};
 use crate::error::CliError;
+use crate::exif;
 use crate::image_dir::{colmap_name, list_images};
-use crate::input::load_gray;
+use crate::input::load_gray_with_exif;
 use crate::progress::Progress;
 use crate::settings;
 use crate::spread::spread;
@@ -23,6 +24,8 @@ use crate::subpixel;
 /// One photo's features.
 struct Photo {
     path: PathBuf,
+    /// EXIF `FocalLengthIn35mmFilm`, if the file has it.
+    focal_35mm: Option<u16>,
     name: String,
     width: u32,
     height: u32,
@@ -224,7 +227,7 @@ fn extract(
     max_keypoints: usize,
     (grid, method, subpixel_radius): (u32, subpixel::Subpixel, u32),
 ) -> Result<Photo, CliError> {
-    let img = load_gray(path)?;
+    let (img, exif_block) = load_gray_with_exif(path)?;
     let view = GrayView::try_from(&img).map_err(CliError::in_image(path))?;
     let detected = extractor.detect(&view).map_err(CliError::in_image(path))?;
     let keypoints = if grid > 1 {
@@ -238,6 +241,7 @@ fn extract(
     let features = Features::from_described(keypoints, described);
     Ok(Photo {
         path: path.to_path_buf(),
+        focal_35mm: exif_block.as_deref().and_then(exif::focal_length_35mm),
         name: name.to_owned(),
         width: img.width(),
         height: img.height(),
@@ -249,7 +253,8 @@ fn extract(
 }
 
 /// Cameras, images and keypoints. With K, one camera shared by every photo (which must then all have
-/// one size); without, one guessed camera per image size.
+/// one size); without, one camera per image size and EXIF focal length: the focal length from EXIF's
+/// 35 mm equivalent where the photo has it (as COLMAP does), else COLMAP's guess.
 fn write_database(
     path: &Path,
     k_text: Option<&str>,
@@ -257,14 +262,16 @@ fn write_database(
     photos: &[Photo],
 ) -> Result<(), CliError> {
     let mut db = Database::create(path)?;
-    let mut cameras: Vec<((u32, u32), u32)> = Vec::new();
+    type CameraKey = ((u32, u32), Option<u16>);
+    let mut cameras: Vec<(CameraKey, u32)> = Vec::new();
     for photo in photos {
         let size = (photo.width, photo.height);
-        let camera_id = match cameras.iter().find(|(s, _)| *s == size) {
+        let key = (size, photo.focal_35mm.filter(|_| k_text.is_none()));
+        let camera_id = match cameras.iter().find(|(k, _)| *k == key) {
             Some(&(_, id)) => id,
             None => {
                 let camera = match (k_text, cameras.first()) {
-                    (Some(_), Some(&((w, h), _))) => {
+                    (Some(_), Some(&(((w, h), _), _))) => {
                         return Err(CliError::ImageSizeMismatch {
                             path: photo.path.clone(),
                             got_w: size.0,
@@ -278,10 +285,10 @@ fn write_database(
                             path: k_path.unwrap_or(Path::new("K")).to_path_buf(),
                             source,
                         })?,
-                    (None, _) => PinholeCamera::guess(size.0, size.1)?,
+                    (None, _) => guess_camera(size, photo.focal_35mm)?,
                 };
                 let id = db.add_camera(&camera)?;
-                cameras.push((size, id));
+                cameras.push((key, id));
                 id
             }
         };
@@ -290,6 +297,28 @@ fn write_database(
     }
     db.finish()?;
     Ok(())
+}
+
+/// A camera from EXIF's 35 mm focal length (marked as known, as COLMAP marks EXIF focal lengths), or
+/// COLMAP's guess without one.
+fn guess_camera(
+    (width, height): (u32, u32),
+    focal_35mm: Option<u16>,
+) -> Result<PinholeCamera, CliError> {
+    let guess = PinholeCamera::guess(width, height)?;
+    Ok(match focal_35mm {
+        Some(f) => {
+            let focal = exif::focal_pixels(f, width, height);
+            PinholeCamera {
+                fx: focal,
+                fy: focal,
+                focal_is_known: true,
+                ..guess
+            }
+            .validated()?
+        }
+        None => guess,
+    })
 }
 
 fn write_match_list(

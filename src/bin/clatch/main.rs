@@ -9,6 +9,7 @@ mod cpu_time;
 mod demo;
 mod draw;
 mod error;
+mod exif;
 mod extract;
 mod homography;
 mod image_dir;
@@ -146,8 +147,9 @@ pub struct ColmapArgs {
     /// The COLMAP database to create (an existing file is an error unless --force).
     #[arg(long, value_name = "FILE")]
     pub database: PathBuf,
-    /// Camera matrix K (9 numbers, row-major) shared by every photo; without it COLMAP's guess
-    /// (focal 1.2 x the larger side, centred principal point) per image size, refined by the mapper.
+    /// Camera matrix K (9 numbers, row-major) shared by every photo. Without it: the focal length from
+    /// EXIF's 35 mm equivalent where a photo has one, else COLMAP's guess (1.2 x the larger side),
+    /// principal point at the centre, one camera per image size and focal, refined by the mapper.
     #[arg(long, value_name = "FILE")]
     pub camera_k: Option<PathBuf>,
     /// Folder for the match list, COLMAP's logs and its model (default: DATABASE's name + `-colmap`).

@@ -66,7 +66,19 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
         .clone()
         .unwrap_or_else(|| default_workspace(&args.database));
     std::fs::create_dir_all(&workspace).map_err(CliError::write(&workspace))?;
-    if args.force && args.database.exists() {
+    // Refuse to overwrite before any work, not after it.
+    let sparse = workspace.join("sparse");
+    if !args.force {
+        if args.database.exists() {
+            return Err(clatch::colmap::ColmapError::DatabaseExists {
+                path: args.database.display().to_string(),
+            }
+            .into());
+        }
+        if !args.no_colmap && !model_dirs_if_any(&sparse)?.is_empty() {
+            return Err(CliError::ModelsExist { path: sparse });
+        }
+    } else if args.database.exists() {
         std::fs::remove_file(&args.database).map_err(CliError::write(&args.database))?;
     }
     let mut times = Times::default();
@@ -165,7 +177,6 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
         }
         found
     };
-    let sparse = workspace.join("sparse");
     let steps = colmap_steps(args, &match_list, &sparse);
     let Some(colmap) = colmap else {
         if !args.no_colmap {
@@ -397,6 +408,15 @@ fn verified_pairs(database: &Path) -> Result<(usize, usize), CliError> {
         },
     )
     .map_err(|e| sql(e).into())
+}
+
+/// [`model_dirs`], or none when `sparse` does not exist yet.
+fn model_dirs_if_any(sparse: &Path) -> Result<Vec<PathBuf>, CliError> {
+    if sparse.exists() {
+        model_dirs(sparse)
+    } else {
+        Ok(Vec::new())
+    }
 }
 
 /// The model folders the mapper wrote (`sparse/0`, `sparse/1`, ...), in order.

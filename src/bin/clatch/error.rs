@@ -89,6 +89,10 @@ pub enum CliError {
     #[error("{0}")]
     Colmap(#[from] clatch::colmap::ColmapError),
 
+    /// The workspace already holds COLMAP models from an earlier run.
+    #[error("{path} already holds COLMAP models; use --force to replace them or choose another --workspace", path = .path.display())]
+    ModelsExist { path: PathBuf },
+
     /// The `colmap` program could not be started.
     #[error("cannot run {program} ({step}): {source}", program = .program.display())]
     ColmapStart {

@@ -3,7 +3,8 @@
 //! These statements create the tables exactly as `colmap database_creator` of COLMAP 3.8 does (checked
 //! against the `sqlite_master` of a database made by COLMAP 3.8.0 from Debian 12). Later releases
 //! changed the schema (pose priors in 3.10, rigs and frames in 3.12, a descriptor type in 4.0), so this
-//! writer targets 3.8 explicitly; COLMAP upgrades older databases when it opens them.
+//! writer targets 3.8 explicitly. (The project's notes report that pycolmap 4.2.1 also reads a
+//! database of this layout; only 3.8 is checked here.)
 
 /// The `CREATE` statements of COLMAP 3.8, in its order.
 pub const SCHEMA_3_8: &str = "

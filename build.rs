@@ -23,7 +23,9 @@ mod cuda {
     use std::process::Command;
 
     /// PTX target: old enough for every GPU the driver supports, new enough for the intrinsics used.
+    /// A kernel file that needs more opens with `// clatch-ptx-arch: compute_NN` (see [`ptx_arch`]).
     const PTX_ARCH: &str = "compute_75";
+    const PTX_ARCH_MARKER: &str = "// clatch-ptx-arch: ";
     /// Native target checked with ptxas (the H100).
     const CHECK_ARCH: &str = "sm_90";
     const NVCC_FLAGS: &[&str] = &["-O3", "--fmad=false", "-lineinfo", "-std=c++17"];
@@ -57,10 +59,11 @@ mod cuda {
         for source in &sources {
             println!("cargo::rerun-if-changed={}", source.display());
             let stem = source.file_stem().unwrap().to_string_lossy().into_owned();
+            let arch = ptx_arch(source);
             let ptx = out.join(format!("{stem}.ptx"));
             run(Command::new(&nvcc)
                 .args(NVCC_FLAGS)
-                .args(["-ptx", &format!("-arch={PTX_ARCH}"), "-I"])
+                .args(["-ptx", &format!("-arch={arch}"), "-I"])
                 .arg(kernels)
                 .arg(source)
                 .arg("-o")
@@ -73,7 +76,7 @@ mod cuda {
                 .args([
                     "-fatbin",
                     &format!("-gencode=arch=compute_{0},code=sm_{0}", &CHECK_ARCH[3..]),
-                    &format!("-gencode=arch={PTX_ARCH},code={PTX_ARCH}"),
+                    &format!("-gencode=arch={arch},code={arch}"),
                     "-Xptxas",
                     "-v",
                     "-I",
@@ -85,8 +88,8 @@ mod cuda {
             report.push_str(&format!("== {stem} ({CHECK_ARCH})\n{check}\n"));
             let name = stem.to_uppercase();
             constants.push_str(&format!(
-                "/// PTX of `kernels/{stem}.cu` ({PTX_ARCH}).\npub const {name}_PTX: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{stem}.ptx\"));\n\
-                 /// Fatbin of `kernels/{stem}.cu`: {CHECK_ARCH} code and {PTX_ARCH} PTX.\npub const {name}_FATBIN: &[u8] = include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{stem}.fatbin\"));\n"
+                "/// PTX of `kernels/{stem}.cu` ({arch}).\npub const {name}_PTX: &str = include_str!(concat!(env!(\"OUT_DIR\"), \"/{stem}.ptx\"));\n\
+                 /// Fatbin of `kernels/{stem}.cu`: {CHECK_ARCH} code and {arch} PTX.\npub const {name}_FATBIN: &[u8] = include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{stem}.fatbin\"));\n"
             ));
         }
         fs::write(out.join("kernels.rs"), constants).expect("write kernels.rs");
@@ -102,6 +105,28 @@ mod cuda {
             .expect("bindgen parses kernels/clatch.h")
             .write_to_file(out.join("clatch_h.rs"))
             .expect("write clatch_h.rs");
+    }
+
+    /// The PTX architecture of one kernel file: [`PTX_ARCH`], or what its first line asks for
+    /// (`// clatch-ptx-arch: compute_80` for instructions the baseline lacks, such as int8 MMA).
+    fn ptx_arch(source: &Path) -> String {
+        let text = fs::read_to_string(source).expect("readable kernel source");
+        match text
+            .lines()
+            .next()
+            .and_then(|l| l.strip_prefix(PTX_ARCH_MARKER))
+        {
+            Some(arch) => {
+                let arch = arch.trim();
+                assert!(
+                    arch.starts_with("compute_") && arch[8..].chars().all(|c| c.is_ascii_digit()),
+                    "clatch: {}: bad PTX architecture {arch:?}",
+                    source.display()
+                );
+                arch.to_string()
+            }
+            None => PTX_ARCH.to_string(),
+        }
     }
 
     fn find_nvcc() -> Option<PathBuf> {

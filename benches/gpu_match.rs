@@ -22,6 +22,7 @@ fn main() {
 fn main() {
     use std::time::Instant;
 
+    use clatch::cuda::MatchKernel;
     use clatch::synthetic::SplitMix64;
     use clatch::{Backend, DescriptorSet, DescriptorWidth, MatchConfig, Matcher};
 
@@ -47,6 +48,33 @@ fn main() {
         bound / 1e9,
         bound / 2e9
     );
+    // Dense int8 tensor throughput per SM and clock on Hopper: 1979 dense INT8 TOPS for the H100 SXM
+    // (NVIDIA H100 datasheet) over 132 SMs at 1.83 GHz = 8192 operations = 4096 multiply-adds; a
+    // 512-bit pair is 512 multiply-adds of +-1 bytes.
+    let tensor_bound = sms as f64 * clock_khz as f64 * 1e3 * 4096.0 / 512.0;
+    println!(
+        "tensor bound: {sms} SMs x {:.0} MHz x 4096 int8 MAC/SM/clock / 512 per pair = {:.1} G pairs/s",
+        clock_khz as f64 / 1e3,
+        tensor_bound / 1e9
+    );
+    if dev.has_tensor_matcher() {
+        for blocks_per_sm in [4, 1] {
+            let rate = clatch::cuda::measure_mma_s8_rate(&dev, blocks_per_sm).expect("mma rate");
+            println!(
+                "int8 mma.sync measured, {} warps per SM: {:.1} T multiply-adds/s = {:.1} G pairs/s at 512 per \
+                 pair ({:.0}% of the dense tensor figure above)",
+                8 * blocks_per_sm,
+                rate / 1e12,
+                rate / 512.0 / 1e9,
+                100.0 * rate / 512.0 / tensor_bound
+            );
+        }
+    }
+    let families: Vec<MatchKernel> = if dev.has_tensor_matcher() {
+        vec![MatchKernel::Popcount, MatchKernel::Tensor]
+    } else {
+        vec![MatchKernel::Popcount]
+    };
     let median = |mut v: Vec<f32>| {
         v.sort_by(f32::total_cmp);
         v[v.len() / 2] as f64
@@ -59,20 +87,34 @@ fn main() {
     let mut sets = Vec::new();
     for n in [1usize << 10, 1 << 14, 1 << 16, 1 << 17] {
         let (query, train) = (random_set(n, &mut rng), random_set(n, &mut rng));
-        let times = clatch::cuda::time_knn_kernel(&dev, &query, &train, 2, WARMUP, REPEATS)
+        for &family in &families {
+            let times = clatch::cuda::time_knn_kernel(
+                &dev,
+                &query,
+                &train,
+                2,
+                Some(family),
+                (WARMUP, REPEATS),
+            )
             .expect("kNN kernel");
-        let (lo, hi) = (
-            times.iter().copied().fold(f32::MAX, f32::min),
-            times.iter().copied().fold(0.0, f32::max),
-        );
-        let ms = median(times);
-        let rate = (n * n) as f64 / (ms * 1e-3);
-        println!(
-            "knn k=2 512 bits {n:>6} x {n:<6}: median {ms:9.3} ms (min {lo:.3}, max {hi:.3}, {REPEATS} runs)  \
-             {:7.1} G pairs/s  {:5.1}% of the POPC bound",
-            rate / 1e9,
-            100.0 * rate / bound
-        );
+            let (lo, hi) = (
+                times.iter().copied().fold(f32::MAX, f32::min),
+                times.iter().copied().fold(0.0, f32::max),
+            );
+            let ms = median(times);
+            let rate = (n * n) as f64 / (ms * 1e-3);
+            let (fraction, of) = match family {
+                MatchKernel::Popcount => (rate / bound, "POPC"),
+                MatchKernel::Tensor => (rate / tensor_bound, "tensor"),
+            };
+            println!(
+                "knn k=2 512 bits {n:>6} x {n:<6} {:<8}: median {ms:9.3} ms (min {lo:.3}, max {hi:.3}, \
+                 {REPEATS} runs)  {:7.1} G pairs/s  {:5.1}% of the {of} bound",
+                format!("{family:?}"),
+                rate / 1e9,
+                100.0 * fraction
+            );
+        }
         sets.push((n, query, train));
     }
 
@@ -87,14 +129,24 @@ fn main() {
                 },
             ),
         ] {
-            let times =
-                clatch::cuda::time_match_kernels(&dev, query, train, &config, WARMUP, REPEATS)
-                    .expect("match kernels");
-            let ms = median(times);
-            println!(
-                "match_descriptors device time, {name:<25} {n:>6} x {n:<6}: median {ms:9.3} ms  {:7.1} G pairs/s",
-                (n * n) as f64 / (ms * 1e-3) / 1e9
-            );
+            for &family in &families {
+                let times = clatch::cuda::time_match_kernels(
+                    &dev,
+                    query,
+                    train,
+                    &config,
+                    Some(family),
+                    (WARMUP, REPEATS),
+                )
+                .expect("match kernels");
+                let ms = median(times);
+                println!(
+                    "match_descriptors device time, {name:<25} {n:>6} x {n:<6} {:<8}: median {ms:9.3} ms  \
+                     {:7.1} G pairs/s",
+                    format!("{family:?}"),
+                    (n * n) as f64 / (ms * 1e-3) / 1e9
+                );
+            }
         }
     }
 

@@ -44,24 +44,29 @@ fn main() {
         }
         t.elapsed().as_secs_f64() * 1e3
     };
-    let in_flight = || {
+    // (wall ms, of which ms spent queueing on the host)
+    let in_flight_split = || {
         let t = Instant::now();
         let pending: Vec<_> = views
             .iter()
             .zip(&streams)
             .map(|(view, stream)| extractor.detect_and_describe_async(stream, view).unwrap())
             .collect();
+        let queued = t.elapsed().as_secs_f64() * 1e3;
         for p in pending {
             p.wait().unwrap();
         }
-        t.elapsed().as_secs_f64() * 1e3
+        (t.elapsed().as_secs_f64() * 1e3, queued)
     };
+    let in_flight = || in_flight_split().0;
     for _ in 0..3 {
         sequential();
         in_flight();
     }
     let seq = median((0..10).map(|_| sequential()).collect());
     let par = median((0..10).map(|_| in_flight()).collect());
+    let queued = median((0..10).map(|_| in_flight_split().1).collect());
+    println!("  of the in-flight batch, queueing on the host takes {queued:.3} ms (median)");
     println!(
         "{n} x {w}x{h} detect+describe: one after another {seq:.3} ms, {n} streams in flight {par:.3} ms: {:.2}x throughput",
         seq / par

@@ -29,6 +29,12 @@
 #define CLATCH_MATCH_ROW_PAD 256 /* device descriptor buffers hold a multiple of this many rows */
 #define CLATCH_MATCH_SELECT_THREADS 256 /* clatch_match_filter / clatch_match_compact (8 warps) */
 #define CLATCH_MATCH_SCAN_THREADS 1024 /* clatch_match_scan: one block */
+/* Tensor-core matching (kernels/match_tensor.cu): descriptors as +-1 bytes, int8 MMA. */
+#define CLATCH_TENSOR_WARPS 8 /* warps per block; each holds 32 queries in registers */
+#define CLATCH_TENSOR_QUERIES 256 /* queries per block (CLATCH_TENSOR_WARPS * 32) */
+#define CLATCH_TENSOR_TILE 64 /* gallery descriptors per shared-memory stage */
+#define CLATCH_TENSOR_STAGES 3 /* cp.async pipeline depth */
+#define CLATCH_EXPAND_THREADS 256 /* clatch_expand_signs */
 
 /* Detection (kernels/detect.cu). */
 #define CLATCH_DETECT_TILE_X 32    /* clatch_detect_nms: one thread per pixel of a 32x8 tile */
@@ -38,6 +44,20 @@
 #define CLATCH_SCAN_THREADS 256    /* clatch_scan_reduce / clatch_scan_apply */
 #define CLATCH_SCAN_CHUNK 4096     /* counts per block of the scan (16 per thread) */
 #define CLATCH_SCAN_TOP_THREADS 1024 /* clatch_scan_partials: one block */
+
+/* OpenCV-compatible LATCH (kernels/describe_opencv.cu). */
+#define CLATCH_OPENCV_THREADS 256        /* threads per block: one warp per 32 triplets of a keypoint */
+#define CLATCH_OPENCV_MAX_OFFSET 24      /* rotated patch centres are clamped to [-24, 24] */
+#define CLATCH_OPENCV_WINDOW_TO_CENTRE 28 /* triplet table value - 28 = OpenCV's centre offset */
+
+/* Where one keypoint's patches go, computed on the host; the same layout as
+ * clatch::describe::opencv::Placement (#[repr(C)]). */
+typedef struct clatch_opencv_placement {
+    int x;     /* (int)(x + 0.5) */
+    int y;     /* (int)(y + 0.5) */
+    float cos; /* (float)cos((double)angle_radians); 1 without rotation invariance */
+    float sin; /* likewise; 0 without rotation invariance */
+} clatch_opencv_placement;
 
 /* One keypoint; the same layout as clatch::KeyPoint (#[repr(C)]). */
 typedef struct clatch_keypoint {

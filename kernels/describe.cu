@@ -59,23 +59,40 @@ __device__ __forceinline__ Frame frame_of(const clatch_keypoint& kp, const int2*
     return f;
 }
 
-// Window sample (u, v): the bilinear value of docs/numerics.md, section 4, steps 2 and 4.
-__device__ __forceinline__ int sample(cudaTextureObject_t image, int width, int height, const Frame& f,
-                                      int u, int v) {
+// Window sample (u, v): the bilinear value of docs/numerics.md, section 4, steps 2 and 4. The four
+// neighbours come from one texel of the quad texture (clatch_build_quads): one fetch instead of four.
+__device__ __forceinline__ int sample(cudaTextureObject_t quads, const Frame& f, int u, int v) {
     const int du = u - CLATCH_WINDOW / 2;
     const int dv = v - CLATCH_WINDOW / 2;
     const int rx = (f.lx + du * f.ux - dv * f.uy + 128) >> 8;  // 24.8, relative to 256 ix
     const int ry = (f.ly + du * f.uy + dv * f.ux + 128) >> 8;
     const int x0 = f.ix + (rx >> 8), y0 = f.iy + (ry >> 8);
     const int fx = rx & 255, fy = ry & 255;
-    const int x1 = min(x0 + 1, width - 1), y1 = min(y0 + 1, height - 1);
-    const int p00 = tex2D<unsigned char>(image, x0 + 0.5f, y0 + 0.5f);
-    const int p01 = tex2D<unsigned char>(image, x1 + 0.5f, y0 + 0.5f);
-    const int p10 = tex2D<unsigned char>(image, x0 + 0.5f, y1 + 0.5f);
-    const int p11 = tex2D<unsigned char>(image, x1 + 0.5f, y1 + 0.5f);
-    const int upper = p00 * (256 - fx) + p01 * fx;
-    const int lower = p10 * (256 - fx) + p11 * fx;
+    const uchar4 q = tex2D<uchar4>(quads, x0 + 1.5f, y0 + 1.5f);
+    const int upper = q.x * (256 - fx) + q.y * fx;
+    const int lower = q.z * (256 - fx) + q.w * fx;
     return (upper * (256 - fy) + lower * fy + (1 << 15)) >> 16;
+}
+
+// The quad texture of an image: texel (X, Y), X in [0, width], Y in [0, height], holds the pixels
+// (X - 1, Y - 1), (X, Y - 1), (X - 1, Y), (X, Y), each coordinate clamped to the image, so the four
+// bilinear neighbours of pixel (x0, y0) are one texel, at (x0 + 1, y0 + 1). With clamp addressing on this
+// (width + 1) x (height + 1) texture, a read past an edge gets the edge pixel for both neighbours, exactly
+// what four clamped reads of the image give (x0 < 0: pixel 0 twice; x0 >= width - 1: pixel width - 1
+// twice), so the samples are unchanged to the bit. quad_pitch: texels per row of `quads`.
+extern "C" __global__ void clatch_build_quads(const unsigned char* __restrict__ pixels, int pitch, int width,
+                                              int height, uchar4* __restrict__ quads, int quad_pitch) {
+    const int X = blockIdx.x * blockDim.x + threadIdx.x;
+    const int Y = blockIdx.y * blockDim.y + threadIdx.y;
+    if (X > width || Y > height) return;
+    const int xa = max(X - 1, 0), xb = min(X, width - 1);
+    const int ya = max(Y - 1, 0), yb = min(Y, height - 1);
+    uchar4 q;
+    q.x = pixels[(size_t)ya * pitch + xa];
+    q.y = pixels[(size_t)ya * pitch + xb];
+    q.z = pixels[(size_t)yb * pitch + xa];
+    q.w = pixels[(size_t)yb * pitch + xb];
+    quads[(size_t)Y * quad_pitch + X] = q;
 }
 
 // The count may come from a kernel queued earlier on the same stream (GPU detection), so it is read on
@@ -85,7 +102,8 @@ __device__ __forceinline__ int keypoint_count(const unsigned int* __restrict__ t
 }
 
 #define DESCRIBE_PARAMS                                                                                    \
-    cudaTextureObject_t image, int width, int height,                                                     \
+    cudaTextureObject_t image, /* the quad texture of clatch_build_quads */                               \
+        int width, int height,                                                                             \
         const clatch_keypoint* __restrict__ keypoints, /* capacity records */                             \
         const unsigned int* __restrict__ total,        /* keypoints available (e.g. detection's count) */ \
         int capacity,                                                                                      \
@@ -120,7 +138,7 @@ extern "C" __global__ void __launch_bounds__(CLATCH_DESCRIBE_WARPS * 32) clatch_
         int* win = window[buffer];
         for (int i = threadIdx.x; i < CLATCH_WINDOW * CLATCH_WINDOW; i += blockDim.x) {
             const int u = i & (CLATCH_WINDOW - 1), v = i >> 6;
-            win[v * WINDOW_STRIDE + u] = sample(image, width, height, f, u, v);
+            win[v * WINDOW_STRIDE + u] = sample(image, f, u, v);
         }
         // One barrier per keypoint is enough: the next keypoint writes the other window, and the one
         // after it cannot start before every warp has passed the next barrier, i.e. finished reading.
@@ -188,7 +206,7 @@ extern "C" __global__ void __launch_bounds__(CLATCH_DESCRIBE_WARPS * 32)
         unsigned char* win = window[buffer];
         for (int i = threadIdx.x; i < CLATCH_WINDOW * CLATCH_WINDOW; i += blockDim.x) {
             const int u = i & (CLATCH_WINDOW - 1), v = i >> 6;
-            const unsigned char s = (unsigned char)sample(image, width, height, f, u, v);
+            const unsigned char s = (unsigned char)sample(image, f, u, v);
 #pragma unroll
             for (int copy = 0; copy < 4; ++copy) {
                 if (u >= copy) win[copy * BYTE_COPY + v * BYTE_STRIDE + u - copy] = s;

@@ -19,6 +19,7 @@ pub mod matching;
 pub mod synthetic;
 
 pub use backend::Backend;
+pub use describe::opencv::OpencvLatch;
 pub use describe::{Described, DescriptorConfig, PatchWeights, SkipReason, Skipped};
 pub use descriptor::{Descriptor, DescriptorSet, DescriptorWidth};
 pub use detect::DetectorConfig;

@@ -37,6 +37,7 @@ fn trials() -> Vec<Trial> {
 
 #[cfg(feature = "cuda")]
 mod gpu {
+    use clatch::cuda::MatchKernel;
     use clatch::synthetic::SplitMix64;
     use clatch::{
         Backend, DescriptorSet, DescriptorWidth, Error, Extractor, ExtractorConfig, KnnMatches,
@@ -50,6 +51,17 @@ mod gpu {
     const WIDTHS: [usize; 7] = [8, 64, 72, 136, 256, 504, 512];
     /// Segment lengths forced on the kNN, in tiles: one block per tile, an odd count, one segment.
     const SEGMENTS: [usize; 3] = [1, 3, usize::MAX];
+
+    /// The kNN kernel families the device runs for k neighbours: the popcount kernels always, the
+    /// tensor-core kernels where the device has them and k <= 2.
+    fn families(k: usize) -> Result<Vec<MatchKernel>, Failed> {
+        let dev = clatch::cuda::device(0)?;
+        let mut all = vec![MatchKernel::Popcount];
+        if dev.has_tensor_matcher() && k <= 2 {
+            all.push(MatchKernel::Tensor);
+        }
+        Ok(all)
+    }
 
     fn matcher(backend: Backend, config: MatchConfig) -> Matcher {
         Matcher::new(backend, config).expect("valid matcher")
@@ -101,20 +113,23 @@ mod gpu {
         if cpu != gpu {
             return Err(describe_difference(&format!("{what}, k {k}"), &cpu, &gpu));
         }
-        if segmented {
-            let dev = clatch::cuda::device(0)?;
-            for tiles in SEGMENTS {
-                let seg = clatch::cuda::knn_segmented(&dev, query, train, k, tiles)?;
-                if cpu != seg {
+        let dev = clatch::cuda::device(0)?;
+        let mut runs = 1;
+        for family in families(k)? {
+            let segments = if segmented { &SEGMENTS[..] } else { &[] };
+            for tiles in std::iter::once(None).chain(segments.iter().map(|&t| Some(t))) {
+                let got = clatch::cuda::knn_on(&dev, query, train, k, tiles, family)?;
+                if cpu != got {
                     return Err(describe_difference(
-                        &format!("{what}, k {k}, segments of {tiles} tiles"),
+                        &format!("{what}, k {k}, {family:?}, segments of {tiles:?} tiles"),
                         &cpu,
-                        &seg,
+                        &got,
                     ));
                 }
+                runs += 1;
             }
         }
-        Ok(query.len() * train.len())
+        Ok(runs * query.len() * train.len())
     }
 
     fn width(bits: usize) -> DescriptorWidth {
@@ -258,20 +273,30 @@ mod gpu {
                 continue;
             }
             let cpu = matcher(Backend::Cpu, config.clone()).match_descriptors(query, train)?;
-            let gpu = matcher(GPU, config.clone()).match_descriptors(query, train)?;
-            if cpu != gpu {
-                let first = cpu.iter().zip(&gpu).position(|(a, b)| a != b);
-                return Err(format!(
-                    "{what}, {config:?}: cpu kept {}, gpu {}; first difference at {first:?}: cpu {:?} gpu {:?}",
-                    cpu.len(),
-                    gpu.len(),
-                    first.map(|i| cpu[i]),
-                    first.map(|i| gpu[i])
-                )
-                .into());
+            let dev = clatch::cuda::device(0)?;
+            let mut runs = vec![(
+                "Matcher".to_string(),
+                matcher(GPU, config.clone()).match_descriptors(query, train)?,
+            )];
+            for family in families(2)? {
+                let got = clatch::cuda::match_descriptors_on(&dev, query, train, &config, family)?;
+                runs.push((format!("{family:?}"), got));
             }
-            queries += query.len();
-            kept += cpu.len();
+            for (how, gpu) in runs {
+                if cpu != gpu {
+                    let first = cpu.iter().zip(&gpu).position(|(a, b)| a != b);
+                    return Err(format!(
+                        "{what}, {config:?}, {how}: cpu kept {}, gpu {}; first difference at {first:?}: cpu {:?} gpu {:?}",
+                        cpu.len(),
+                        gpu.len(),
+                        first.map(|i| cpu[i]),
+                        first.map(|i| gpu[i])
+                    )
+                    .into());
+                }
+                queries += query.len();
+                kept += cpu.len();
+            }
         }
         Ok((queries, kept))
     }
@@ -401,6 +426,7 @@ mod gpu {
         let one = random_set(width(512), 1, &mut rng);
         let long = random_set(width(512), 200_003, &mut rng);
         pairs += compare_knn("512 bits, 1x200003", &one, &long, 8, false)?;
+        pairs += compare_knn("512 bits, 1x200003", &one, &long, 2, false)?;
         println!("large sets and grid limits: {pairs} pairs: identical");
         Ok(())
     }
@@ -429,17 +455,21 @@ mod gpu {
             },
         ] {
             let cpu = matcher(Backend::Cpu, config.clone()).match_descriptors(&query, &train)?;
-            let gpu = matcher(GPU, config.clone()).match_descriptors(&query, &train)?;
-            if cpu != gpu {
-                return Err(format!(
-                    "tied 512 bits 20000x20000, {config:?}: cpu kept {}, gpu {}",
-                    cpu.len(),
-                    gpu.len()
-                )
-                .into());
+            let dev = clatch::cuda::device(0)?;
+            for family in families(2)? {
+                let gpu =
+                    clatch::cuda::match_descriptors_on(&dev, &query, &train, &config, family)?;
+                if cpu != gpu {
+                    return Err(format!(
+                        "tied 512 bits 20000x20000, {config:?}, {family:?}: cpu kept {}, gpu {}",
+                        cpu.len(),
+                        gpu.len()
+                    )
+                    .into());
+                }
+                queries += query.len();
+                kept += cpu.len();
             }
-            queries += query.len();
-            kept += cpu.len();
         }
         println!(
             "match_descriptors, every config: {queries} queries, {kept} kept matches: identical"

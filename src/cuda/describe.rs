@@ -10,7 +10,7 @@ use super::memory::{alloc_zeros, upload};
 use super::texture::DeviceImage;
 use crate::describe::{Described, DescriptorConfig, SamplingFrame, SkipReason, Skipped};
 use crate::descriptor::DescriptorSet;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::image::GrayView;
 use crate::keypoint::KeyPoint;
 
@@ -80,7 +80,8 @@ impl Job {
         config: &DescriptorConfig,
     ) -> Result<Self> {
         let stream = dev.new_stream()?;
-        let device_image = DeviceImage::upload(dev, &stream, image)?;
+        let mut device_image = DeviceImage::upload(dev, &stream, image)?;
+        device_image.build_quads(dev, &stream)?;
         Ok(Self {
             keypoints: upload(&stream, keypoints, "keypoint upload")?,
             count: upload(&stream, &[keypoints.len() as u32], "keypoint count upload")?,
@@ -146,7 +147,10 @@ pub(crate) fn launch_describe(
     out: &mut CudaSlice<u64>,
 ) -> Result<()> {
     let capacity = keypoints.len() as i32;
-    let texture = image.texture();
+    let texture = image.quads().ok_or_else(|| Error::Cuda {
+        operation: "describe".into(),
+        message: "internal: the image's quad texture was not built".into(),
+    })?;
     let (width, height) = (image.width() as i32, image.height() as i32);
     let blocks = keypoints
         .len()

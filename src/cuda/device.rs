@@ -7,6 +7,7 @@ use cudarc::driver::{CudaContext, CudaFunction, CudaSlice, CudaStream, DriverErr
 use cudarc::nvrtc::Ptx;
 
 use super::ptx;
+use super::tensor_knn::{self, MatchKernel};
 use crate::angle::{quadrant_boundaries, rotation_table};
 use crate::describe::triplets::TRIPLETS;
 use crate::error::{Error, Result};
@@ -18,7 +19,17 @@ const KERNELS: &[(&str, &str, &[u8], &[&str])] = &[
         "kernels/describe.cu",
         ptx::DESCRIBE_PTX,
         ptx::DESCRIBE_FATBIN,
-        &["clatch_describe", "clatch_describe_binary"],
+        &[
+            "clatch_describe",
+            "clatch_describe_binary",
+            "clatch_build_quads",
+        ],
+    ),
+    (
+        "kernels/describe_opencv.cu",
+        ptx::DESCRIBE_OPENCV_PTX,
+        ptx::DESCRIBE_OPENCV_FATBIN,
+        &["clatch_describe_opencv"],
     ),
     (
         "kernels/detect.cu",
@@ -48,6 +59,14 @@ const KERNELS: &[(&str, &str, &[u8], &[&str])] = &[
     ),
 ];
 
+/// Kernels for compute capability 8.0 and later (int8 MMA), loaded only there.
+const TENSOR_KERNELS: (&str, &str, &[u8], &[&str]) = (
+    "kernels/match_tensor.cu",
+    ptx::MATCH_TENSOR_PTX,
+    ptx::MATCH_TENSOR_FATBIN,
+    tensor_knn::KERNELS,
+);
+
 /// A CUDA device with clatch's kernels loaded and its tables uploaded.
 #[derive(Debug)]
 pub struct GpuDevice {
@@ -59,6 +78,10 @@ pub struct GpuDevice {
     pub(crate) boundaries: CudaSlice<i64>,
     pub(crate) pitch_alignment: usize,
     pub(crate) multiprocessors: usize,
+    /// Whether the tensor-core kNN kernels are loaded (compute capability 8.0 and later).
+    tensor_cores: bool,
+    /// The kNN kernels asked for with `CLATCH_MATCH_KERNEL`, if any.
+    match_kernel_override: Option<MatchKernel>,
     name: String,
 }
 
@@ -124,11 +147,27 @@ pub fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
 impl GpuDevice {
     fn load(ordinal: usize) -> Result<Self> {
         let ctx = CudaContext::new(ordinal).map_err(driver_error("context creation"))?;
+        // cudarc by default gives every buffer two events and waits on / records them around every
+        // use, so that a buffer can hop between streams safely. clatch never lets one hop: each call
+        // allocates, uses and frees its buffers on its own stream (frees are stream-ordered), and the
+        // tables below are uploaded on the default stream and synchronised before any other stream
+        // exists; pinned staging buffers keep their own events. The tracking cost ~2 driver calls per
+        // kernel argument and most of the host time of a queued image.
+        // SAFETY: the invariant above: no buffer is used on a stream other than the one it was
+        // allocated on, except the tables, which are complete before they are shared.
+        unsafe { ctx.disable_event_tracking() };
         let mut kernels = HashMap::new();
         // The fatbin's native code loads without JIT on the GPUs it was built for (and falls back to its
         // PTX elsewhere); CLATCH_FORCE_PTX=1 loads the plain PTX instead, so tests can prove both paths.
         let force_ptx = std::env::var_os("CLATCH_FORCE_PTX").is_some_and(|v| v == "1");
-        for &(file, source, fatbin, names) in KERNELS {
+        let (major, _) = ctx
+            .compute_capability()
+            .map_err(driver_error("reading the compute capability"))?;
+        let tensor_cores = major >= 8;
+        let files = KERNELS
+            .iter()
+            .chain(tensor_cores.then_some(&TENSOR_KERNELS));
+        for &(file, source, fatbin, names) in files {
             let image = if force_ptx {
                 Ptx::from_src(source)
             } else {
@@ -137,6 +176,7 @@ impl GpuDevice {
             let module = ctx.load_module(image).map_err(driver_error(file))?;
             for &name in names {
                 let function = module.load_function(name).map_err(driver_error(name))?;
+                tensor_knn::configure(name, &function)?;
                 kernels.insert(name, function);
             }
         }
@@ -176,8 +216,44 @@ impl GpuDevice {
             boundaries,
             pitch_alignment,
             multiprocessors,
+            tensor_cores,
+            match_kernel_override: MatchKernel::from_env(),
             name,
         })
+    }
+
+    /// The kNN kernels matching uses for `k` neighbours: the tensor cores where the device has them and
+    /// k <= 2, unless `CLATCH_MATCH_KERNEL=popcount` says otherwise; the popcount kernels elsewhere.
+    pub(crate) fn match_kernel(&self, k: usize) -> MatchKernel {
+        let tensor_ok = self.tensor_cores && k <= tensor_knn::MAX_K;
+        match self.match_kernel_override {
+            Some(MatchKernel::Popcount) => MatchKernel::Popcount,
+            _ if tensor_ok => MatchKernel::Tensor,
+            _ => MatchKernel::Popcount,
+        }
+    }
+
+    /// `kernel` if this device can run it for `k` neighbours, else a typed error.
+    pub(crate) fn check_match_kernel(&self, kernel: MatchKernel, k: usize) -> Result<MatchKernel> {
+        if kernel == MatchKernel::Tensor && !self.tensor_cores {
+            return Err(Error::BackendUnavailable {
+                backend: format!("cuda tensor-core matcher on {}", self.name),
+                reason: "needs compute capability 8.0 or later".into(),
+            });
+        }
+        if kernel == MatchKernel::Tensor && k > tensor_knn::MAX_K {
+            return Err(Error::KTooLargeForBackend {
+                k,
+                max: tensor_knn::MAX_K,
+                backend: "cuda tensor-core matcher".into(),
+            });
+        }
+        Ok(kernel)
+    }
+
+    /// Whether the tensor-core kNN kernels are loaded on this device.
+    pub fn has_tensor_matcher(&self) -> bool {
+        self.tensor_cores
     }
 
     /// A loaded kernel, by its `extern "C"` name (one listed in `KERNELS`).

@@ -24,6 +24,7 @@ use super::header::{
     CLATCH_MATCH_TILE,
 };
 use super::memory::alloc_zeros;
+use super::tensor_knn::{MatchKernel, TensorKnn};
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
 use crate::matching::{KnnMatches, Match, MatchConfig};
@@ -187,25 +188,43 @@ struct KnnRun {
     /// Per gallery descriptor, `!(distance << 32 | query)` of its nearest query (one unused element
     /// unless `mutual`).
     reverse: CudaSlice<u64>,
+    /// The tensor-core kernels run this kNN instead of `kernel` (see `tensor_knn.rs`).
+    tensor: Option<TensorKnn>,
 }
 
 impl KnnRun {
     /// Plans the production kernel for `nq` queries against `nt` gallery rows of `words` words;
     /// `mutual` (k = 1 or 2) also computes the nearest query of every gallery row.
+    /// `family` picks the kernels (the device's choice for `k` when `None`).
     fn new(
         dev: &GpuDevice,
         stream: &Arc<CudaStream>,
         (nq, nt, words): (usize, usize, usize),
-        k: usize,
-        mutual: bool,
+        (k, mutual): (usize, bool),
+        family: Option<MatchKernel>,
         segment_tiles: Option<usize>,
     ) -> Result<Self> {
+        let family = match family {
+            Some(f) => dev.check_match_kernel(f, k)?,
+            None => dev.match_kernel(k),
+        };
         let kernel = knn_kernel(words, k, mutual);
         let qpt = CLATCH_MATCH_QUERIES_PER_THREAD as usize;
         let mut run = Self::with_kernel(dev, stream, kernel, qpt, (nq, nt), k, segment_tiles)?;
         if mutual {
             run.mutual = true;
             run.reverse = alloc_zeros(stream, nt, "reverse 1-NN keys")?;
+        }
+        if family == MatchKernel::Tensor {
+            let shape = (nq, nt, words);
+            run.tensor = Some(TensorKnn::new(
+                dev,
+                stream,
+                shape,
+                k,
+                mutual,
+                segment_tiles,
+            )?);
         }
         Ok(run)
     }
@@ -234,6 +253,7 @@ impl KnnRun {
             partial: alloc_zeros(stream, partial_len, "kNN segment lists")?,
             mutual: false,
             reverse: alloc_zeros(stream, 1, "kNN placeholder")?,
+            tensor: None,
         })
     }
 
@@ -253,6 +273,9 @@ impl KnnRun {
             stream
                 .memset_zeros(&mut self.reverse)
                 .map_err(driver_error("clearing the reverse 1-NN keys"))?;
+        }
+        if let Some(tensor) = &mut self.tensor {
+            return tensor.launch(dev, stream, (query, train), out, &mut self.reverse);
         }
         let mut launch = stream.launch_builder(dev.kernel(self.kernel));
         launch
@@ -276,26 +299,46 @@ impl KnnRun {
         // `reverse` nt keys for the mutual kernels (the only ones that touch it).
         unsafe { launch.launch(config) }.map_err(driver_error(self.kernel))?;
         if g.segments > 1 {
-            let segments = g.segments as u32;
-            let mut launch = stream.launch_builder(dev.kernel("clatch_knn_merge"));
-            launch
-                .arg(&self.partial)
-                .arg(&self.nq)
-                .arg(&segments)
-                .arg(&self.k)
-                .arg(&mut *out);
-            let blocks = (self.nq as usize).div_ceil(SELECT_THREADS).min(1 << 20) as u32;
-            let config = LaunchConfig {
-                grid_dim: (blocks, 1, 1),
-                block_dim: (CLATCH_MATCH_SELECT_THREADS, 1, 1),
-                shared_mem_bytes: 0,
-            };
-            // SAFETY: `partial` holds segments * nq * k keys, all written by the kNN kernel above
-            // (every segment is non-empty), and `out` nq * k matches.
-            unsafe { launch.launch(config) }.map_err(driver_error("clatch_knn_merge"))?;
+            launch_merge(
+                dev,
+                stream,
+                &self.partial,
+                (self.nq, g.segments as u32, self.k),
+                out,
+            )?;
         }
         Ok(())
     }
+}
+
+/// Queues `clatch_knn_merge`: the k best of `segments` sorted lists per query in `partial` (every one
+/// written) into `out` (nq * k matches).
+pub(crate) fn launch_merge(
+    dev: &GpuDevice,
+    stream: &Arc<CudaStream>,
+    partial: &CudaSlice<u64>,
+    (nq, segments, k): (u32, u32, u32),
+    out: &mut CudaSlice<Match>,
+) -> Result<()> {
+    debug_assert!(partial.len() >= segments as usize * nq as usize * k as usize);
+    debug_assert!(out.len() >= nq as usize * k as usize);
+    let mut launch = stream.launch_builder(dev.kernel("clatch_knn_merge"));
+    launch
+        .arg(partial)
+        .arg(&nq)
+        .arg(&segments)
+        .arg(&k)
+        .arg(&mut *out);
+    let blocks = (nq as usize).div_ceil(SELECT_THREADS).min(1 << 20) as u32;
+    let config = LaunchConfig {
+        grid_dim: (blocks, 1, 1),
+        block_dim: (CLATCH_MATCH_SELECT_THREADS, 1, 1),
+        shared_mem_bytes: 0,
+    };
+    // SAFETY: `partial` holds segments * nq * k keys, all written by the kNN kernel queued before
+    // (every segment is non-empty), and `out` nq * k matches.
+    unsafe { launch.launch(config) }.map_err(driver_error("clatch_knn_merge"))?;
+    Ok(())
 }
 
 /// The k nearest gallery descriptors of every query (validated sets and `k`, as for
@@ -306,7 +349,7 @@ pub(crate) fn knn(
     train: &DescriptorSet,
     k: usize,
 ) -> Result<KnnMatches> {
-    knn_with(dev, query, train, k, None)
+    knn_with(dev, query, train, k, None, None)
 }
 
 /// [`knn`] with the gallery cut into segments of `segment_tiles` tiles of
@@ -320,7 +363,29 @@ pub fn knn_segmented(
     k: usize,
     segment_tiles: usize,
 ) -> Result<KnnMatches> {
-    knn_with(dev, query, train, k, Some(segment_tiles.max(1)))
+    knn_with(dev, query, train, k, Some(segment_tiles.max(1)), None)
+}
+
+/// [`knn`] on the kernel family `kernel` (an error where the device or `k` does not allow it), with
+/// the gallery segments of [`knn_segmented`] when `segment_tiles` is given (tensor kernels: tiles of
+/// `CLATCH_TENSOR_TILE`).
+#[doc(hidden)]
+pub fn knn_on(
+    dev: &GpuDevice,
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    k: usize,
+    segment_tiles: Option<usize>,
+    kernel: MatchKernel,
+) -> Result<KnnMatches> {
+    knn_with(
+        dev,
+        query,
+        train,
+        k,
+        segment_tiles.map(|t| t.max(1)),
+        Some(kernel),
+    )
 }
 
 fn knn_with(
@@ -329,6 +394,7 @@ fn knn_with(
     train: &DescriptorSet,
     k: usize,
     segment_tiles: Option<usize>,
+    kernel: Option<MatchKernel>,
 ) -> Result<KnnMatches> {
     check_k(k)?;
     check_rows(query, "query descriptors")?;
@@ -343,7 +409,7 @@ fn knn_with(
     let q = upload(&stream, query, "query descriptor upload")?;
     let t = upload(&stream, train, "gallery descriptor upload")?;
     let shape = (query.len(), train.len(), query.width().words());
-    let mut run = KnnRun::new(dev, &stream, shape, k, false, segment_tiles)?;
+    let mut run = KnnRun::new(dev, &stream, shape, (k, false), kernel, segment_tiles)?;
     let mut out = alloc_zeros::<Match>(&stream, query.len() * k, "kNN matches")?;
     run.launch(dev, &stream, &q, &t, &mut out)?;
     let matches = stream.clone_dtoh(&out).map_err(driver_error(
@@ -365,7 +431,26 @@ pub(crate) fn match_descriptors(
     if query.is_empty() {
         return Ok(Vec::new());
     }
-    let mut job = MatchJob::prepare(dev, dev.new_stream()?, query, train, config)?;
+    let mut job = MatchJob::prepare(dev, dev.new_stream()?, query, train, config, None)?;
+    job.launch(dev)?;
+    job.fetch()
+}
+
+/// [`match_descriptors`] on the kernel family `kernel` (an error where the device does not allow it).
+#[doc(hidden)]
+pub fn match_descriptors_on(
+    dev: &GpuDevice,
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    config: &MatchConfig,
+    kernel: MatchKernel,
+) -> Result<Vec<Match>> {
+    check_rows(query, "query descriptors")?;
+    check_rows(train, "gallery descriptors")?;
+    if query.is_empty() {
+        return Ok(Vec::new());
+    }
+    let mut job = MatchJob::prepare(dev, dev.new_stream()?, query, train, config, Some(kernel))?;
     job.launch(dev)?;
     job.fetch()
 }
@@ -387,13 +472,15 @@ pub(crate) struct MatchJob {
 }
 
 impl MatchJob {
-    /// Uploads both (non-empty, row-checked) sets and allocates every buffer, on `stream`.
+    /// Uploads both (non-empty, row-checked) sets and allocates every buffer, on `stream`; `kernel`
+    /// overrides the device's choice of kNN kernels.
     pub(crate) fn prepare(
         dev: &GpuDevice,
         stream: Arc<CudaStream>,
         query: &DescriptorSet,
         train: &DescriptorSet,
         config: &MatchConfig,
+        kernel: Option<MatchKernel>,
     ) -> Result<Self> {
         let (nq, nt, words) = (query.len(), train.len(), query.width().words());
         let k = if config.ratio.is_some() { 2 } else { 1 };
@@ -401,7 +488,14 @@ impl MatchJob {
         Ok(Self {
             query: upload(&stream, query, "query descriptor upload")?,
             train: upload(&stream, train, "gallery descriptor upload")?,
-            run: KnnRun::new(dev, &stream, (nq, nt, words), k, config.cross_check, None)?,
+            run: KnnRun::new(
+                dev,
+                &stream,
+                (nq, nt, words),
+                (k, config.cross_check),
+                kernel,
+                None,
+            )?,
             forward: alloc_zeros(&stream, nq * k, "kNN matches")?,
             keep_bits: alloc_zeros(&stream, blocks * SELECT_THREADS / 32, "match flags")?,
             counts: alloc_zeros(&stream, blocks, "match counts")?,
@@ -500,8 +594,8 @@ pub fn time_match_kernels(
     query: &DescriptorSet,
     train: &DescriptorSet,
     config: &MatchConfig,
-    warmup: usize,
-    repeats: usize,
+    kernel: Option<MatchKernel>,
+    (warmup, repeats): (usize, usize),
 ) -> Result<Vec<f32>> {
     let k = if config.ratio.is_some() { 2 } else { 1 };
     if query.is_empty() || train.len() < k {
@@ -510,7 +604,7 @@ pub fn time_match_kernels(
             gallery: train.len(),
         });
     }
-    let mut job = MatchJob::prepare(dev, dev.new_stream()?, query, train, config)?;
+    let mut job = MatchJob::prepare(dev, dev.new_stream()?, query, train, config, kernel)?;
     let stream = job.stream.clone();
     time_launches(dev, &stream, warmup, repeats, || job.launch(dev))
 }
@@ -537,8 +631,8 @@ pub fn time_knn_kernel(
     query: &DescriptorSet,
     train: &DescriptorSet,
     k: usize,
-    warmup: usize,
-    repeats: usize,
+    kernel: Option<MatchKernel>,
+    (warmup, repeats): (usize, usize),
 ) -> Result<Vec<f32>> {
     check_k(k)?;
     if query.is_empty() || k == 0 || k > train.len() {
@@ -551,7 +645,7 @@ pub fn time_knn_kernel(
     let q = upload(&stream, query, "query descriptor upload")?;
     let t = upload(&stream, train, "gallery descriptor upload")?;
     let shape = (query.len(), train.len(), query.width().words());
-    let mut run = KnnRun::new(dev, &stream, shape, k, false, None)?;
+    let mut run = KnnRun::new(dev, &stream, shape, (k, false), kernel, None)?;
     let mut out = alloc_zeros::<Match>(&stream, query.len() * k, "kNN matches")?;
     time_launches(dev, &stream, warmup, repeats, || {
         run.launch(dev, &stream, &q, &t, &mut out)
@@ -581,7 +675,7 @@ pub fn time_knn_variants(
             reason: "the kNN variants are compiled for 512-bit descriptors and k = 2",
         });
     }
-    let expected = knn(dev, query, train, K)?.matches;
+    let expected = knn_on(dev, query, train, K, None, MatchKernel::Popcount)?.matches;
     let stream = dev.new_stream()?;
     let q = upload(&stream, query, "query descriptor upload")?;
     let t = upload(&stream, train, "gallery descriptor upload")?;

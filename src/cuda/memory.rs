@@ -4,7 +4,9 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
-use cudarc::driver::{CudaSlice, CudaStream, DeviceRepr, PinnedHostSlice, ValidAsZeroBits};
+use cudarc::driver::{
+    CudaEvent, CudaSlice, CudaStream, DeviceRepr, PinnedHostSlice, ValidAsZeroBits,
+};
 
 use super::device::driver_error;
 use crate::error::{Error, Result};
@@ -49,11 +51,22 @@ pub(crate) fn upload<T: DeviceRepr>(
 }
 
 /// Reusable page-locked host buffers, by exact size, so repeated uploads of same-sized images (video,
-/// batches) are true asynchronous DMA without a fresh `cuMemHostAlloc` each time.
-type Pool = Mutex<HashMap<(usize, usize), Vec<PinnedHostSlice<u8>>>>;
+/// batches) are true asynchronous DMA without a fresh `cuMemHostAlloc` each time. Each comes with an
+/// event recorded after its last copy, so a caller takes a buffer whose copy has finished instead of
+/// waiting for the one just queued (which made images in flight queue one upload at a time).
+type Pool = Mutex<HashMap<(usize, usize), Vec<(PinnedHostSlice<u8>, CudaEvent)>>>;
 
-/// Buffers kept per size; more in flight at once are allocated and dropped.
-const KEPT_PER_SIZE: usize = 4;
+/// Most buffers kept per size, and most bytes kept per size: as many images of one size as are
+/// commonly in flight keep their staging buffers (allocating and freeing pinned memory per call
+/// costs more than the copy: with 4 kept, 8 images of 1080p in flight spent most of their host time
+/// there); more in flight at once are allocated and dropped.
+const KEPT_PER_SIZE: usize = 16;
+const KEPT_BYTES_PER_SIZE: usize = 256 << 20;
+
+/// Buffers of `len` bytes the pool keeps.
+fn kept_for(len: usize) -> usize {
+    (KEPT_BYTES_PER_SIZE / len.max(1)).clamp(1, KEPT_PER_SIZE)
+}
 
 fn pool() -> &'static Pool {
     static POOL: OnceLock<Pool> = OnceLock::new();
@@ -61,8 +74,8 @@ fn pool() -> &'static Pool {
 }
 
 /// Uploads `len` bytes written by `fill` into a pinned staging buffer, then copied to a new device
-/// buffer on `stream`. The staging buffer returns to the pool; its next user waits (through the event
-/// cudarc records) until this copy has finished reading it.
+/// buffer on `stream`. The staging buffer returns to the pool; a later user takes it once this copy has
+/// finished reading it (and cudarc's own event makes any user wait for that in any case).
 pub(crate) fn upload_staged(
     stream: &Arc<CudaStream>,
     len: usize,
@@ -75,7 +88,10 @@ pub(crate) fn upload_staged(
         .lock()
         .unwrap_or_else(|p| p.into_inner())
         .get_mut(&key)
-        .and_then(Vec::pop);
+        .and_then(|kept| {
+            let idle = kept.iter().position(|(_, copied)| copied.is_complete())?;
+            Some(kept.swap_remove(idle).0)
+        });
     let mut staging = match reused {
         Some(buffer) => buffer,
         // SAFETY: the buffer is fully written by `fill` below before it is read.
@@ -89,10 +105,13 @@ pub(crate) fn upload_staged(
     let device = stream
         .clone_htod(&staging)
         .map_err(|e| with_bytes(driver_error(operation)(e), len))?;
+    let copied = stream
+        .record_event(None)
+        .map_err(driver_error("event record"))?;
     let mut pool = pool().lock().unwrap_or_else(|p| p.into_inner());
     let kept = pool.entry(key).or_default();
-    if kept.len() < KEPT_PER_SIZE {
-        kept.push(staging);
+    if kept.len() < kept_for(len) {
+        kept.push((staging, copied));
     }
     Ok(device)
 }

@@ -131,8 +131,9 @@ pub(crate) fn detect_and_describe_async(
     descriptor: &DescriptorConfig,
 ) -> Result<PendingFeatures> {
     let (dev, s) = (&*stream.dev, &stream.stream);
-    let device_image = DeviceImage::upload(dev, s, image)?;
+    let mut device_image = DeviceImage::upload(dev, s, image)?;
     let keypoints = detect_on_device(dev, s, &device_image, detector)?;
+    device_image.build_quads(dev, s)?;
     let width = descriptor.width;
     let weights = upload_weights(s, descriptor)?;
     let mut descriptors = alloc_zeros(
@@ -201,7 +202,14 @@ pub(crate) fn match_async(
             done: None,
         });
     }
-    let mut job = MatchJob::prepare(&stream.dev, stream.stream.clone(), query, train, config)?;
+    let mut job = MatchJob::prepare(
+        &stream.dev,
+        stream.stream.clone(),
+        query,
+        train,
+        config,
+        None,
+    )?;
     job.launch(&stream.dev)?;
     Ok(PendingMatches {
         job: Some(job),

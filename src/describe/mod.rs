@@ -20,6 +20,7 @@
 //!    stored at word `t / 64`, bit `t % 64` (least significant first).
 
 pub mod cpu;
+pub mod opencv;
 pub mod triplets;
 
 use crate::angle::{angle_bin, rotation_table};
@@ -112,6 +113,12 @@ pub struct DescriptorConfig {
 pub enum SkipReason {
     /// Part of its rotated, scaled window lies outside the image.
     WindowOutsideImage,
+    /// OpenCV-compatible LATCH: OpenCV drops it too (its rounded position is within
+    /// `24 + half_ssd_size` pixels of an edge; see [`opencv`]).
+    OpencvBorder,
+    /// OpenCV-compatible LATCH: OpenCV keeps it but reads pixels outside the image for it (`x` or `y`
+    /// exactly `k + 0.5` next to the border; see [`opencv`]), so its OpenCV descriptor is undefined.
+    OpencvReadsOutsideImage,
 }
 
 /// A keypoint that got no descriptor, and why.

@@ -77,6 +77,30 @@ pub fn rectangles(width: usize, height: usize, seed: u64) -> Gray {
     )
 }
 
+/// Keypoints anywhere in a `width` x `height` image (border zones included) at sub-pixel positions on a
+/// 1/64 grid (half pixels included), with FAST's "no angle" -1, angles on a 0.01-degree grid, and
+/// angles with any `f32` mantissa in [-720, 720).
+pub fn random_subpixel_keypoints(
+    width: usize,
+    height: usize,
+    count: usize,
+    seed: u64,
+) -> Vec<clatch::KeyPoint> {
+    let mut rng = SplitMix64::new(seed);
+    (0..count)
+        .map(|i| {
+            let x = rng.below(width as u64 * 64) as f32 / 64.0;
+            let y = rng.below(height as u64 * 64) as f32 / 64.0;
+            let angle = match i % 5 {
+                0 => -1.0,
+                1 => rng.below(36_000) as f32 / 100.0,
+                _ => (rng.below(1 << 24) as f32 / (1 << 24) as f32) * 1440.0 - 720.0,
+            };
+            clatch::KeyPoint::new(x, y).with_angle(angle)
+        })
+        .collect()
+}
+
 /// Uniformly random descriptors of the given width (bits past the width cleared by the set).
 pub fn random_set(width: DescriptorWidth, count: usize, rng: &mut SplitMix64) -> DescriptorSet {
     let words = (0..count * width.words()).map(|_| rng.next_u64()).collect();

@@ -121,6 +121,35 @@ pub enum CliError {
     /// A homography file that is not nine finite numbers forming an invertible matrix.
     #[error("bad homography file {path}: {reason}", path = .path.display())]
     Homography { path: PathBuf, reason: String },
+
+    /// An evaluation input that is missing or incomplete (a sequence folder without its images, ...).
+    #[error("evaluation input {path}: {reason}", path = .path.display())]
+    EvalInput { path: PathBuf, reason: String },
+
+    /// Two things that must have the same size do not (a warp and its source, a merged result and
+    /// the pair it claims to describe).
+    #[error("size mismatch for {what}: expected {expected}, found {found}")]
+    SizeMismatch {
+        what: String,
+        expected: String,
+        found: String,
+    },
+
+    /// A results file (CSV) from another tool that cannot be read as evaluation results.
+    #[error("bad results file {path}, line {line}: {reason}", path = .path.display())]
+    ResultsFormat {
+        path: PathBuf,
+        line: usize,
+        reason: String,
+    },
+
+    /// An external script (the OpenCV evaluation) could not run or failed.
+    #[error("{command} failed: {reason}")]
+    Script { command: String, reason: String },
+
+    /// A chart could not be drawn.
+    #[error("cannot draw chart {path}: {reason}", path = .path.display())]
+    Chart { path: PathBuf, reason: String },
 }
 
 impl CliError {

@@ -73,7 +73,11 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
     let img = load_gray(&args.image)?;
     progress.done();
 
-    let extracted = pipeline::extract(&extractor, &img, &args.image, &progress)?;
+    let latch = args.opencv.latch()?;
+    let extracted = match &latch {
+        None => pipeline::extract(&extractor, &img, &args.image, &progress)?,
+        Some(latch) => pipeline::extract_opencv(&extractor, latch, &img, &args.image, &progress)?,
+    };
     let features = &extracted.features;
 
     progress.stage("writing files");
@@ -93,6 +97,16 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
     println!("clatch extract");
     println!("  image       {} ({w}x{h})", args.image.display());
     println!("  {:<12}{}", "backend", extractor.backend());
+    if let Some(l) = &latch {
+        println!(
+            "  {:<12}OpenCV LATCH (bytes {}, rotation {}, half_ssd_size {}, sigma {})",
+            "descriptor",
+            l.bytes(),
+            l.rotation_invariance(),
+            l.half_ssd_size(),
+            l.sigma()
+        );
+    }
     println!("  {:<12}{n}", "keypoints");
     println!("  {:<12}{:>12}", "detect", ms(extracted.detect));
     println!("  {:<12}{:>12}", "describe", ms(extracted.describe));

@@ -127,35 +127,121 @@ impl Homography {
         Ok(h)
     }
 
-    /// Reads and parses a homography file.
+    /// Parses a 3x3 matrix from an OpenCV FileStorage XML file (as OpenCV's sample `H1to3p.xml`):
+    /// the first `opencv-matrix` element must have 3 rows, 3 columns and its nine numbers in `<data>`.
+    pub fn parse_opencv_xml(text: &str) -> Result<Homography, String> {
+        let element = |tag: &str| -> Result<&str, String> {
+            let (open, close) = (format!("<{tag}>"), format!("</{tag}>"));
+            let start = text
+                .find(&open)
+                .ok_or_else(|| format!("no <{tag}> element"))?
+                + open.len();
+            let len = text[start..]
+                .find(&close)
+                .ok_or_else(|| format!("<{tag}> is not closed"))?;
+            Ok(text[start..start + len].trim())
+        };
+        for (tag, want) in [("rows", "3"), ("cols", "3")] {
+            let found = element(tag)?;
+            if found != want {
+                return Err(format!("<{tag}> is {found}, expected {want}"));
+            }
+        }
+        Homography::parse(element("data")?)
+    }
+
+    /// Reads and parses a homography file: nine numbers (the Oxford format), or OpenCV FileStorage
+    /// XML when the file starts with `<?xml` or `<opencv_storage>`.
     pub fn from_file(path: &Path) -> Result<Homography, CliError> {
         let text = std::fs::read_to_string(path).map_err(|source| CliError::Read {
             path: path.to_path_buf(),
             source,
         })?;
-        Homography::parse(&text).map_err(|reason| CliError::Homography {
+        let start = text.trim_start();
+        let parsed = if start.starts_with("<?xml") || start.starts_with("<opencv_storage>") {
+            Homography::parse_opencv_xml(&text)
+        } else {
+            Homography::parse(&text)
+        };
+        parsed.map_err(|reason| CliError::Homography {
             path: path.to_path_buf(),
             reason,
         })
     }
 }
 
+/// `inner` applied about the centre of a `width` x `height` image instead of about the origin.
+pub fn about_centre(width: usize, height: usize, inner: &Homography) -> Homography {
+    let (cx, cy) = ((width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0);
+    Homography::translation(cx, cy)
+        .after(inner)
+        .after(&Homography::translation(-cx, -cy))
+        .normalized()
+}
+
 /// The demo's fixed second view of a `width` x `height` image: rotation by 30 degrees and scaling by
 /// 0.9 about the centre, with a slight perspective tilt; the centre stays put.
 pub fn demo_homography(width: usize, height: usize) -> Homography {
-    let (cx, cy) = ((width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0);
     // Perspective in centred coordinates: w varies by about ±5 % across a 512-pixel image.
     let tilt = Homography::perspective(1.2e-4, -0.8e-4);
-    Homography::translation(cx, cy)
-        .after(&tilt)
-        .after(&Homography::rotation_scale(30.0, 0.9))
-        .after(&Homography::translation(-cx, -cy))
-        .normalized()
+    about_centre(
+        width,
+        height,
+        &tilt.after(&Homography::rotation_scale(30.0, 0.9)),
+    )
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// OpenCV's sample `H1to3p.xml` in shape (values shortened).
+    const OPENCV_XML: &str = "<?xml version=\"1.0\"?>\n<opencv_storage>\n\
+        <H13 type_id=\"opencv-matrix\">\n  <rows>3</rows>\n  <cols>3</cols>\n  <dt>d</dt>\n\
+        <data>\n\t2.0e+00 0. 1.5e+01\n\t0. 2. -4.\n\t0. 0. 1. </data></H13>\n</opencv_storage>\n";
+
+    #[test]
+    fn parses_opencv_xml() {
+        let h = Homography::parse_opencv_xml(OPENCV_XML).unwrap();
+        // (x, y) -> (2 x + 15, 2 y - 4).
+        assert_eq!(h.apply(1.0, 3.0), Some((17.0, 2.0)));
+        let wrong_rows = OPENCV_XML.replace("<rows>3</rows>", "<rows>2</rows>");
+        assert!(
+            Homography::parse_opencv_xml(&wrong_rows)
+                .unwrap_err()
+                .contains("<rows> is 2")
+        );
+        let no_data = OPENCV_XML.replace("</data>", "");
+        assert!(
+            Homography::parse_opencv_xml(&no_data)
+                .unwrap_err()
+                .contains("not closed")
+        );
+        let short = OPENCV_XML.replace("0. 0. 1. ", "0. 0.");
+        assert!(
+            Homography::parse_opencv_xml(&short)
+                .unwrap_err()
+                .contains("9")
+        );
+    }
+
+    #[test]
+    fn from_file_reads_both_formats_and_names_bad_files() {
+        let dir = std::env::temp_dir().join(format!("clatch-h-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (xml, txt, bad) = (dir.join("h.xml"), dir.join("H1to3p"), dir.join("bad"));
+        std::fs::write(&xml, OPENCV_XML).unwrap();
+        std::fs::write(&txt, "2 0 15\n0 2 -4\n0 0 1\n").unwrap();
+        std::fs::write(&bad, "<opencv_storage><rows>3</rows></opencv_storage>").unwrap();
+        let from_xml = Homography::from_file(&xml).unwrap();
+        assert_eq!(from_xml, Homography::from_file(&txt).unwrap());
+        let e = Homography::from_file(&bad).unwrap_err();
+        assert!(matches!(e, CliError::Homography { .. }), "{e}");
+        assert!(e.to_string().contains("bad"), "{e}");
+        let e = Homography::from_file(&dir.join("missing")).unwrap_err();
+        assert!(matches!(e, CliError::Read { .. }), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     fn close(a: (f64, f64), b: (f64, f64)) -> bool {
         (a.0 - b.0).abs() < 1e-9 && (a.1 - b.1).abs() < 1e-9

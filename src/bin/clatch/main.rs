@@ -9,6 +9,7 @@ mod cpu_time;
 mod demo;
 mod draw;
 mod error;
+mod eval;
 mod exif;
 mod extract;
 mod homography;
@@ -28,7 +29,7 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use clatch::{Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, ExtractorConfig};
-use clatch::{MatchConfig, PatchWeights};
+use clatch::{MatchConfig, OpencvLatch, PatchWeights};
 
 use crate::error::CliError;
 use crate::pipeline::Settings;
@@ -76,6 +77,60 @@ enum Command {
     /// `colmap model_analyzer`, and reports registered images, 3D points, reprojection error and the
     /// time of each stage. The model is in WORKSPACE/sparse/N.
     Colmap(ColmapArgs),
+    /// Descriptor quality on image pairs with ground-truth homographies, optionally beside OpenCV.
+    ///
+    /// Pairs: OpenCV's graf1/graf3 sample (--opencv-samples), the Oxford graf, boat and bikes
+    /// sequences, img1 against img2..img6 (--data), and synthetic warps (rotations 0-180 degrees,
+    /// scales 0.5-2, two perspective tilts) of the embedded photo and of --synthetic-image photos.
+    /// Per pair and method: keypoints in the overlap, matches, correct matches (within --inlier-px
+    /// of the true homography), matching score, and precision and recall of the ratio test at
+    /// thresholds 0.50..1.00. Writes OUT/pairs.csv (the pairs, for bench/eval_opencv.py),
+    /// OUT/clatch.summary.csv and OUT/clatch.pr.csv, OUT/results.json, OUT/tables.md, and the charts
+    /// OUT/pr.png and OUT/synthetic.png. EVALUATION.md defines every figure.
+    Eval(EvalArgs),
+}
+
+/// Arguments of `clatch eval`.
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// Folder holding oxford_graf/, oxford_boat/, oxford_bikes/ (img1..img6, H1to2p..H1to6p each).
+    #[arg(long, value_name = "DIR")]
+    pub data: Option<PathBuf>,
+    /// Folder holding OpenCV's graf1.png, graf3.png and H1to3p.xml (Debian's opencv-doc package
+    /// installs them in /usr/share/doc/opencv-doc/examples/data).
+    #[arg(long, value_name = "DIR")]
+    pub opencv_samples: Option<PathBuf>,
+    /// A photo to warp synthetically besides the embedded one: PATH, or NAME=PATH (repeatable).
+    #[arg(long = "synthetic-image", value_name = "[NAME=]PATH")]
+    pub synthetic_images: Vec<String>,
+    /// No synthetic pairs at all.
+    #[arg(long, conflicts_with = "synthetic_images")]
+    pub no_synthetic: bool,
+    /// Output folder.
+    #[arg(short, long, default_value = "clatch-eval", value_name = "DIR")]
+    pub out: PathBuf,
+    /// clatch configurations to evaluate (repeatable).
+    #[arg(long = "method", value_enum, default_values_t = [eval::run::ClatchMethod::Clatch])]
+    pub methods: Vec<eval::run::ClatchMethod>,
+    /// Run the OpenCV script with this Python (which needs opencv-contrib-python-headless) and merge
+    /// its results.
+    #[arg(long, value_name = "PYTHON")]
+    pub opencv_python: Option<PathBuf>,
+    /// The OpenCV script.
+    #[arg(long, default_value = "bench/eval_opencv.py", value_name = "FILE")]
+    pub opencv_script: PathBuf,
+    /// Merge results written earlier for the same pairs: PREFIX.summary.csv and PREFIX.pr.csv
+    /// (repeatable).
+    #[arg(long, value_name = "PREFIX")]
+    pub merge: Vec<PathBuf>,
+    #[command(flatten)]
+    pub backend: BackendArgs,
+    #[command(flatten)]
+    pub detect: DetectArgs,
+    #[command(flatten)]
+    pub matching: MatchingArgs,
+    #[command(flatten)]
+    pub check: CheckArgs,
 }
 
 /// Arguments of `clatch demo`.
@@ -136,6 +191,59 @@ pub struct ExtractArgs {
     pub backend: BackendArgs,
     #[command(flatten)]
     pub detect: DetectArgs,
+    #[command(flatten)]
+    pub opencv: OpencvLatchArgs,
+}
+
+/// OpenCV-compatible LATCH instead of CLATCH (`clatch extract --opencv-latch`).
+#[derive(Debug, Args)]
+pub struct OpencvLatchArgs {
+    /// Describe with OpenCV's LATCH: the descriptors equal
+    /// `cv2.xfeatures2d.LATCH_create(BYTES, rotation, HALF, SIGMA).compute` on the same keypoints.
+    #[arg(long, conflicts_with = "bits")]
+    pub opencv_latch: bool,
+    /// OpenCV LATCH descriptor bytes: 1, 2, 4, 8, 16, 32 or 64.
+    #[arg(
+        long,
+        default_value_t = 32,
+        value_name = "BYTES",
+        requires = "opencv_latch"
+    )]
+    pub latch_bytes: usize,
+    /// OpenCV LATCH without rotation invariance (patch centres not rotated by the keypoint angle).
+    #[arg(long, requires = "opencv_latch")]
+    pub latch_no_rotation: bool,
+    /// OpenCV LATCH patch half size: patches are (2 HALF + 1)² pixels.
+    #[arg(
+        long,
+        default_value_t = 3,
+        value_name = "HALF",
+        requires = "opencv_latch"
+    )]
+    pub latch_half_ssd_size: usize,
+    /// OpenCV LATCH pre-blur sigma (3x3 Gaussian; 0: none).
+    #[arg(
+        long,
+        default_value_t = 2.0,
+        value_name = "SIGMA",
+        requires = "opencv_latch"
+    )]
+    pub latch_sigma: f64,
+}
+
+impl OpencvLatchArgs {
+    /// The validated settings, or `None` without `--opencv-latch`.
+    pub fn latch(&self) -> Result<Option<OpencvLatch>, CliError> {
+        if !self.opencv_latch {
+            return Ok(None);
+        }
+        Ok(Some(OpencvLatch::new(
+            self.latch_bytes,
+            !self.latch_no_rotation,
+            self.latch_half_ssd_size,
+            self.latch_sigma,
+        )?))
+    }
 }
 
 /// Arguments of `clatch colmap`.
@@ -363,6 +471,7 @@ fn main() -> ExitCode {
         Command::Match(args) => match_cmd::main(&args),
         Command::Extract(args) => extract::main(&args),
         Command::Colmap(args) => colmap_cmd::main(&args),
+        Command::Eval(args) => eval::main(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -396,6 +505,25 @@ mod tests {
             &["clatch", "match", "only-one.png"],
             &["clatch", "extract", "img.png"],
             &["clatch", "demo", "--ratio", "0.7", "--no-ratio"],
+            &[
+                "clatch",
+                "extract",
+                "a.png",
+                "-o",
+                "a",
+                "--latch-bytes",
+                "64",
+            ],
+            &[
+                "clatch",
+                "extract",
+                "a.png",
+                "-o",
+                "a",
+                "--opencv-latch",
+                "--bits",
+                "256",
+            ],
         ] {
             assert!(Cli::try_parse_from(args).is_err(), "{args:?} should fail");
         }
@@ -405,6 +533,31 @@ mod tests {
         };
         assert_eq!(demo.detect.bits, 256);
         assert_eq!(demo.matching.config().ratio, None);
+        let parse = |extra: &[&str]| {
+            let args = [&["clatch", "extract", "a.png", "-o", "a"][..], extra].concat();
+            let Command::Extract(extract) = Cli::try_parse_from(args).unwrap().command else {
+                panic!("parsed the wrong subcommand")
+            };
+            extract.opencv.latch()
+        };
+        assert_eq!(parse(&[]).unwrap(), None);
+        assert_eq!(
+            parse(&["--opencv-latch"]).unwrap(),
+            Some(OpencvLatch::default())
+        );
+        assert_eq!(
+            parse(&[
+                "--opencv-latch",
+                "--latch-bytes",
+                "64",
+                "--latch-no-rotation",
+                "--latch-sigma",
+                "0"
+            ])
+            .unwrap(),
+            Some(OpencvLatch::new(64, false, 3, 0.0).unwrap())
+        );
+        assert!(parse(&["--opencv-latch", "--latch-bytes", "3"]).is_err());
     }
 
     #[cfg(not(feature = "cuda"))]

@@ -4,7 +4,8 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use clatch::{
-    Backend, Extractor, ExtractorConfig, Features, GrayView, Match, MatchConfig, Matcher,
+    Backend, Described, Extractor, ExtractorConfig, Features, GrayView, KeyPoint, Match,
+    MatchConfig, Matcher, OpencvLatch,
 };
 use image::GrayImage;
 
@@ -62,6 +63,32 @@ pub fn extract(
     name: &Path,
     progress: &Progress,
 ) -> Result<Extracted, CliError> {
+    extract_with(extractor, img, name, progress, |view, keypoints| {
+        extractor.describe(view, keypoints)
+    })
+}
+
+/// Detects with `extractor` and describes with OpenCV-compatible LATCH on the extractor's backend.
+pub fn extract_opencv(
+    extractor: &Extractor,
+    latch: &OpencvLatch,
+    img: &GrayImage,
+    name: &Path,
+    progress: &Progress,
+) -> Result<Extracted, CliError> {
+    extract_with(extractor, img, name, progress, |view, keypoints| {
+        latch.describe(extractor.backend(), view, keypoints)
+    })
+}
+
+/// Detects with `extractor`, describes with `describe`, timing both.
+fn extract_with(
+    extractor: &Extractor,
+    img: &GrayImage,
+    name: &Path,
+    progress: &Progress,
+    describe: impl FnOnce(&GrayView, &[KeyPoint]) -> clatch::Result<Described>,
+) -> Result<Extracted, CliError> {
     let in_image = || CliError::in_image(name);
     let view = GrayView::try_from(img).map_err(in_image())?;
 
@@ -73,7 +100,7 @@ pub fn extract(
 
     progress.stage("describing keypoints");
     let start = Instant::now();
-    let described = extractor.describe(&view, &keypoints).map_err(in_image())?;
+    let described = describe(&view, &keypoints).map_err(in_image())?;
     let describe = start.elapsed();
     progress.done();
 

@@ -28,8 +28,7 @@ impl Progress {
         progress
     }
 
-    /// A bar that never draws (tests).
-    #[cfg(test)]
+    /// A bar that never draws (tests, and work that reports progress of its own).
     pub fn hidden() -> Self {
         Self(ProgressBar::hidden())
     }

@@ -92,7 +92,8 @@ pub fn ms(d: Duration) -> String {
     format!("{:.2} ms", d.as_secs_f64() * 1e3)
 }
 
-fn describe_matching(config: &MatchConfig) -> String {
+/// The matcher settings in words, e.g. `ratio 0.8, cross-check`.
+pub fn describe_matching(config: &MatchConfig) -> String {
     let mut parts = Vec::new();
     match config.ratio {
         Some(r) => parts.push(format!("ratio {r}")),

@@ -3,6 +3,8 @@
 
 pub mod angle;
 pub mod backend;
+#[cfg(feature = "colmap")]
+pub mod colmap;
 #[cfg(feature = "cuda")]
 pub mod cuda;
 pub mod describe;

@@ -50,6 +50,74 @@ pub enum CliError {
     #[error("cannot save a picture as {path}: {reason}", path = .path.display())]
     PictureFormat { path: PathBuf, reason: String },
 
+    /// The image folder could not be listed.
+    #[error("cannot list the image folder {path}: {source}", path = .path.display())]
+    ImageDir {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+
+    /// The image folder holds no image file.
+    #[error("no image in {path} (looked for the extensions {extensions})", path = .path.display())]
+    NoImages { path: PathBuf, extensions: String },
+
+    /// A file name that is not UTF-8 (COLMAP stores names as text).
+    #[error("{path}: the file name is not valid UTF-8", path = .path.display())]
+    ImageName { path: PathBuf },
+
+    /// Images of different sizes with one given camera matrix.
+    #[error(
+        "{path} is {got_w}x{got_h} but the first image is {want_w}x{want_h}: one camera matrix (--camera-k) needs one image size",
+        path = .path.display()
+    )]
+    ImageSizeMismatch {
+        path: PathBuf,
+        got_w: u32,
+        got_h: u32,
+        want_w: u32,
+        want_h: u32,
+    },
+
+    /// A camera matrix file that is not a pinhole K.
+    #[error("bad camera matrix file {path}: {source}", path = .path.display())]
+    CameraK {
+        path: PathBuf,
+        source: clatch::colmap::ColmapError,
+    },
+
+    /// Writing the COLMAP database or match list failed.
+    #[error("{0}")]
+    Colmap(#[from] clatch::colmap::ColmapError),
+
+    /// The workspace already holds COLMAP models from an earlier run.
+    #[error("{path} already holds COLMAP models; use --force to replace them or choose another --workspace", path = .path.display())]
+    ModelsExist { path: PathBuf },
+
+    /// The `colmap` program could not be started.
+    #[error("cannot run {program} ({step}): {source}", program = .program.display())]
+    ColmapStart {
+        program: PathBuf,
+        step: &'static str,
+        source: std::io::Error,
+    },
+
+    /// A `colmap` step failed; the tail of its output says why.
+    #[error("colmap {step} failed ({status}); full log {log}; last lines:\n{tail}", log = .log.display())]
+    ColmapFailed {
+        step: &'static str,
+        status: String,
+        log: PathBuf,
+        tail: String,
+    },
+
+    /// `colmap model_analyzer` printed no figure where one was expected.
+    #[error("cannot read `{field}` from colmap model_analyzer's output for {model}; it printed:\n{output}", model = .model.display())]
+    ModelAnalyzer {
+        field: &'static str,
+        model: PathBuf,
+        output: String,
+    },
+
     /// A homography file that is not nine finite numbers forming an invertible matrix.
     #[error("bad homography file {path}: {reason}", path = .path.display())]
     Homography { path: PathBuf, reason: String },

@@ -4,14 +4,23 @@ use std::io::BufReader;
 use std::path::Path;
 
 use clatch::describe::WINDOW;
-use image::{GrayImage, ImageReader};
+use image::{DynamicImage, GrayImage, ImageDecoder, ImageReader};
 
 use crate::error::CliError;
 
 /// Decodes any image the `image` crate reads here (PNG, JPEG, PGM/PPM/PBM/PAM), converts it to gray
 /// with [`clatch::image::gray_from_dynamic`] and checks that it holds one descriptor window.
 pub fn load_gray(path: &Path) -> Result<GrayImage, CliError> {
+    load_gray_with_exif(path).map(|(gray, _)| gray)
+}
+
+/// [`load_gray`], with the file's raw EXIF block when it has one.
+pub fn load_gray_with_exif(path: &Path) -> Result<(GrayImage, Option<Vec<u8>>), CliError> {
     let read_err = |source| CliError::Read {
+        path: path.to_path_buf(),
+        source,
+    };
+    let decode_err = |source| CliError::Decode {
         path: path.to_path_buf(),
         source,
     };
@@ -19,13 +28,13 @@ pub fn load_gray(path: &Path) -> Result<GrayImage, CliError> {
     let reader = ImageReader::new(BufReader::new(file))
         .with_guessed_format()
         .map_err(read_err)?;
-    let decoded = reader.decode().map_err(|source| CliError::Decode {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let mut decoder = reader.into_decoder().map_err(decode_err)?;
+    // EXIF is optional: a block that cannot be read is simply absent.
+    let exif = decoder.exif_metadata().ok().flatten();
+    let decoded = DynamicImage::from_decoder(decoder).map_err(decode_err)?;
     let gray = clatch::image::gray_from_dynamic(&decoded);
     check_size(&gray).map_err(CliError::in_image(path))?;
-    Ok(gray)
+    Ok((gray, exif))
 }
 
 /// The library's error for an image that cannot hold one 64x64 descriptor window (or that is larger

@@ -3,18 +3,25 @@
 //! This file holds the command-line definitions and the dispatch; each subcommand lives in its own
 //! module.
 
+mod colmap_cmd;
+mod colmap_program;
+mod cpu_time;
 mod demo;
 mod draw;
 mod error;
 mod eval;
+mod exif;
 mod extract;
 mod homography;
+mod image_dir;
 mod input;
 mod match_cmd;
 mod npy;
 mod pipeline;
 mod progress;
 mod report;
+mod spread;
+mod subpixel;
 mod warp;
 
 use std::path::PathBuf;
@@ -61,6 +68,15 @@ enum Command {
     /// one uint8 row per keypoint in OpenCV LATCH's byte layout, so it can go straight into
     /// `cv2.BFMatcher(cv2.NORM_HAMMING)`.
     Extract(ExtractArgs),
+    /// Structure from motion with COLMAP 3.8: features of a folder of photos, matched exhaustively.
+    ///
+    /// Detects and describes every image in DIR, matches every pair (ratio test and cross-check), and
+    /// writes a COLMAP 3.8 database (cameras, images, keypoints) plus the putative matches as a text
+    /// file in the workspace. If the `colmap` program is installed it then runs `colmap
+    /// matches_importer --match_type raw` (COLMAP's geometric verification), `colmap mapper` and
+    /// `colmap model_analyzer`, and reports registered images, 3D points, reprojection error and the
+    /// time of each stage. The model is in WORKSPACE/sparse/N.
+    Colmap(ColmapArgs),
     /// Descriptor quality on image pairs with ground-truth homographies, optionally beside OpenCV.
     ///
     /// Pairs: OpenCV's graf1/graf3 sample (--opencv-samples), the Oxford graf, boat and bikes
@@ -228,6 +244,55 @@ impl OpencvLatchArgs {
             self.latch_sigma,
         )?))
     }
+}
+
+/// Arguments of `clatch colmap`.
+#[derive(Debug, Args)]
+pub struct ColmapArgs {
+    /// Folder of photos (JPEG, PNG, PGM/PPM; not its subfolders), read in name order.
+    #[arg(long, value_name = "DIR")]
+    pub images: PathBuf,
+    /// The COLMAP database to create (an existing file is an error unless --force).
+    #[arg(long, value_name = "FILE")]
+    pub database: PathBuf,
+    /// Camera matrix K (9 numbers, row-major) shared by every photo. Without it: the focal length from
+    /// EXIF's 35 mm equivalent where a photo has one, else COLMAP's guess (1.2 x the larger side),
+    /// principal point at the centre, one camera per image size and focal, refined by the mapper.
+    #[arg(long, value_name = "FILE")]
+    pub camera_k: Option<PathBuf>,
+    /// Folder for the match list, COLMAP's logs and its model (default: DATABASE's name + `-colmap`).
+    #[arg(long, value_name = "DIR")]
+    pub workspace: Option<PathBuf>,
+    /// Spread keypoints over a GRID x GRID division of each image (1: the strongest anywhere). The
+    /// default 8 keeps textured corners of a photo (foliage, gravel) from taking every keypoint.
+    #[arg(long, default_value_t = 8, value_name = "GRID", value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub grid: u32,
+    /// How the keypoint positions written to COLMAP are refined below a pixel (descriptors and
+    /// matches do not change).
+    #[arg(long, value_enum, default_value_t = subpixel::Subpixel::Score)]
+    pub subpixel: subpixel::Subpixel,
+    /// Half side of the window of --subpixel corner.
+    #[arg(long, default_value_t = 3, value_name = "R", value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub subpixel_radius: u32,
+    /// Replace an existing database and model.
+    #[arg(long)]
+    pub force: bool,
+    /// Only write the database and match list; do not run COLMAP.
+    #[arg(long)]
+    pub no_colmap: bool,
+    /// The COLMAP 3.8 executable (default: `colmap` on PATH, skipped with a note if absent).
+    #[arg(long, value_name = "PROGRAM", conflicts_with = "no_colmap")]
+    pub colmap: Option<PathBuf>,
+    /// An option for `colmap mapper`, as KEY=VALUE (for example Mapper.init_min_num_inliers=50);
+    /// repeatable.
+    #[arg(long = "mapper-option", value_name = "KEY=VALUE")]
+    pub mapper_options: Vec<String>,
+    #[command(flatten)]
+    pub backend: BackendArgs,
+    #[command(flatten)]
+    pub detect: DetectArgs,
+    #[command(flatten)]
+    pub matching: MatchingArgs,
 }
 
 /// Which backend runs detection, description and matching.
@@ -405,6 +470,7 @@ fn main() -> ExitCode {
         Command::Demo(args) => demo::main(&args),
         Command::Match(args) => match_cmd::main(&args),
         Command::Extract(args) => extract::main(&args),
+        Command::Colmap(args) => colmap_cmd::main(&args),
         Command::Eval(args) => eval::main(&args),
     };
     match result {

@@ -21,6 +21,13 @@ impl Progress {
         Self(bar)
     }
 
+    /// A bar counting `len` items of one stage (images, pairs) under `message`.
+    pub fn counter(len: u64, message: &'static str) -> Self {
+        let progress = Self::new(len);
+        progress.stage(message);
+        progress
+    }
+
     /// A bar that never draws (tests, and work that reports progress of its own).
     pub fn hidden() -> Self {
         Self(ProgressBar::hidden())

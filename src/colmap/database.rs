@@ -1,0 +1,237 @@
+//! Writing cameras, images, keypoints and matches into a new COLMAP 3.8 database.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use rusqlite::{Connection, params};
+
+use crate::colmap::camera::{PINHOLE_MODEL_ID, PinholeCamera};
+use crate::colmap::error::ColmapError;
+use crate::colmap::schema::SCHEMA_3_8;
+use crate::colmap::{keypoints_blob, matches_blob, pair_id};
+use crate::keypoint::KeyPoint;
+use crate::matching::Match;
+
+/// A new COLMAP 3.8 database being written. Everything goes into one transaction, committed by
+/// [`Database::finish`]; a database dropped before that keeps its tables but none of the rows.
+///
+/// ```
+/// use clatch::colmap::{Database, PinholeCamera};
+/// use clatch::{KeyPoint, Match};
+///
+/// let path = std::env::temp_dir().join(format!("clatch-doc-{}.db", std::process::id()));
+/// # std::fs::remove_file(&path).ok();
+/// let mut db = Database::create(&path)?;
+/// let camera = db.add_camera(&PinholeCamera::guess(640, 480)?)?;
+/// let a = db.add_image("a.png", camera)?;
+/// let b = db.add_image("b.png", camera)?;
+/// db.set_keypoints(a, &[KeyPoint::new(10.0, 20.0), KeyPoint::new(30.0, 40.0)])?;
+/// db.set_keypoints(b, &[KeyPoint::new(11.0, 21.0)])?;
+/// db.add_matches(a, b, &[Match { query: 1, train: 0, distance: 12 }])?;
+/// db.finish()?;
+/// # std::fs::remove_file(&path).ok();
+/// # Ok::<(), clatch::colmap::ColmapError>(())
+/// ```
+pub struct Database {
+    connection: Connection,
+    /// Keypoint count of every image, 0 until its keypoints are written.
+    keypoints: HashMap<u32, Option<usize>>,
+    pairs: std::collections::HashSet<u64>,
+}
+
+impl Database {
+    /// Creates the file with COLMAP 3.8's tables. An existing file is an error, never overwritten.
+    pub fn create(path: &Path) -> Result<Self, ColmapError> {
+        if path.exists() {
+            return Err(ColmapError::DatabaseExists {
+                path: path.display().to_string(),
+            });
+        }
+        let connection = Connection::open(path).map_err(ColmapError::sql("opening the file"))?;
+        connection
+            .execute_batch(SCHEMA_3_8)
+            .map_err(ColmapError::sql("creating the COLMAP 3.8 tables"))?;
+        connection
+            .execute_batch("BEGIN")
+            .map_err(ColmapError::sql("starting the transaction"))?;
+        Ok(Self {
+            connection,
+            keypoints: HashMap::new(),
+            pairs: Default::default(),
+        })
+    }
+
+    /// Adds a camera; returns its `camera_id` (from 1).
+    pub fn add_camera(&mut self, camera: &PinholeCamera) -> Result<u32, ColmapError> {
+        let camera = camera.validated()?;
+        self.connection
+            .execute(
+                "INSERT INTO cameras (model, width, height, params, prior_focal_length) \
+                 VALUES (?1, ?2, ?3, ?4, ?5)",
+                params![
+                    PINHOLE_MODEL_ID,
+                    camera.width,
+                    camera.height,
+                    camera.params_blob(),
+                    i64::from(camera.focal_is_known)
+                ],
+            )
+            .map_err(ColmapError::sql("inserting a camera"))?;
+        self.last_id("reading the new camera id")
+    }
+
+    /// Adds an image seen by `camera_id`; `name` is its path relative to the folder that COLMAP will
+    /// be given as `--image_path`. Returns its `image_id` (from 1).
+    pub fn add_image(&mut self, name: &str, camera_id: u32) -> Result<u32, ColmapError> {
+        let bad = |reason| ColmapError::InvalidImageName {
+            name: name.into(),
+            reason,
+        };
+        if name.is_empty() {
+            return Err(bad("it is empty"));
+        }
+        if name.starts_with('/') {
+            return Err(bad("it must be relative to the image folder"));
+        }
+        let taken: bool = self
+            .connection
+            .query_row(
+                "SELECT EXISTS(SELECT 1 FROM images WHERE name = ?1)",
+                [name],
+                |row| row.get(0),
+            )
+            .map_err(ColmapError::sql("looking up an image name"))?;
+        if taken {
+            return Err(bad("another image has this name"));
+        }
+        self.connection
+            .execute(
+                "INSERT INTO images (name, camera_id) VALUES (?1, ?2)",
+                params![name, camera_id],
+            )
+            .map_err(ColmapError::sql("inserting an image"))?;
+        let id = self.last_id("reading the new image id")?;
+        self.keypoints.insert(id, None);
+        Ok(id)
+    }
+
+    /// Writes the keypoints of `image_id` (see [`keypoints_blob`] for the conversion to COLMAP's
+    /// conventions). Keypoint `i` is the one that match indices `i` refer to.
+    pub fn set_keypoints(
+        &mut self,
+        image_id: u32,
+        keypoints: &[KeyPoint],
+    ) -> Result<(), ColmapError> {
+        let entry = self
+            .keypoints
+            .get_mut(&image_id)
+            .ok_or(ColmapError::UnknownImage { image_id })?;
+        if entry.is_some() {
+            return Err(ColmapError::Duplicate {
+                what: format!("keypoints of image {image_id}"),
+            });
+        }
+        let rows = i64::try_from(keypoints.len()).map_err(|_| ColmapError::TooMany {
+            what: "keypoints",
+            count: keypoints.len(),
+        })?;
+        self.connection
+            .execute(
+                "INSERT INTO keypoints (image_id, rows, cols, data) VALUES (?1, ?2, 4, ?3)",
+                params![image_id, rows, keypoints_blob(keypoints)],
+            )
+            .map_err(ColmapError::sql("inserting keypoints"))?;
+        *entry = Some(keypoints.len());
+        Ok(())
+    }
+
+    fn keypoint_count(&self, image_id: u32) -> Result<usize, ColmapError> {
+        match self.keypoints.get(&image_id) {
+            Some(Some(n)) => Ok(*n),
+            _ => Err(ColmapError::UnknownImage { image_id }),
+        }
+    }
+
+    /// Writes putative matches between two images into the `matches` table: `query` indexes the
+    /// keypoints of `image_id1`, `train` those of `image_id2`. Both images' keypoints must be written
+    /// first; every index is checked against them. The blob is stored in COLMAP's order (the smaller
+    /// image id's column first), swapping columns when `image_id1 > image_id2`.
+    ///
+    /// COLMAP's mapper reads only verified matches (`two_view_geometries`): hand these to
+    /// `colmap matches_importer` through a [`crate::colmap::MatchList`] instead when COLMAP should
+    /// verify them. This table is for tools that read putative matches.
+    pub fn add_matches(
+        &mut self,
+        image_id1: u32,
+        image_id2: u32,
+        matches: &[Match],
+    ) -> Result<(), ColmapError> {
+        if image_id1 == image_id2 {
+            return Err(ColmapError::SamePair {
+                image_id: image_id1,
+            });
+        }
+        let (n1, n2) = (
+            self.keypoint_count(image_id1)?,
+            self.keypoint_count(image_id2)?,
+        );
+        check_match_indices(image_id1, image_id2, matches, n1, n2)?;
+        let pair = pair_id(image_id1, image_id2);
+        if !self.pairs.insert(pair) {
+            return Err(ColmapError::Duplicate {
+                what: format!("matches of pair ({image_id1}, {image_id2})"),
+            });
+        }
+        self.connection
+            .execute(
+                "INSERT INTO matches (pair_id, rows, cols, data) VALUES (?1, ?2, 2, ?3)",
+                params![
+                    pair as i64,
+                    matches.len() as i64,
+                    matches_blob(image_id1, image_id2, matches)
+                ],
+            )
+            .map_err(ColmapError::sql("inserting matches"))?;
+        Ok(())
+    }
+
+    /// Commits everything written.
+    pub fn finish(self) -> Result<(), ColmapError> {
+        self.connection
+            .execute_batch("COMMIT")
+            .map_err(ColmapError::sql("committing"))
+    }
+
+    fn last_id(&self, operation: &'static str) -> Result<u32, ColmapError> {
+        u32::try_from(self.connection.last_insert_rowid()).map_err(|_| ColmapError::TooMany {
+            what: operation,
+            count: self.connection.last_insert_rowid() as usize,
+        })
+    }
+}
+
+/// Checks that every match index is a keypoint of its image (`n1` keypoints in image 1, `n2` in 2).
+pub fn check_match_indices(
+    image_id1: u32,
+    image_id2: u32,
+    matches: &[Match],
+    n1: usize,
+    n2: usize,
+) -> Result<(), ColmapError> {
+    for (index, m) in matches.iter().enumerate() {
+        for (image_id, keypoint, keypoints) in [(image_id1, m.query, n1), (image_id2, m.train, n2)]
+        {
+            if keypoint as usize >= keypoints {
+                return Err(ColmapError::MatchOutOfRange {
+                    index,
+                    image_id1,
+                    image_id2,
+                    image_id,
+                    keypoint,
+                    keypoints,
+                });
+            }
+        }
+    }
+    Ok(())
+}

@@ -150,6 +150,7 @@ mod tests {
             backend: Backend::Cpu,
             extractor: ExtractorConfig::default(),
             matching: MatchConfig::default(),
+            opencv_latch: None,
         };
         let start = std::time::Instant::now();
         let demo = run_demo(&settings, 3.0, &Progress::hidden()).unwrap();

@@ -109,8 +109,16 @@ pub struct EvalArgs {
     /// Output folder.
     #[arg(short, long, default_value = "clatch-eval", value_name = "DIR")]
     pub out: PathBuf,
-    /// clatch configurations to evaluate (repeatable).
-    #[arg(long = "method", value_enum, default_values_t = [eval::run::ClatchMethod::Clatch])]
+    /// clatch configurations to evaluate (repeatable): `clatch` (CLATCH descriptors) and
+    /// `clatch-opencv` (the same keypoints, OpenCV-compatible LATCH with cv2's defaults).
+    #[arg(
+        long = "method",
+        value_enum,
+        default_values_t = [
+            eval::run::ClatchMethod::Clatch,
+            eval::run::ClatchMethod::ClatchOpencv
+        ]
+    )]
     pub methods: Vec<eval::run::ClatchMethod>,
     /// Run the OpenCV script with this Python (which needs opencv-contrib-python-headless) and merge
     /// its results.
@@ -461,6 +469,7 @@ pub fn settings(
         backend: backend.resolve()?,
         extractor: detect.config()?,
         matching: matching.map(MatchingArgs::config).unwrap_or_default(),
+        opencv_latch: None,
     })
 }
 

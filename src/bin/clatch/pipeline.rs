@@ -26,6 +26,9 @@ pub struct Settings {
     pub extractor: ExtractorConfig,
     /// Which matches are kept.
     pub matching: MatchConfig,
+    /// Describe with OpenCV-compatible LATCH instead of the extractor's CLATCH (the extractor still
+    /// detects the keypoints and their orientation).
+    pub opencv_latch: Option<OpencvLatch>,
 }
 
 /// The features of one image and how long they took.
@@ -120,8 +123,12 @@ pub fn match_pair(
 ) -> Result<PairRun, CliError> {
     let extractor = Extractor::new(settings.backend, settings.extractor.clone())?;
     let matcher = Matcher::new(settings.backend, settings.matching.clone())?;
-    let a = extract(&extractor, img_a, name_a, progress)?;
-    let b = extract(&extractor, img_b, name_b, progress)?;
+    let extract_one = |img: &GrayImage, name: &Path| match &settings.opencv_latch {
+        None => extract(&extractor, img, name, progress),
+        Some(latch) => extract_opencv(&extractor, latch, img, name, progress),
+    };
+    let a = extract_one(img_a, name_a)?;
+    let b = extract_one(img_b, name_b)?;
 
     progress.stage("matching descriptors");
     let (qa, tb) = (&a.features.descriptors, &b.features.descriptors);
@@ -170,6 +177,7 @@ mod tests {
             backend: Backend::Cpu,
             extractor: ExtractorConfig::default(),
             matching: MatchConfig::default(),
+            opencv_latch: None,
         }
     }
 

@@ -275,7 +275,7 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
         }
     }
 
-    let setting_text = format!(
+    let mut setting_text = format!(
         "{}; FAST threshold {}, at most {} keypoints, {} bits; {}",
         from_flags.backend,
         args.detect.threshold,
@@ -283,6 +283,13 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
         args.detect.bits,
         crate::report::describe_matching(&from_flags.matching),
     );
+    if args.methods.contains(&run::ClatchMethod::ClatchOpencv) {
+        setting_text.push_str(&format!(
+            "; {}: the same keypoints, OpenCV-compatible LATCH (64 bytes, rotation invariance, \
+             half_ssd_size 3, sigma 2)",
+            run::ClatchMethod::ClatchOpencv.label()
+        ));
+    }
     let json_path = args.out.join("results.json");
     std::fs::write(
         &json_path,

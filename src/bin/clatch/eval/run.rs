@@ -1,7 +1,7 @@
 //! Running clatch on one pair and turning its features and matches into [`PairResult`]s.
 
 use clap::ValueEnum;
-use clatch::{Match, Matcher};
+use clatch::{Match, Matcher, OpencvLatch};
 use image::GrayImage;
 
 use crate::error::CliError;
@@ -18,8 +18,15 @@ use crate::progress::Progress;
 pub enum ClatchMethod {
     /// clatch as set by the detector, descriptor and matcher flags.
     Clatch,
-    // Hook for "clatch (OpenCV-compatible)": add the variant here, its label in `label` and its
-    // settings (derived from the flags' settings) in `settings`; nothing else keys on the variant.
+    /// The same keypoints (clatch's detector, with its orientation) described by OpenCV-compatible
+    /// LATCH with `cv2.xfeatures2d.LATCH_create`'s defaults, matched by the same matcher.
+    ClatchOpencv,
+}
+
+/// `cv2.xfeatures2d.LATCH_create(bytes=64, rotationInvariance=True, half_ssd_size=3, sigma=2.0)`,
+/// OpenCV's defaults and the configuration of the OpenCV LATCH column of `bench/eval_opencv.py`.
+pub fn opencv_default_latch() -> Result<OpencvLatch, CliError> {
+    Ok(OpencvLatch::new(64, true, 3, 2.0)?)
 }
 
 impl ClatchMethod {
@@ -27,14 +34,22 @@ impl ClatchMethod {
     pub fn label(self) -> &'static str {
         match self {
             ClatchMethod::Clatch => "clatch",
+            ClatchMethod::ClatchOpencv => "clatch (OpenCV-compatible)",
         }
     }
 
     /// The settings this configuration runs with, given the ones from the command line.
-    pub fn settings(self, from_flags: &Settings) -> Settings {
-        match self {
-            ClatchMethod::Clatch => from_flags.clone(),
-        }
+    pub fn settings(self, from_flags: &Settings) -> Result<Settings, CliError> {
+        Ok(match self {
+            ClatchMethod::Clatch => Settings {
+                opencv_latch: None,
+                ..from_flags.clone()
+            },
+            ClatchMethod::ClatchOpencv => Settings {
+                opencv_latch: Some(opencv_default_latch()?),
+                ..from_flags.clone()
+            },
+        })
     }
 }
 
@@ -124,7 +139,7 @@ pub fn evaluate_pair(
     loaded: &LoadedPair,
     ratios: &[f32],
 ) -> Result<PairResult, CliError> {
-    let settings = method.settings(from_flags);
+    let settings = method.settings(from_flags)?;
     let run = pipeline::match_pair(
         &settings,
         (&loaded.a, loaded.pair.image_a.as_path()),
@@ -139,13 +154,16 @@ mod tests {
     use super::*;
     use crate::eval::metrics::ratio_grid;
     use crate::eval::pairs::{SyntheticSource, write_synthetic};
-    use clatch::{Backend, ExtractorConfig, MatchConfig};
+    use clatch::{
+        Backend, DescriptorWidth, Extractor, ExtractorConfig, Features, GrayView, MatchConfig,
+    };
 
     fn settings(matching: MatchConfig) -> Settings {
         Settings {
             backend: Backend::Cpu,
             extractor: ExtractorConfig::default(),
             matching,
+            opencv_latch: None,
         }
     }
 
@@ -191,6 +209,76 @@ mod tests {
         }
         let at_08 = r.curve.iter().find(|p| p.ratio == 0.8).unwrap();
         assert_eq!((at_08.kept, at_08.correct_kept), (r.matches, r.correct));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn opencv_column_describes_clatch_keypoints_with_opencv_latch() {
+        let (dir, pairs) = astronaut_pairs("opencv");
+        let s = settings(MatchConfig::default());
+        let grid = ratio_grid();
+        let method = ClatchMethod::ClatchOpencv;
+        assert_eq!(method.label(), "clatch (OpenCV-compatible)");
+        let opencv = method.settings(&s).unwrap();
+        assert_eq!(
+            opencv.opencv_latch,
+            Some(OpencvLatch::new(64, true, 3, 2.0).unwrap())
+        );
+        assert_eq!(
+            ClatchMethod::Clatch.settings(&opencv).unwrap().opencv_latch,
+            None
+        );
+
+        let rot = load_pair(&pairs[2], 3.0).unwrap();
+        assert_eq!(rot.pair.name, "astronaut rot 30");
+        let run = pipeline::match_pair(
+            &opencv,
+            (&rot.a, rot.pair.image_a.as_path()),
+            (&rot.b, rot.pair.image_b.as_path()),
+            &Progress::hidden(),
+        )
+        .unwrap();
+        // The keypoints are the detector's (with its angles); the descriptors are the library's
+        // OpenCV-compatible ones for them, not CLATCH's.
+        let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
+        for (img, got) in [(&rot.a, &run.a), (&rot.b, &run.b)] {
+            let view = GrayView::try_from(img).unwrap();
+            let detected = extractor.detect(&view).unwrap();
+            assert!(detected.iter().any(|k| k.angle != 0.0));
+            let latch = opencv.opencv_latch.as_ref().unwrap();
+            let described = latch.describe(Backend::Cpu, &view, &detected).unwrap();
+            let expected = Features::from_described(detected.clone(), described);
+            assert!(!expected.keypoints.is_empty());
+            assert_eq!(got.features, expected);
+            assert_eq!(got.features.descriptors.width(), DescriptorWidth::FULL);
+            let clatch = extractor.describe(&view, &detected).unwrap();
+            assert_ne!(
+                got.features,
+                Features::from_described(detected, clatch),
+                "CLATCH descriptors"
+            );
+        }
+
+        // Its figures: labelled, matched by the configured matcher, judged by the homography.
+        let r = evaluate_run(method.label(), &rot, &run, &opencv, &grid).unwrap();
+        assert_eq!(r.method, "clatch (OpenCV-compatible)");
+        assert_eq!(
+            r.keypoints,
+            (
+                run.a.features.keypoints.len(),
+                run.b.features.keypoints.len()
+            )
+        );
+        assert!(r.matches > 0 && r.correct > 0, "{r:?}");
+        let at_08 = r.curve.iter().find(|p| p.ratio == 0.8).unwrap();
+        assert_eq!((at_08.kept, at_08.correct_kept), (r.matches, r.correct));
+        assert_eq!(evaluate_pair(method, &s, &rot, &grid).unwrap(), r);
+
+        // The same image twice: every match is correct.
+        let same = load_pair(&pairs[0], 3.0).unwrap();
+        let r = evaluate_pair(method, &s, &same, &grid).unwrap();
+        assert!(r.matches > 0);
+        assert_eq!(r.correct, r.matches);
         std::fs::remove_dir_all(&dir).ok();
     }
 

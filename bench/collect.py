@@ -2,7 +2,8 @@
 """Collects one benchmark run's figures into a CSV the chart reads (`examples/bench_chart.rs`).
 
 Reads, from one run directory: bench_match.txt (`cargo bench --features cuda --bench gpu_match`),
-bench_describe.txt (`--bench gpu`) and peers.json (`bench/peers.py --out`). Writes rows
+bench_describe.txt (`--bench gpu`), cpu_clatch.txt (`examples/cpu_describe time` on the dumped image and
+keypoints) and peers.json (`bench/peers.py --out`). Writes rows
 `panel,series,x,y`: matching throughput (G pairs/s) against N for N x N, and extraction throughput
 (M descriptors/s) against the number of keypoints.
 
@@ -33,6 +34,19 @@ def extraction(run):
     return rows
 
 
+def cpu_clatch(run):
+    """clatch's CPU describe on the same machine, image and keypoints (`examples/cpu_describe time`)."""
+    rows = []
+    path = os.path.join(run, "cpu_clatch.txt")
+    if not os.path.exists(path):
+        return rows
+    for line in open(path):
+        m = re.match(r"(\S+) threads (\d+): descriptors (\d+) threads \d+ median_us ([\d.]+)", line)
+        if m:
+            rows.append(("extraction", f"clatch CPU {m.group(2)} thread(s) {m.group(1)}", int(m.group(3)), 1.0 / float(m.group(4))))
+    return rows
+
+
 def peers(run):
     rows = []
     path = os.path.join(run, "peers.json")
@@ -55,7 +69,7 @@ def peers(run):
 
 def main(run):
     print("panel,series,x,y")
-    for panel, series, x, y in matching(run) + extraction(run) + peers(run):
+    for panel, series, x, y in matching(run) + extraction(run) + cpu_clatch(run) + peers(run):
         print(f"{panel},{series},{x},{y:.6g}")
 
 

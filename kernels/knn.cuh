@@ -39,6 +39,7 @@
 #define CLATCH_KNN_CUH
 
 #include "clatch.h"
+#include "knn_output.cuh"
 
 namespace clatch_knn {
 
@@ -298,25 +299,7 @@ __device__ __forceinline__ void knn(const u64* __restrict__ query, unsigned nq, 
         for (int p = 0; p < QPT; ++p) {
             const u64 qi = (u64)qb * (THREADS * QPT) + p * THREADS + threadIdx.x;
             if (qi >= nq) continue;
-            if (gridDim.y == 1) {
-                clatch_match* o = out + qi * k;
-#pragma unroll
-                for (int s = 0; s < K; ++s) {
-                    if ((unsigned)s < k) {
-                        clatch_match m;
-                        m.query = (unsigned)qi;
-                        m.train = index[p][s];
-                        m.distance = dist[p][s];
-                        o[s] = m;
-                    }
-                }
-            } else {
-                u64* o = partial + ((u64)blockIdx.y * nq + qi) * k;
-#pragma unroll
-                for (int s = 0; s < K; ++s) {
-                    if ((unsigned)s < k) o[s] = ((u64)dist[p][s] << 32) | index[p][s];
-                }
-            }
+            write_knn_list<K>(qi, nq, k, dist[p], index[p], out, partial);
         }
     }
 }

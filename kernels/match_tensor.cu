@@ -30,6 +30,7 @@
 //   (distance << 32 | query) key with a global atomic maximum, the form match.cu's fused reverse 1-NN
 //   fills. Maxima do not depend on the order of the updates: deterministic.
 #include "clatch.h"
+#include "knn_output.cuh"
 
 typedef unsigned long long u64;
 
@@ -371,25 +372,7 @@ __device__ __forceinline__ void knn_tensor(const signed char* __restrict__ query
 #pragma unroll
                 for (int s = 0; s < K; ++s)
                     dist[s] = list.dot[s] == WORST ? NONE : (unsigned)(BYTES - list.dot[s]) >> 1;
-                if (gridDim.y == 1) {
-                    clatch_match* o = out + qi * k;
-#pragma unroll
-                    for (int s = 0; s < K; ++s) {
-                        if ((unsigned)s < k) {
-                            clatch_match m;
-                            m.query = (unsigned)qi;
-                            m.train = list.index[s];
-                            m.distance = dist[s];
-                            o[s] = m;
-                        }
-                    }
-                } else {
-                    u64* o = partial + ((u64)blockIdx.y * nq + qi) * k;
-#pragma unroll
-                    for (int s = 0; s < K; ++s) {
-                        if ((unsigned)s < k) o[s] = ((u64)dist[s] << 32) | list.index[s];
-                    }
-                }
+                write_knn_list<K>(qi, nq, k, dist, list.index, out, partial);
             }
         }
     }

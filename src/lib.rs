@@ -14,6 +14,7 @@ pub mod image;
 pub mod keypoint;
 pub mod matcher;
 pub mod matching;
+pub mod pyramid;
 pub mod synthetic;
 
 pub use backend::Backend;
@@ -27,3 +28,4 @@ pub use image::GrayView;
 pub use keypoint::KeyPoint;
 pub use matcher::Matcher;
 pub use matching::{KnnMatches, Match, MatchConfig};
+pub use pyramid::Pyramid;

@@ -371,6 +371,7 @@ impl DetectArgs {
                 width: DescriptorWidth::from_bits(self.bits)?,
                 weights: PatchWeights::default(),
             },
+            pyramid: None,
         })
     }
 }

@@ -56,13 +56,29 @@ pub struct PairRun {
     pub skipped: Option<String>,
 }
 
-/// Detects and describes one image; `name` labels errors.
+/// Detects and describes one image; `name` labels errors. With a pyramid, description happens on the
+/// levels inside detection, so the whole time is reported as detection.
 pub fn extract(
     extractor: &Extractor,
     img: &GrayImage,
     name: &Path,
     progress: &Progress,
 ) -> Result<Extracted, CliError> {
+    if extractor.config().pyramid.is_some() {
+        let view = GrayView::try_from(img).map_err(CliError::in_image(name))?;
+        progress.stage("detecting and describing keypoints on the pyramid");
+        let start = Instant::now();
+        let features = extractor
+            .detect_and_describe(&view)
+            .map_err(CliError::in_image(name))?;
+        let detect = start.elapsed();
+        progress.done();
+        return Ok(Extracted {
+            features,
+            detect,
+            describe: Duration::ZERO,
+        });
+    }
     extract_with(extractor, img, name, progress, |view, keypoints| {
         extractor.describe(view, keypoints)
     })
@@ -76,6 +92,14 @@ pub fn extract_opencv(
     name: &Path,
     progress: &Progress,
 ) -> Result<Extracted, CliError> {
+    if extractor.config().pyramid.is_some() {
+        return Err(clatch::Error::InvalidConfig {
+            field: "pyramid",
+            value: "Some".into(),
+            reason: "OpenCV-compatible LATCH describes level 0 only; drop --pyramid",
+        }
+        .into());
+    }
     extract_with(extractor, img, name, progress, |view, keypoints| {
         latch.describe(extractor.backend(), view, keypoints)
     })

@@ -32,12 +32,10 @@ fn trials() -> Vec<Trial> {
 #[cfg(feature = "cuda")]
 mod gpu {
     use clatch::pyramid::{Plan, cpu::build_levels};
-    use clatch::{
-        Backend, DetectorConfig, Extractor, ExtractorConfig, GrayView, KeyPoint, Pyramid,
-    };
+    use clatch::{Backend, DetectorConfig, Extractor, ExtractorConfig, GrayView, Pyramid};
     use libtest_mimic::Failed;
 
-    use super::common::{Gray, astronaut, rectangles};
+    use super::common::{Gray, astronaut, first_keypoint_difference, rectangles};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
 
@@ -73,25 +71,6 @@ mod gpu {
             },
         )
         .expect("valid configuration")
-    }
-
-    /// Every field's bits.
-    fn bits(k: &KeyPoint) -> [u32; 6] {
-        [
-            k.x.to_bits(),
-            k.y.to_bits(),
-            k.size.to_bits(),
-            k.angle.to_bits(),
-            k.response.to_bits(),
-            k.octave as u32,
-        ]
-    }
-
-    fn first_difference(cpu: &[KeyPoint], gpu: &[KeyPoint]) -> Option<usize> {
-        cpu.iter()
-            .zip(gpu)
-            .position(|(c, g)| bits(c) != bits(g))
-            .or((cpu.len() != gpu.len()).then_some(cpu.len().min(gpu.len())))
     }
 
     fn detectors() -> Vec<DetectorConfig> {
@@ -148,7 +127,7 @@ mod gpu {
                     let view: GrayView = image.view();
                     let cpu = extractor(Backend::Cpu, &detector, p).detect(&view)?;
                     let gpu = extractor(GPU, &detector, p).detect(&view)?;
-                    if let Some(i) = first_difference(&cpu, &gpu) {
+                    if let Some(i) = first_keypoint_difference(&cpu, &gpu) {
                         return Err(format!(
                             "{name} {p:?} {detector:?}: cpu {} keypoints, gpu {}; first difference at {i}: cpu {:?}, gpu {:?}",
                             cpu.len(),
@@ -175,7 +154,7 @@ mod gpu {
                     let view = image.view();
                     let cpu = extractor(Backend::Cpu, &detector, p).detect_and_describe(&view)?;
                     let gpu = extractor(GPU, &detector, p).detect_and_describe(&view)?;
-                    if let Some(i) = first_difference(&cpu.keypoints, &gpu.keypoints) {
+                    if let Some(i) = first_keypoint_difference(&cpu.keypoints, &gpu.keypoints) {
                         return Err(format!(
                             "{name} {p:?} {detector:?}: keypoints differ at {i}: cpu {:?}, gpu {:?}",
                             cpu.keypoints.get(i),

@@ -101,6 +101,15 @@ impl DeviceImage {
                     row[width..].fill(0);
                 });
         })?;
+        Self::from_pixels(pixels, stream, (width, height, pitch))
+    }
+
+    /// Wraps `height` rows of `pitch` bytes (the first `width` of each are the image) with its texture.
+    fn from_pixels(
+        pixels: CudaSlice<u8>,
+        stream: &Arc<CudaStream>,
+        (width, height, pitch): (usize, usize, usize),
+    ) -> Result<Self> {
         let texture = texture_object(&pixels, stream, (width, height, pitch), 1)?;
         Ok(Self {
             texture,
@@ -154,16 +163,7 @@ impl DeviceImage {
         // `self.pitch` bytes and every read is clamped inside it (taps are below the source sides);
         // `pixels` holds `height` rows of `pitch` bytes, of which the first `width` are written.
         unsafe { launch.launch(config) }.map_err(driver_error("clatch_downscale"))?;
-        let texture = texture_object(&pixels, stream, (width, height, pitch), 1)?;
-        Ok(Self {
-            texture,
-            quads: None,
-            pixels,
-            quad_texels: None,
-            pitch,
-            width,
-            height,
-        })
+        Self::from_pixels(pixels, stream, (width, height, pitch))
     }
 
     /// Queues the build of the quad texture the describe kernels read (once per image).

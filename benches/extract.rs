@@ -1,5 +1,6 @@
 //! Extraction benchmarks on a 1024x768 synthetic image: description of ~2000 and ~10000 keypoints
-//! (throughput in keypoints = descriptors per second) and detection alone.
+//! (throughput in keypoints = descriptors per second), detection alone, and detection + description
+//! with and without the pyramid option.
 //!
 //! `cargo bench --bench extract`
 
@@ -59,6 +60,33 @@ fn extraction(c: &mut Criterion) {
         BenchmarkId::new("pixels", format!("{found} keypoints")),
         |b| b.iter(|| extractor.detect(black_box(&image)).unwrap()),
     );
+    group.finish();
+
+    let mut group = c.benchmark_group("detect_and_describe 1024x768");
+    group
+        .measurement_time(Duration::from_secs(6))
+        .sample_size(10);
+    for (name, pyramid) in [
+        ("no pyramid", None),
+        ("pyramid 3:2", Some((3, 2.0))),
+        ("pyramid 8:1.2", Some((8, 1.2))),
+    ] {
+        let extractor = Extractor::new(
+            Backend::Cpu,
+            ExtractorConfig {
+                pyramid: pyramid.map(|(levels, scale_factor)| clatch::Pyramid {
+                    levels,
+                    scale_factor,
+                }),
+                ..ExtractorConfig::default()
+            },
+        )
+        .unwrap();
+        let found = extractor.detect(&image).unwrap().len();
+        group.bench_function(BenchmarkId::new(name, format!("{found} keypoints")), |b| {
+            b.iter(|| extractor.detect_and_describe(black_box(&image)).unwrap())
+        });
+    }
     group.finish();
 }
 

@@ -220,13 +220,6 @@ impl Extractor {
         image: &GrayView,
     ) -> Result<crate::cuda::PendingFeatures> {
         Self::check_image(image)?;
-        if self.config.pyramid.is_some() {
-            return Err(Error::InvalidConfig {
-                field: "pyramid",
-                value: "Some".into(),
-                reason: "asynchronous extraction does not build pyramids yet; use detect_and_describe",
-            });
-        }
         match self.backend {
             Backend::Cuda { device } => {
                 stream.check_device(device)?;
@@ -235,6 +228,7 @@ impl Extractor {
                     image,
                     &self.config.detector,
                     &self.config.descriptor,
+                    self.config.pyramid.as_ref(),
                 )
             }
             Backend::Cpu => Err(Error::InvalidConfig {

@@ -26,6 +26,10 @@ fn trials() -> Vec<Trial> {
             "pyramid_detect_and_describe_equals_cpu",
             gpu::detect_and_describe,
         ),
+        Trial::test(
+            "pyramid_async_on_several_streams_equals_cpu",
+            gpu::async_streams,
+        ),
     ]
 }
 
@@ -187,6 +191,47 @@ mod gpu {
         if upper == 0 {
             return Err("no keypoint above level 0: the comparison proved nothing".into());
         }
+        Ok(())
+    }
+
+    pub fn async_streams() -> Result<(), Failed> {
+        // Every image with two pyramids queued at once, round-robin over three streams, then waited
+        // for in order: each result equals the CPU's.
+        let streams = (0..3)
+            .map(|_| clatch::cuda::GpuStream::new(0))
+            .collect::<Result<Vec<_>, _>>()?;
+        let images = images();
+        let two = &pyramids()[..2];
+        let jobs: Vec<(&str, &Gray, Pyramid)> = images
+            .iter()
+            .flat_map(|(name, image)| two.iter().map(move |&p| (*name, image, p)))
+            .collect();
+        let detector = DetectorConfig::default();
+        let pending = jobs
+            .iter()
+            .zip(streams.iter().cycle())
+            .map(|((_, image, p), stream)| {
+                extractor(GPU, &detector, *p).detect_and_describe_async(stream, &image.view())
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut descriptors = 0;
+        for ((name, image, p), pending) in jobs.iter().zip(pending) {
+            let gpu = pending.wait()?;
+            let cpu = extractor(Backend::Cpu, &detector, *p).detect_and_describe(&image.view())?;
+            if first_keypoint_difference(&cpu.keypoints, &gpu.keypoints).is_some()
+                || cpu.descriptors != gpu.descriptors
+            {
+                return Err(format!(
+                    "{name} {p:?}: the asynchronous result differs from the CPU's"
+                )
+                .into());
+            }
+            descriptors += cpu.descriptors.len();
+        }
+        println!(
+            "{} asynchronous multi-scale extractions on 3 streams, {descriptors} descriptors, 0 differences",
+            jobs.len()
+        );
         Ok(())
     }
 }

@@ -3,15 +3,15 @@
 //!
 //! Everything is queued on one stream. The global top-N over the levels ([`crate::pyramid::select`])
 //! runs on the host: the levels' keypoints are read back once, the selection is uploaded per level for
-//! description. So this path waits for the device in the middle; the asynchronous extractor does not
-//! take a pyramid yet.
+//! description. So the asynchronous extractor queues the levels and their detection at once and does
+//! the rest in `wait`.
 
 use std::sync::Arc;
 
 use cudarc::driver::CudaStream;
 
 use super::describe::{launch_describe, upload_weights};
-use super::detect::detect_on_device;
+use super::detect::{DeviceKeypoints, detect_on_device};
 use super::device::{GpuDevice, driver_error};
 use super::memory::{alloc_zeros, upload};
 use super::texture::DeviceImage;
@@ -24,45 +24,126 @@ use crate::image::GrayView;
 use crate::keypoint::KeyPoint;
 use crate::pyramid::{self, LevelKeypoint, Plan, Pyramid};
 
-/// The levels on the device and the selected keypoints (level coordinates).
-struct Detected {
+/// A pyramid queued on a stream: levels built and every level's detection launched, nothing read back.
+#[derive(Debug)]
+pub(crate) struct QueuedPyramid {
     stream: Arc<CudaStream>,
     plan: Plan,
+    pyramid: Pyramid,
+    max_keypoints: usize,
     levels: Vec<DeviceImage>,
-    selected: Vec<LevelKeypoint>,
+    found: Vec<DeviceKeypoints>,
 }
 
-fn detect_levels(
+/// Queues the levels of `image` and the detection on each on `stream` (no synchronisation).
+pub(crate) fn queue(
     dev: &GpuDevice,
+    stream: &Arc<CudaStream>,
     image: &GrayView,
     config: &DetectorConfig,
     p: &Pyramid,
-) -> Result<Detected> {
-    let stream = dev.new_stream()?;
+) -> Result<QueuedPyramid> {
     let plan = Plan::new(p, image.width(), image.height(), config.margin());
-    let mut levels = vec![DeviceImage::upload(dev, &stream, image)?];
+    let mut levels = vec![DeviceImage::upload(dev, stream, image)?];
     for &size in &plan.sizes[1..] {
         let next = levels
             .last()
             .expect("level 0 is there")
-            .downscale(dev, &stream, plan.step, size)?;
+            .downscale(dev, stream, plan.step, size)?;
         levels.push(next);
     }
-    // Queue every level's detection before reading any back.
     let found = levels
         .iter()
-        .map(|level| detect_on_device(dev, &stream, level, config))
+        .map(|level| detect_on_device(dev, stream, level, config))
         .collect::<Result<Vec<_>>>()?;
-    let per_level = found
-        .iter()
-        .map(|f| f.download(&stream))
-        .collect::<Result<Vec<_>>>()?;
-    Ok(Detected {
-        selected: pyramid::select(&per_level, config.max_keypoints),
-        stream,
+    Ok(QueuedPyramid {
+        stream: stream.clone(),
         plan,
+        pyramid: *p,
+        max_keypoints: config.max_keypoints,
         levels,
+        found,
     })
+}
+
+impl QueuedPyramid {
+    /// Reads every level's keypoints back (waits for the stream) and keeps the strongest over all.
+    fn select(&self) -> Result<Vec<LevelKeypoint>> {
+        let per_level = self
+            .found
+            .iter()
+            .map(|f| f.download(&self.stream))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(pyramid::select(&per_level, self.max_keypoints))
+    }
+
+    fn report(&self, selected: &[LevelKeypoint]) -> Vec<KeyPoint> {
+        selected
+            .iter()
+            .map(|k| pyramid::report(k, &self.pyramid, self.plan.step))
+            .collect()
+    }
+
+    /// The selected keypoints in level-0 coordinates (waits for the stream).
+    pub(crate) fn keypoints(self) -> Result<Vec<KeyPoint>> {
+        let selected = self.select()?;
+        Ok(self.report(&selected))
+    }
+
+    /// Describes the selected keypoints on their levels and reads everything back.
+    pub(crate) fn features(
+        mut self,
+        dev: &GpuDevice,
+        descriptor: &DescriptorConfig,
+    ) -> Result<Features> {
+        let selected = self.select()?;
+        let stream = &self.stream;
+        let width = descriptor.width;
+        let weights = upload_weights(stream, descriptor)?;
+        let mut outputs = Vec::with_capacity(self.levels.len());
+        for (l, level) in self.levels.iter_mut().enumerate() {
+            let keypoints = pyramid::of_level(&selected, l);
+            if keypoints.is_empty() {
+                outputs.push(None);
+                continue;
+            }
+            level.build_quads(dev, stream)?;
+            let on_device = upload(stream, &keypoints, "pyramid keypoint upload")?;
+            let count = upload(stream, &[keypoints.len() as u32], "pyramid keypoint count")?;
+            let mut out = alloc_zeros(
+                stream,
+                keypoints.len() * width.words(),
+                "pyramid descriptors",
+            )?;
+            // Detection's margin makes every window fit on its level, as on the CPU.
+            launch_describe(
+                dev,
+                stream,
+                level,
+                (&on_device, &count),
+                &weights,
+                width.bits() as i32,
+                &mut out,
+            )?;
+            outputs.push(Some(out));
+        }
+        let per_level = outputs
+            .iter()
+            .map(|out| match out {
+                None => Ok(DescriptorSet::empty(width)),
+                Some(out) => {
+                    let words = stream
+                        .clone_dtoh(out)
+                        .map_err(driver_error("copying pyramid descriptors back"))?;
+                    DescriptorSet::from_words(width, words)
+                }
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Features {
+            keypoints: self.report(&selected),
+            descriptors: pyramid::assemble(&selected, &per_level, width)?,
+        })
+    }
 }
 
 /// The pyramid levels of `image` for a detector margin of `margin` as the GPU builds them, level 0
@@ -92,11 +173,7 @@ pub(crate) fn pyramid_detect(
     config: &DetectorConfig,
     p: &Pyramid,
 ) -> Result<Vec<KeyPoint>> {
-    let d = detect_levels(dev, image, config, p)?;
-    Ok(d.selected
-        .iter()
-        .map(|k| pyramid::report(k, p, d.plan.step))
-        .collect())
+    queue(dev, &dev.new_stream()?, image, config, p)?.keypoints()
 }
 
 /// Multi-scale detection and description on the GPU: the same features as
@@ -108,55 +185,5 @@ pub(crate) fn pyramid_detect_and_describe(
     descriptor: &DescriptorConfig,
     p: &Pyramid,
 ) -> Result<Features> {
-    let mut d = detect_levels(dev, image, detector, p)?;
-    let stream = &d.stream;
-    let width = descriptor.width;
-    let weights = upload_weights(stream, descriptor)?;
-    let mut outputs = Vec::with_capacity(d.levels.len());
-    for (l, level) in d.levels.iter_mut().enumerate() {
-        let keypoints = pyramid::of_level(&d.selected, l);
-        if keypoints.is_empty() {
-            outputs.push(None);
-            continue;
-        }
-        level.build_quads(dev, stream)?;
-        let on_device = upload(stream, &keypoints, "pyramid keypoint upload")?;
-        let count = upload(stream, &[keypoints.len() as u32], "pyramid keypoint count")?;
-        let mut out = alloc_zeros(
-            stream,
-            keypoints.len() * width.words(),
-            "pyramid descriptors",
-        )?;
-        // Detection's margin makes every window fit on its level, as on the CPU.
-        launch_describe(
-            dev,
-            stream,
-            level,
-            (&on_device, &count),
-            &weights,
-            width.bits() as i32,
-            &mut out,
-        )?;
-        outputs.push(Some(out));
-    }
-    let per_level = outputs
-        .iter()
-        .map(|out| match out {
-            None => Ok(DescriptorSet::empty(width)),
-            Some(out) => {
-                let words = stream
-                    .clone_dtoh(out)
-                    .map_err(driver_error("copying pyramid descriptors back"))?;
-                DescriptorSet::from_words(width, words)
-            }
-        })
-        .collect::<Result<Vec<_>>>()?;
-    Ok(Features {
-        keypoints: d
-            .selected
-            .iter()
-            .map(|k| pyramid::report(k, p, d.plan.step))
-            .collect(),
-        descriptors: pyramid::assemble(&d.selected, &per_level, width)?,
-    })
+    queue(dev, &dev.new_stream()?, image, detector, p)?.features(dev, descriptor)
 }

@@ -212,6 +212,40 @@ mod tests {
     }
 
     #[test]
+    fn a_pyramid_extracts_in_one_stage_and_refuses_opencv_latch() {
+        let (w, h) = (400, 300);
+        let pixels = clatch::synthetic::rectangles(w, h, 4);
+        let img = GrayImage::from_raw(w as u32, h as u32, pixels.clone()).unwrap();
+        let config = ExtractorConfig {
+            pyramid: Some(clatch::Pyramid {
+                levels: 2,
+                scale_factor: 2.0,
+            }),
+            ..ExtractorConfig::default()
+        };
+        let extractor = Extractor::new(Backend::Cpu, config).unwrap();
+        let got = extract(&extractor, &img, Path::new("a"), &Progress::hidden()).unwrap();
+        let view = GrayView::new(&pixels, w, h, w).unwrap();
+        assert_eq!(got.features, extractor.detect_and_describe(&view).unwrap());
+        assert!(got.features.keypoints.iter().any(|k| k.octave == 1));
+        assert_eq!(got.describe, Duration::ZERO);
+        let latch = clatch::OpencvLatch::default();
+        assert!(matches!(
+            extract_opencv(
+                &extractor,
+                &latch,
+                &img,
+                Path::new("a"),
+                &Progress::hidden()
+            ),
+            Err(CliError::Clatch(clatch::Error::InvalidConfig {
+                field: "pyramid",
+                ..
+            }))
+        ));
+    }
+
+    #[test]
     fn an_image_matches_itself() {
         let (w, h) = (200, 160);
         let pixels = clatch::synthetic::rectangles(w, h, 3);

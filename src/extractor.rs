@@ -195,7 +195,8 @@ impl Extractor {
     /// Queues detection and description of `image` on `stream` and returns at once; the result's
     /// `wait` gives exactly what [`Extractor::detect_and_describe`] gives. With one stream per image,
     /// several images are in flight at once (see [`crate::cuda::GpuStream`]). The backend must be
-    /// `Backend::Cuda` on the stream's device.
+    /// `Backend::Cuda` on the stream's device. With a [`Pyramid`], the levels and their detection are
+    /// queued; the top-N over the levels and the description on each level run in `wait`.
     ///
     /// ```no_run
     /// # fn main() -> clatch::Result<()> {

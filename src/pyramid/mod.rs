@@ -307,6 +307,35 @@ mod tests {
     }
 
     #[test]
+    fn each_level_keeps_a_prefix_of_its_own_list() {
+        // The global cut keeps, on every level, the first k of that level's list (what a device-side
+        // merge could rely on: count per level, no reordering within a level).
+        let mut rng = crate::synthetic::SplitMix64::new(3);
+        for round in 0..200 {
+            let per_level: Vec<Vec<KeyPoint>> = (0..1 + rng.below(5))
+                .map(|_| {
+                    let mut kps: Vec<KeyPoint> = (0..rng.below(40))
+                        .map(|_| KeyPoint {
+                            response: (1 + rng.below(4)) as f32,
+                            ..KeyPoint::new(rng.below(50) as f32, rng.below(50) as f32)
+                        })
+                        .collect();
+                    kps.sort_by_key(|k| (-(k.response as i32), k.y as u32, k.x as u32));
+                    kps
+                })
+                .collect();
+            let max = 1 + rng.below(60) as usize;
+            let selected = select(&per_level, max);
+            let total: usize = per_level.iter().map(Vec::len).sum();
+            assert_eq!(selected.len(), max.min(total));
+            for (l, list) in per_level.iter().enumerate() {
+                let kept = of_level(&selected, l);
+                assert_eq!(kept[..], list[..kept.len()], "round {round}, level {l}");
+            }
+        }
+    }
+
+    #[test]
     fn validation_rejects_each_bad_field() {
         assert!(pyramid(5, 2.0).validate(64.0).is_ok());
         assert!(pyramid(8, 1.2).validate(64.0).is_ok());

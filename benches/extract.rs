@@ -1,7 +1,8 @@
 //! Extraction benchmarks on a 1024x768 synthetic image: description of ~2000 and ~10000 keypoints
-//! (throughput in keypoints = descriptors per second) and detection alone; and the CPU describe on
-//! one thread and on all threads, same photograph and keypoints (`assets/astronaut.png` enlarged to
-//! 1024x768, 5000 detected keypoints: the image `bench/cpu_vs_opencv.py` compares with OpenCV).
+//! (throughput in keypoints = descriptors per second), detection alone, detection + description
+//! with and without the pyramid option, and the CPU describe on one thread and on all threads, same
+//! photograph and keypoints (`assets/astronaut.png` enlarged to 1024x768, 5000 detected keypoints: the
+//! image `bench/cpu_vs_opencv.py` compares with OpenCV).
 //!
 //! `cargo bench --bench extract`
 
@@ -61,6 +62,33 @@ fn extraction(c: &mut Criterion) {
         BenchmarkId::new("pixels", format!("{found} keypoints")),
         |b| b.iter(|| extractor.detect(black_box(&image)).unwrap()),
     );
+    group.finish();
+
+    let mut group = c.benchmark_group("detect_and_describe 1024x768");
+    group
+        .measurement_time(Duration::from_secs(6))
+        .sample_size(10);
+    for (name, pyramid) in [
+        ("no pyramid", None),
+        ("pyramid 3:2", Some((3, 2.0))),
+        ("pyramid 8:1.2", Some((8, 1.2))),
+    ] {
+        let extractor = Extractor::new(
+            Backend::Cpu,
+            ExtractorConfig {
+                pyramid: pyramid.map(|(levels, scale_factor)| clatch::Pyramid {
+                    levels,
+                    scale_factor,
+                }),
+                ..ExtractorConfig::default()
+            },
+        )
+        .unwrap();
+        let found = extractor.detect(&image).unwrap().len();
+        group.bench_function(BenchmarkId::new(name, format!("{found} keypoints")), |b| {
+            b.iter(|| extractor.detect_and_describe(black_box(&image)).unwrap())
+        });
+    }
     group.finish();
 }
 

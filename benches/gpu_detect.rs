@@ -7,6 +7,9 @@
 //!   `Extractor::detect_and_describe` call (uploads, host round trip and read-backs included), with the
 //!   CPU reference's wall-clock time beside it.
 //!
+//! - the pyramid option (1, 3 levels of factor 2, 8 of factor 1.2) on 1080p: wall clock of the whole
+//!   call on both backends.
+//!
 //! Medians of the repeats are reported with the device's name.
 
 #[cfg(feature = "cuda")]
@@ -110,5 +113,32 @@ fn main() {
                 rayon::current_num_threads()
             );
         }
+    }
+    // The pyramid option: whole calls (levels, detection per level, the host's top-N, description per
+    // level, read-backs), default detector.
+    let (w, h) = (1920usize, 1080usize);
+    let pixels = clatch::synthetic::rectangles(w, h, 9);
+    let image = GrayView::new(&pixels, w, h, w).unwrap();
+    for (levels, scale_factor) in [(1usize, 2.0f32), (3, 2.0), (8, 1.2)] {
+        let config = ExtractorConfig {
+            pyramid: Some(clatch::Pyramid {
+                levels,
+                scale_factor,
+            }),
+            ..ExtractorConfig::default()
+        };
+        let gpu = Extractor::new(Backend::Cuda { device: 0 }, config.clone()).unwrap();
+        let cpu = Extractor::new(Backend::Cpu, config).unwrap();
+        let found = gpu.detect_and_describe(&image).unwrap().keypoints.len();
+        let gpu_ms = wall(REPEATS, &mut || {
+            gpu.detect_and_describe(&image).unwrap();
+        });
+        let cpu_ms = wall(3, &mut || {
+            cpu.detect_and_describe(&image).unwrap();
+        });
+        println!(
+            "pyramid {levels}:{scale_factor} 1080p: {found:>6} keypoints, wall clock, whole call: GPU {gpu_ms:8.3} ms, CPU ({} threads) {cpu_ms:8.3} ms",
+            rayon::current_num_threads()
+        );
     }
 }

@@ -45,6 +45,11 @@
 #define CLATCH_SCAN_CHUNK 4096     /* counts per block of the scan (16 per thread) */
 #define CLATCH_SCAN_TOP_THREADS 1024 /* clatch_scan_partials: one block */
 
+/* Pyramid levels (kernels/pyramid.cu). */
+#define CLATCH_PYRAMID_STEP_FRAC_BITS 16 /* the scale step is 16.16 fixed point */
+#define CLATCH_PYRAMID_TILE_X 32         /* clatch_downscale: one thread per output pixel of a 32x8 tile */
+#define CLATCH_PYRAMID_TILE_Y 8
+
 /* OpenCV-compatible LATCH (kernels/describe_opencv.cu). */
 #define CLATCH_OPENCV_THREADS 256        /* threads per block: one warp per 32 triplets of a keypoint */
 #define CLATCH_OPENCV_MAX_OFFSET 24      /* rotated patch centres are clamped to [-24, 24] */

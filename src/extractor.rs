@@ -7,6 +7,7 @@ use crate::detect::{self, DetectorConfig};
 use crate::error::{Error, Result};
 use crate::image::GrayView;
 use crate::keypoint::KeyPoint;
+use crate::pyramid::{self, Pyramid};
 
 /// Settings of an [`Extractor`].
 #[derive(Clone, Debug, PartialEq, Default)]
@@ -15,6 +16,9 @@ pub struct ExtractorConfig {
     pub detector: DetectorConfig,
     /// CLATCH descriptor settings.
     pub descriptor: DescriptorConfig,
+    /// Multi-scale detection over an image pyramid ([`crate::pyramid`]); `None` (the default) detects
+    /// on the full-resolution image only.
+    pub pyramid: Option<Pyramid>,
 }
 
 /// Keypoints and their descriptors: row `i` of `descriptors` describes `keypoints[i]`.
@@ -68,6 +72,9 @@ impl Extractor {
     /// Validates the configuration and the backend.
     pub fn new(backend: Backend, config: ExtractorConfig) -> Result<Self> {
         config.detector.validate()?;
+        if let Some(p) = &config.pyramid {
+            p.validate(config.detector.keypoint_size)?;
+        }
         backend.ensure_available()?;
         Ok(Self { backend, config })
     }
@@ -95,8 +102,13 @@ impl Extractor {
 
     /// FAST keypoints with orientation, strongest first (see [`crate::detect`] for the exact rules).
     /// Every keypoint returned has a window that fits, so [`Extractor::describe`] skips none of them.
+    ///
+    /// With a [`Pyramid`], keypoints of every level in level-0 coordinates (see [`crate::pyramid`]).
     pub fn detect(&self, image: &GrayView) -> Result<Vec<KeyPoint>> {
         Self::check_image(image)?;
+        if let Some(p) = &self.config.pyramid {
+            return self.detect_pyramid(image, p);
+        }
         match self.backend {
             Backend::Cpu => Ok(detect::cpu::detect(image, &self.config.detector)),
             #[cfg(feature = "cuda")]
@@ -128,9 +140,45 @@ impl Extractor {
         }
     }
 
+    fn detect_pyramid(&self, image: &GrayView, p: &Pyramid) -> Result<Vec<KeyPoint>> {
+        match self.backend {
+            Backend::Cpu => Ok(pyramid::cpu::detect(image, &self.config.detector, p)),
+            #[cfg(feature = "cuda")]
+            Backend::Cuda { device } => crate::cuda::pyramid_detect(
+                &*crate::cuda::device(device)?,
+                image,
+                &self.config.detector,
+                p,
+            ),
+        }
+    }
+
     /// Detects keypoints and describes them. On the GPU the image is uploaded once and description
     /// follows detection on the device with no host round trip.
+    ///
+    /// With a [`Pyramid`], each keypoint is described on its own level (its window `size` pixels of
+    /// level 0, sampled from the downscaled level), so [`Extractor::describe`] of the returned
+    /// keypoints, which samples level 0, gives the same descriptors only for level-0 keypoints.
     pub fn detect_and_describe(&self, image: &GrayView) -> Result<Features> {
+        if let Some(p) = &self.config.pyramid {
+            Self::check_image(image)?;
+            return match self.backend {
+                Backend::Cpu => pyramid::cpu::detect_and_describe(
+                    image,
+                    &self.config.detector,
+                    &self.config.descriptor,
+                    p,
+                ),
+                #[cfg(feature = "cuda")]
+                Backend::Cuda { device } => crate::cuda::pyramid_detect_and_describe(
+                    &*crate::cuda::device(device)?,
+                    image,
+                    &self.config.detector,
+                    &self.config.descriptor,
+                    p,
+                ),
+            };
+        }
         match self.backend {
             Backend::Cpu => {
                 let keypoints = self.detect(image)?;
@@ -147,7 +195,8 @@ impl Extractor {
     /// Queues detection and description of `image` on `stream` and returns at once; the result's
     /// `wait` gives exactly what [`Extractor::detect_and_describe`] gives. With one stream per image,
     /// several images are in flight at once (see [`crate::cuda::GpuStream`]). The backend must be
-    /// `Backend::Cuda` on the stream's device.
+    /// `Backend::Cuda` on the stream's device. With a [`Pyramid`], the levels and their detection are
+    /// queued; the top-N over the levels and the description on each level run in `wait`.
     ///
     /// ```no_run
     /// # fn main() -> clatch::Result<()> {
@@ -180,6 +229,7 @@ impl Extractor {
                     image,
                     &self.config.detector,
                     &self.config.descriptor,
+                    self.config.pyramid.as_ref(),
                 )
             }
             Backend::Cpu => Err(Error::InvalidConfig {

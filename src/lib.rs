@@ -16,6 +16,7 @@ pub mod image;
 pub mod keypoint;
 pub mod matcher;
 pub mod matching;
+pub mod pyramid;
 pub mod synthetic;
 
 pub use backend::Backend;
@@ -29,3 +30,4 @@ pub use image::GrayView;
 pub use keypoint::KeyPoint;
 pub use matcher::Matcher;
 pub use matching::{KnnMatches, Match, MatchConfig};
+pub use pyramid::Pyramid;

@@ -43,7 +43,7 @@ mod gpu {
     use libtest_mimic::Failed;
 
     use super::common::golden::{golden_path, render};
-    use super::common::{Gray, astronaut, rectangles};
+    use super::common::{Gray, astronaut, first_keypoint_difference, rectangles};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
     const THRESHOLDS: [u8; 5] = [1, 5, 20, 80, 254];
@@ -70,18 +70,6 @@ mod gpu {
         extractor.detect(image).expect("detection runs")
     }
 
-    /// Every field's bits, so that even a -0.0 against 0.0 would count as a difference.
-    fn bits(k: &KeyPoint) -> [u32; 6] {
-        [
-            k.x.to_bits(),
-            k.y.to_bits(),
-            k.size.to_bits(),
-            k.angle.to_bits(),
-            k.response.to_bits(),
-            k.octave as u32,
-        ]
-    }
-
     /// Detects on both backends and demands identical lists; returns the CPU's list.
     fn compare(
         what: &str,
@@ -90,12 +78,7 @@ mod gpu {
     ) -> Result<Vec<KeyPoint>, Failed> {
         let cpu = detect(Backend::Cpu, image, config);
         let gpu = detect(GPU, image, config);
-        let first = cpu
-            .iter()
-            .zip(&gpu)
-            .position(|(c, g)| bits(c) != bits(g))
-            .or((cpu.len() != gpu.len()).then_some(cpu.len().min(gpu.len())));
-        if let Some(i) = first {
+        if let Some(i) = first_keypoint_difference(&cpu, &gpu) {
             return Err(format!(
                 "{what} {}x{} {config:?}: cpu {} keypoints, gpu {}; first difference at {i}: cpu {:?}, gpu {:?}",
                 image.width(),

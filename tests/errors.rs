@@ -533,6 +533,44 @@ fn detector_threshold_0_and_255() {
 }
 
 #[test]
+fn pyramid_levels_and_factor_out_of_range() {
+    let with = |levels, scale_factor, keypoint_size| {
+        Extractor::new(
+            Backend::Cpu,
+            ExtractorConfig {
+                detector: DetectorConfig {
+                    keypoint_size,
+                    ..DetectorConfig::default()
+                },
+                pyramid: Some(clatch::Pyramid {
+                    levels,
+                    scale_factor,
+                }),
+                ..ExtractorConfig::default()
+            },
+        )
+    };
+    for (levels, factor, size, field) in [
+        (0, 2.0, 64.0, "pyramid.levels"),
+        (33, 1.01, 1.0, "pyramid.levels"),
+        // 64 · 2^5 = 2048 > 1024; with size 32 the same pyramid is fine.
+        (6, 2.0, 64.0, "pyramid.levels"),
+        (3, 1.0, 64.0, "pyramid.scale_factor"),
+        (3, 0.5, 64.0, "pyramid.scale_factor"),
+        (3, 2.5, 64.0, "pyramid.scale_factor"),
+        (3, f32::NAN, 64.0, "pyramid.scale_factor"),
+    ] {
+        let result = with(levels, factor, size);
+        assert!(
+            matches!(&result, Err(Error::InvalidConfig { field: f, .. }) if *f == field),
+            "{levels} {factor} {size}: {result:?}"
+        );
+    }
+    assert!(with(6, 2.0, 32.0).is_ok());
+    assert!(with(1, 1.5, 1024.0).is_ok());
+}
+
+#[test]
 fn detector_max_keypoints_0() {
     assert!(matches!(
         detector_error(DetectorConfig {

@@ -46,6 +46,12 @@ const KERNELS: &[(&str, &str, &[u8], &[&str])] = &[
         ],
     ),
     (
+        "kernels/pyramid.cu",
+        ptx::PYRAMID_PTX,
+        ptx::PYRAMID_FATBIN,
+        &["clatch_downscale"],
+    ),
+    (
         "kernels/match.cu",
         ptx::MATCH_PTX,
         ptx::MATCH_FATBIN,

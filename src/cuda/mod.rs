@@ -10,6 +10,7 @@ mod detect;
 mod device;
 mod matching;
 mod memory;
+mod pyramid;
 mod stream;
 mod tensor_knn;
 mod texture;
@@ -43,6 +44,9 @@ pub use matching::{
 };
 #[doc(hidden)]
 pub use memory::probe_allocation;
+#[doc(hidden)]
+pub use pyramid::debug_pyramid_levels;
+pub(crate) use pyramid::{pyramid_detect, pyramid_detect_and_describe};
 pub use stream::{GpuStream, PendingFeatures, PendingMatches};
 pub(crate) use stream::{detect_and_describe_async, match_async};
 pub use tensor_knn::MatchKernel;
@@ -77,6 +81,10 @@ mod tests {
         assert_eq!(CLATCH_ROTATION_FRAC_BITS, angle::ROTATION_FRAC_BITS);
         assert_eq!(CLATCH_ORIENTATION_RADIUS as i32, detect::ORIENTATION_RADIUS);
         assert_eq!(CLATCH_FAST_ARC as usize, detect::FAST_ARC);
+        assert_eq!(
+            CLATCH_PYRAMID_STEP_FRAC_BITS,
+            crate::pyramid::STEP_FRAC_BITS
+        );
         assert_eq!(describe::triplets::TRIPLETS.len(), describe::TRIPLET_COUNT);
         assert_eq!(
             CLATCH_OPENCV_MAX_OFFSET as i32,

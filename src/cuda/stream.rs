@@ -16,6 +16,7 @@ use super::detect::{DeviceKeypoints, detect_on_device};
 use super::device::{GpuDevice, driver_error};
 use super::matching::{MatchJob, check_rows};
 use super::memory::alloc_zeros;
+use super::pyramid::QueuedPyramid;
 use super::texture::DeviceImage;
 use crate::describe::DescriptorConfig;
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
@@ -24,6 +25,7 @@ use crate::error::{Error, Result};
 use crate::extractor::Features;
 use crate::image::GrayView;
 use crate::matching::{Match, MatchConfig};
+use crate::pyramid::Pyramid;
 
 /// A CUDA stream owned by clatch, on one device.
 #[derive(Debug, Clone)]
@@ -83,20 +85,33 @@ impl GpuStream {
 }
 
 /// Features being computed on a stream: detection and description of one image, queued with no host
-/// round trip between them (the image is uploaded once).
+/// round trip between them (the image is uploaded once). With a pyramid, the levels and their detection
+/// are queued; the top-N over the levels and the description on each level happen in `wait`.
 #[derive(Debug)]
 pub struct PendingFeatures {
     stream: GpuStream,
-    // Kept alive until the kernels that read it have run (wait synchronises first).
-    _image: DeviceImage,
-    keypoints: DeviceKeypoints,
-    descriptors: CudaSlice<u64>,
-    width: DescriptorWidth,
+    work: Work,
     done: CudaEvent,
 }
 
+/// What a [`PendingFeatures`] holds on the device.
+#[derive(Debug)]
+enum Work {
+    Single {
+        // Kept alive until the kernels that read it have run (wait synchronises first).
+        _image: DeviceImage,
+        keypoints: DeviceKeypoints,
+        descriptors: CudaSlice<u64>,
+        width: DescriptorWidth,
+    },
+    Pyramid {
+        queued: QueuedPyramid,
+        descriptor: DescriptorConfig,
+    },
+}
+
 impl PendingFeatures {
-    /// True once the device has finished this image.
+    /// True once the device has finished what was queued (with a pyramid: the levels' detection).
     pub fn is_ready(&self) -> bool {
         self.done.is_complete()
     }
@@ -104,21 +119,28 @@ impl PendingFeatures {
     /// Waits for the device and copies the features back.
     pub fn wait(self) -> Result<Features> {
         let stream = &self.stream.stream;
-        let keypoints = self.keypoints.download(stream)?;
+        let (keypoints, descriptors, width) = match self.work {
+            Work::Pyramid { queued, descriptor } => {
+                return queued.features(&self.stream.dev, &descriptor);
+            }
+            Work::Single {
+                keypoints,
+                descriptors,
+                width,
+                ..
+            } => (keypoints, descriptors, width),
+        };
+        let keypoints = keypoints.download(stream)?;
         let words = if keypoints.is_empty() {
             Vec::new()
         } else {
             stream
-                .clone_dtoh(
-                    &self
-                        .descriptors
-                        .slice(..keypoints.len() * self.width.words()),
-                )
+                .clone_dtoh(&descriptors.slice(..keypoints.len() * width.words()))
                 .map_err(driver_error("copying descriptors back"))?
         };
         Ok(Features {
             keypoints,
-            descriptors: DescriptorSet::from_words(self.width, words)?,
+            descriptors: DescriptorSet::from_words(width, words)?,
         })
     }
 }
@@ -129,8 +151,20 @@ pub(crate) fn detect_and_describe_async(
     image: &GrayView,
     detector: &DetectorConfig,
     descriptor: &DescriptorConfig,
+    pyramid: Option<&Pyramid>,
 ) -> Result<PendingFeatures> {
     let (dev, s) = (&*stream.dev, &stream.stream);
+    if let Some(p) = pyramid {
+        let queued = super::pyramid::queue(dev, s, image, detector, p)?;
+        return Ok(PendingFeatures {
+            done: stream.mark()?,
+            stream: stream.clone(),
+            work: Work::Pyramid {
+                queued,
+                descriptor: descriptor.clone(),
+            },
+        });
+    }
     let mut device_image = DeviceImage::upload(dev, s, image)?;
     let keypoints = detect_on_device(dev, s, &device_image, detector)?;
     device_image.build_quads(dev, s)?;
@@ -154,10 +188,12 @@ pub(crate) fn detect_and_describe_async(
     Ok(PendingFeatures {
         done: stream.mark()?,
         stream: stream.clone(),
-        _image: device_image,
-        keypoints,
-        descriptors,
-        width,
+        work: Work::Single {
+            _image: device_image,
+            keypoints,
+            descriptors,
+            width,
+        },
     })
 }
 

@@ -7,6 +7,7 @@ use rayon::prelude::*;
 use cudarc::driver::{CudaSlice, CudaStream, DevicePtr, LaunchConfig, PushKernelArg, sys};
 
 use super::device::{GpuDevice, driver_error};
+use super::header::{CLATCH_PYRAMID_TILE_X, CLATCH_PYRAMID_TILE_Y};
 use super::memory::{alloc_zeros, upload_staged};
 use crate::error::Result;
 use crate::image::GrayView;
@@ -100,6 +101,15 @@ impl DeviceImage {
                     row[width..].fill(0);
                 });
         })?;
+        Self::from_pixels(pixels, stream, (width, height, pitch))
+    }
+
+    /// Wraps `height` rows of `pitch` bytes (the first `width` of each are the image) with its texture.
+    fn from_pixels(
+        pixels: CudaSlice<u8>,
+        stream: &Arc<CudaStream>,
+        (width, height, pitch): (usize, usize, usize),
+    ) -> Result<Self> {
         let texture = texture_object(&pixels, stream, (width, height, pitch), 1)?;
         Ok(Self {
             texture,
@@ -110,6 +120,50 @@ impl DeviceImage {
             width,
             height,
         })
+    }
+
+    /// Queues the next pyramid level: `width` x `height` pixels downscaled from this image by the 16.16
+    /// factor `step` (`kernels/pyramid.cu`, reproducing [`crate::pyramid::cpu::downscale`]).
+    pub(crate) fn downscale(
+        &self,
+        dev: &GpuDevice,
+        stream: &Arc<CudaStream>,
+        step: i64,
+        (width, height): (usize, usize),
+    ) -> Result<Self> {
+        let pitch = width.div_ceil(dev.pitch_alignment) * dev.pitch_alignment;
+        let mut pixels = alloc_zeros::<u8>(stream, pitch * height, "pyramid level")?;
+        let (src_pitch, src_w, src_h) = (self.pitch as i32, self.width as i32, self.height as i32);
+        let (dst_pitch, dst_w, dst_h) = (pitch as i32, width as i32, height as i32);
+        let mut launch = stream.launch_builder(dev.kernel("clatch_downscale"));
+        launch
+            .arg(&self.pixels)
+            .arg(&src_pitch)
+            .arg(&src_w)
+            .arg(&src_h)
+            .arg(&mut pixels)
+            .arg(&dst_pitch)
+            .arg(&dst_w)
+            .arg(&dst_h)
+            .arg(&step);
+        let tile = (
+            CLATCH_PYRAMID_TILE_X as usize,
+            CLATCH_PYRAMID_TILE_Y as usize,
+        );
+        let config = LaunchConfig {
+            grid_dim: (
+                width.div_ceil(tile.0) as u32,
+                height.div_ceil(tile.1) as u32,
+                1,
+            ),
+            block_dim: (tile.0 as u32, tile.1 as u32, 1),
+            shared_mem_bytes: 0,
+        };
+        // SAFETY: matches clatch_downscale's signature; the source holds `self.height` rows of
+        // `self.pitch` bytes and every read is clamped inside it (taps are below the source sides);
+        // `pixels` holds `height` rows of `pitch` bytes, of which the first `width` are written.
+        unsafe { launch.launch(config) }.map_err(driver_error("clatch_downscale"))?;
+        Self::from_pixels(pixels, stream, (width, height, pitch))
     }
 
     /// Queues the build of the quad texture the describe kernels read (once per image).
@@ -143,6 +197,18 @@ impl DeviceImage {
         self.quads = Some(texture_object(&texels, stream, (qw, qh, pitch), 4)?);
         self.quad_texels = Some(texels);
         Ok(())
+    }
+
+    /// The pixels read back, row-major with stride = width (waits for the stream).
+    pub(crate) fn download(&self, stream: &Arc<CudaStream>) -> Result<Vec<u8>> {
+        let pitched = stream
+            .clone_dtoh(&self.pixels)
+            .map_err(driver_error("reading an image back"))?;
+        Ok(pitched
+            .chunks_exact(self.pitch)
+            .flat_map(|row| &row[..self.width])
+            .copied()
+            .collect())
     }
 
     /// The quad texture's handle, once [`Self::build_quads`] was queued.

@@ -101,6 +101,26 @@ pub fn random_subpixel_keypoints(
         .collect()
 }
 
+/// Every field's bits, so that even a -0.0 against 0.0 counts as a difference.
+pub fn keypoint_bits(k: &clatch::KeyPoint) -> [u32; 6] {
+    [
+        k.x.to_bits(),
+        k.y.to_bits(),
+        k.size.to_bits(),
+        k.angle.to_bits(),
+        k.response.to_bits(),
+        k.octave as u32,
+    ]
+}
+
+/// The first index where two keypoint lists differ in any bit (or in length), if any.
+pub fn first_keypoint_difference(a: &[clatch::KeyPoint], b: &[clatch::KeyPoint]) -> Option<usize> {
+    a.iter()
+        .zip(b)
+        .position(|(x, y)| keypoint_bits(x) != keypoint_bits(y))
+        .or((a.len() != b.len()).then_some(a.len().min(b.len())))
+}
+
 /// Uniformly random descriptors of the given width (bits past the width cleared by the set).
 pub fn random_set(width: DescriptorWidth, count: usize, rng: &mut SplitMix64) -> DescriptorSet {
     let words = (0..count * width.words()).map(|_| rng.next_u64()).collect();

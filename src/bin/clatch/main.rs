@@ -29,7 +29,7 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use clatch::{Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, ExtractorConfig};
-use clatch::{MatchConfig, OpencvLatch, PatchWeights};
+use clatch::{MatchConfig, OpencvLatch, PatchWeights, Pyramid};
 
 use crate::error::CliError;
 use crate::pipeline::Settings;
@@ -337,6 +337,10 @@ pub struct DetectArgs {
     /// Descriptor width in bits: a multiple of 8 from 8 to 512.
     #[arg(long, default_value_t = 512, value_parser = parse_bits)]
     pub bits: usize,
+    /// Detect on a scale pyramid of LEVELS levels (full resolution included), each FACTOR (in (1, 2],
+    /// default 2) smaller than the one before; each keypoint is described on its own level.
+    #[arg(long, value_name = "LEVELS[:FACTOR]", value_parser = parse_pyramid)]
+    pub pyramid: Option<Pyramid>,
 }
 
 /// Which matches are kept.
@@ -385,6 +389,23 @@ fn parse_bits(s: &str) -> Result<usize, String> {
     DescriptorWidth::from_bits(bits)
         .map(DescriptorWidth::bits)
         .map_err(|_| "must be a multiple of 8 between 8 and 512".into())
+}
+
+/// `LEVELS` or `LEVELS:FACTOR`; the ranges are checked with the keypoint size by the library.
+fn parse_pyramid(s: &str) -> Result<Pyramid, String> {
+    let (levels, factor) = s.split_once(':').unwrap_or((s, "2"));
+    let levels = levels
+        .parse::<usize>()
+        .map_err(|e| format!("LEVELS: {e}"))?;
+    let scale_factor = factor.parse::<f32>().map_err(|e| format!("FACTOR: {e}"))?;
+    let pyramid = Pyramid {
+        levels,
+        scale_factor,
+    };
+    pyramid
+        .validate(clatch::keypoint::DEFAULT_KEYPOINT_SIZE)
+        .map_err(|e| e.to_string())?;
+    Ok(pyramid)
 }
 
 fn parse_ratio(s: &str) -> Result<f32, String> {
@@ -444,6 +465,7 @@ impl DetectArgs {
                 width: DescriptorWidth::from_bits(self.bits)?,
                 weights: PatchWeights::default(),
             },
+            pyramid: self.pyramid,
         })
     }
 }
@@ -511,6 +533,12 @@ mod tests {
             &["clatch", "demo", "--bits", "100"],
             &["clatch", "demo", "--max-keypoints", "0"],
             &["clatch", "demo", "--backend", "tpu"],
+            &["clatch", "demo", "--pyramid", "0"],
+            &["clatch", "demo", "--pyramid", "6"],
+            &["clatch", "demo", "--pyramid", "3:1"],
+            &["clatch", "demo", "--pyramid", "3:2.5"],
+            &["clatch", "demo", "--pyramid", "3:x"],
+            &["clatch", "demo", "--pyramid", "3:"],
             &["clatch", "match", "only-one.png"],
             &["clatch", "extract", "img.png"],
             &["clatch", "demo", "--ratio", "0.7", "--no-ratio"],
@@ -541,6 +569,29 @@ mod tests {
             panic!("parsed the wrong subcommand")
         };
         assert_eq!(demo.detect.bits, 256);
+        assert_eq!(demo.detect.pyramid, None);
+        let parse = |arg: &str| {
+            let Command::Demo(demo) = Cli::try_parse_from(["clatch", "demo", "--pyramid", arg])
+                .unwrap()
+                .command
+            else {
+                panic!("parsed the wrong subcommand")
+            };
+            demo.detect.config().unwrap().pyramid.unwrap()
+        };
+        assert_eq!(
+            (parse("3"), parse("8:1.2")),
+            (
+                Pyramid {
+                    levels: 3,
+                    scale_factor: 2.0
+                },
+                Pyramid {
+                    levels: 8,
+                    scale_factor: 1.2
+                }
+            )
+        );
         assert_eq!(demo.matching.config().ratio, None);
         let parse = |extra: &[&str]| {
             let args = [&["clatch", "extract", "a.png", "-o", "a"][..], extra].concat();

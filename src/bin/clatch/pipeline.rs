@@ -59,13 +59,29 @@ pub struct PairRun {
     pub skipped: Option<String>,
 }
 
-/// Detects and describes one image; `name` labels errors.
+/// Detects and describes one image; `name` labels errors. With a pyramid, description happens on the
+/// levels inside detection, so the whole time is reported as detection.
 pub fn extract(
     extractor: &Extractor,
     img: &GrayImage,
     name: &Path,
     progress: &Progress,
 ) -> Result<Extracted, CliError> {
+    if extractor.config().pyramid.is_some() {
+        let view = GrayView::try_from(img).map_err(CliError::in_image(name))?;
+        progress.stage("detecting and describing keypoints on the pyramid");
+        let start = Instant::now();
+        let features = extractor
+            .detect_and_describe(&view)
+            .map_err(CliError::in_image(name))?;
+        let detect = start.elapsed();
+        progress.done();
+        return Ok(Extracted {
+            features,
+            detect,
+            describe: Duration::ZERO,
+        });
+    }
     extract_with(extractor, img, name, progress, |view, keypoints| {
         extractor.describe(view, keypoints)
     })
@@ -79,6 +95,14 @@ pub fn extract_opencv(
     name: &Path,
     progress: &Progress,
 ) -> Result<Extracted, CliError> {
+    if extractor.config().pyramid.is_some() {
+        return Err(clatch::Error::InvalidConfig {
+            field: "pyramid",
+            value: "Some".into(),
+            reason: "OpenCV-compatible LATCH describes level 0 only; drop --pyramid",
+        }
+        .into());
+    }
     extract_with(extractor, img, name, progress, |view, keypoints| {
         latch.describe(extractor.backend(), view, keypoints)
     })
@@ -193,6 +217,40 @@ mod tests {
         .unwrap();
         assert!(run.matches.is_empty());
         assert!(run.skipped.unwrap().contains("no keypoints"));
+    }
+
+    #[test]
+    fn a_pyramid_extracts_in_one_stage_and_refuses_opencv_latch() {
+        let (w, h) = (400, 300);
+        let pixels = clatch::synthetic::rectangles(w, h, 4);
+        let img = GrayImage::from_raw(w as u32, h as u32, pixels.clone()).unwrap();
+        let config = ExtractorConfig {
+            pyramid: Some(clatch::Pyramid {
+                levels: 2,
+                scale_factor: 2.0,
+            }),
+            ..ExtractorConfig::default()
+        };
+        let extractor = Extractor::new(Backend::Cpu, config).unwrap();
+        let got = extract(&extractor, &img, Path::new("a"), &Progress::hidden()).unwrap();
+        let view = GrayView::new(&pixels, w, h, w).unwrap();
+        assert_eq!(got.features, extractor.detect_and_describe(&view).unwrap());
+        assert!(got.features.keypoints.iter().any(|k| k.octave == 1));
+        assert_eq!(got.describe, Duration::ZERO);
+        let latch = clatch::OpencvLatch::default();
+        assert!(matches!(
+            extract_opencv(
+                &extractor,
+                &latch,
+                &img,
+                Path::new("a"),
+                &Progress::hidden()
+            ),
+            Err(CliError::Clatch(clatch::Error::InvalidConfig {
+                field: "pyramid",
+                ..
+            }))
+        ));
     }
 
     #[test]

@@ -1,0 +1,189 @@
+//! GPU pyramid: `kernels/pyramid.cu` builds the levels, the usual detect and describe kernels run on
+//! each, reproducing [`crate::pyramid::cpu`] keypoint for keypoint and bit for bit.
+//!
+//! Everything is queued on one stream. The global top-N over the levels ([`crate::pyramid::select`])
+//! runs on the host: the levels' keypoints are read back once, the selection is uploaded per level for
+//! description. So the asynchronous extractor queues the levels and their detection at once and does
+//! the rest in `wait`.
+
+use std::sync::Arc;
+
+use cudarc::driver::CudaStream;
+
+use super::describe::{launch_describe, upload_weights};
+use super::detect::{DeviceKeypoints, detect_on_device};
+use super::device::{GpuDevice, driver_error};
+use super::memory::{alloc_zeros, upload};
+use super::texture::DeviceImage;
+use crate::describe::DescriptorConfig;
+use crate::descriptor::DescriptorSet;
+use crate::detect::DetectorConfig;
+use crate::error::Result;
+use crate::extractor::Features;
+use crate::image::GrayView;
+use crate::keypoint::KeyPoint;
+use crate::pyramid::{self, LevelKeypoint, Plan, Pyramid};
+
+/// A pyramid queued on a stream: levels built and every level's detection launched, nothing read back.
+#[derive(Debug)]
+pub(crate) struct QueuedPyramid {
+    stream: Arc<CudaStream>,
+    plan: Plan,
+    pyramid: Pyramid,
+    max_keypoints: usize,
+    levels: Vec<DeviceImage>,
+    found: Vec<DeviceKeypoints>,
+}
+
+/// Queues the levels of `image` and the detection on each on `stream` (no synchronisation).
+pub(crate) fn queue(
+    dev: &GpuDevice,
+    stream: &Arc<CudaStream>,
+    image: &GrayView,
+    config: &DetectorConfig,
+    p: &Pyramid,
+) -> Result<QueuedPyramid> {
+    let plan = Plan::new(p, image.width(), image.height(), config.margin());
+    let mut levels = vec![DeviceImage::upload(dev, stream, image)?];
+    for &size in &plan.sizes[1..] {
+        let next = levels
+            .last()
+            .expect("level 0 is there")
+            .downscale(dev, stream, plan.step, size)?;
+        levels.push(next);
+    }
+    let found = levels
+        .iter()
+        .map(|level| detect_on_device(dev, stream, level, config))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(QueuedPyramid {
+        stream: stream.clone(),
+        plan,
+        pyramid: *p,
+        max_keypoints: config.max_keypoints,
+        levels,
+        found,
+    })
+}
+
+impl QueuedPyramid {
+    /// Reads every level's keypoints back (waits for the stream) and keeps the strongest over all.
+    fn select(&self) -> Result<Vec<LevelKeypoint>> {
+        let per_level = self
+            .found
+            .iter()
+            .map(|f| f.download(&self.stream))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(pyramid::select(&per_level, self.max_keypoints))
+    }
+
+    fn report(&self, selected: &[LevelKeypoint]) -> Vec<KeyPoint> {
+        selected
+            .iter()
+            .map(|k| pyramid::report(k, &self.pyramid, self.plan.step))
+            .collect()
+    }
+
+    /// The selected keypoints in level-0 coordinates (waits for the stream).
+    pub(crate) fn keypoints(self) -> Result<Vec<KeyPoint>> {
+        let selected = self.select()?;
+        Ok(self.report(&selected))
+    }
+
+    /// Describes the selected keypoints on their levels and reads everything back.
+    pub(crate) fn features(
+        mut self,
+        dev: &GpuDevice,
+        descriptor: &DescriptorConfig,
+    ) -> Result<Features> {
+        let selected = self.select()?;
+        let stream = &self.stream;
+        let width = descriptor.width;
+        let weights = upload_weights(stream, descriptor)?;
+        let mut outputs = Vec::with_capacity(self.levels.len());
+        for (l, level) in self.levels.iter_mut().enumerate() {
+            let keypoints = pyramid::of_level(&selected, l);
+            if keypoints.is_empty() {
+                outputs.push(None);
+                continue;
+            }
+            level.build_quads(dev, stream)?;
+            let on_device = upload(stream, &keypoints, "pyramid keypoint upload")?;
+            let count = upload(stream, &[keypoints.len() as u32], "pyramid keypoint count")?;
+            let mut out = alloc_zeros(
+                stream,
+                keypoints.len() * width.words(),
+                "pyramid descriptors",
+            )?;
+            // Detection's margin makes every window fit on its level, as on the CPU.
+            launch_describe(
+                dev,
+                stream,
+                level,
+                (&on_device, &count),
+                &weights,
+                width.bits() as i32,
+                &mut out,
+            )?;
+            outputs.push(Some(out));
+        }
+        let per_level = outputs
+            .iter()
+            .map(|out| match out {
+                None => Ok(DescriptorSet::empty(width)),
+                Some(out) => {
+                    let words = stream
+                        .clone_dtoh(out)
+                        .map_err(driver_error("copying pyramid descriptors back"))?;
+                    DescriptorSet::from_words(width, words)
+                }
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Features {
+            keypoints: self.report(&selected),
+            descriptors: pyramid::assemble(&selected, &per_level, width)?,
+        })
+    }
+}
+
+/// The pyramid levels of `image` for a detector margin of `margin` as the GPU builds them, level 0
+/// first, each row-major with stride = width: for comparing with [`crate::pyramid::cpu::build_levels`].
+#[doc(hidden)]
+pub fn debug_pyramid_levels(
+    dev: &GpuDevice,
+    image: &GrayView,
+    p: &Pyramid,
+    margin: usize,
+) -> Result<Vec<Vec<u8>>> {
+    let stream = dev.new_stream()?;
+    let plan = Plan::new(p, image.width(), image.height(), margin);
+    let mut level = DeviceImage::upload(dev, &stream, image)?;
+    let mut out = vec![level.download(&stream)?];
+    for &size in &plan.sizes[1..] {
+        level = level.downscale(dev, &stream, plan.step, size)?;
+        out.push(level.download(&stream)?);
+    }
+    Ok(out)
+}
+
+/// Multi-scale detection on the GPU: the same list as [`crate::pyramid::cpu::detect`].
+pub(crate) fn pyramid_detect(
+    dev: &GpuDevice,
+    image: &GrayView,
+    config: &DetectorConfig,
+    p: &Pyramid,
+) -> Result<Vec<KeyPoint>> {
+    queue(dev, &dev.new_stream()?, image, config, p)?.keypoints()
+}
+
+/// Multi-scale detection and description on the GPU: the same features as
+/// [`crate::pyramid::cpu::detect_and_describe`].
+pub(crate) fn pyramid_detect_and_describe(
+    dev: &GpuDevice,
+    image: &GrayView,
+    detector: &DetectorConfig,
+    descriptor: &DescriptorConfig,
+    p: &Pyramid,
+) -> Result<Features> {
+    queue(dev, &dev.new_stream()?, image, detector, p)?.features(dev, descriptor)
+}

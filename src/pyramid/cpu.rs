@@ -1,0 +1,190 @@
+//! The reference pyramid (see the parent module for the numeric contract).
+
+use rayon::prelude::*;
+
+use super::{LevelKeypoint, Plan, Pyramid, STEP_FRAC_BITS, downscaled, source_position};
+use crate::describe::{self, DescriptorConfig};
+use crate::detect::{self, DetectorConfig};
+use crate::error::Result;
+use crate::extractor::Features;
+use crate::image::GrayView;
+
+/// Where one output coordinate reads: the lower neighbour, the upper one (clamped to the last pixel)
+/// and the 8-bit weight of the upper one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Tap {
+    low: usize,
+    high: usize,
+    weight: i32,
+}
+
+/// The taps of the `n` output coordinates of a side of `source` pixels.
+fn taps(n: usize, source: usize, step: i64) -> Vec<Tap> {
+    (0..n)
+        .map(|i| {
+            let p8 = (source_position(i, step) + 128) >> 8;
+            let low = (p8 >> 8) as usize;
+            Tap {
+                low,
+                high: (low + 1).min(source - 1),
+                weight: (p8 & 255) as i32,
+            }
+        })
+        .collect()
+}
+
+/// One level down: `floor(W · 2^16 / step)` x `floor(H · 2^16 / step)` pixels, each the bilinear sample
+/// (description's rule) of `img` at its source position. Returns the pixels (stride = width), width
+/// and height.
+pub fn downscale(img: &GrayView, step: i64) -> (Vec<u8>, usize, usize) {
+    debug_assert!(step > 1 << STEP_FRAC_BITS && step <= 2 << STEP_FRAC_BITS);
+    let (w, h) = (
+        downscaled(img.width(), step),
+        downscaled(img.height(), step),
+    );
+    let columns = taps(w, img.width(), step);
+    let rows = taps(h, img.height(), step);
+    let mut out = vec![0u8; w * h];
+    if w == 0 {
+        return (out, w, h);
+    }
+    out.par_chunks_mut(w)
+        .zip(rows.par_iter())
+        .for_each(|(line, row)| {
+            let (top, bottom) = (img.row(row.low), img.row(row.high));
+            let fy = row.weight;
+            for (pixel, col) in line.iter_mut().zip(&columns) {
+                let fx = col.weight;
+                let upper = top[col.low] as i32 * (256 - fx) + top[col.high] as i32 * fx;
+                let lower = bottom[col.low] as i32 * (256 - fx) + bottom[col.high] as i32 * fx;
+                *pixel = ((upper * (256 - fy) + lower * fy + (1 << 15)) >> 16) as u8;
+            }
+        });
+    (out, w, h)
+}
+
+/// Levels `1..` of the plan (level 0 is the input), each downscaled from the one before.
+pub fn build_levels(img: &GrayView, plan: &Plan) -> Vec<Vec<u8>> {
+    let mut levels: Vec<Vec<u8>> = Vec::with_capacity(plan.sizes.len().saturating_sub(1));
+    for l in 1..plan.sizes.len() {
+        let (pw, ph) = plan.sizes[l - 1];
+        let previous = match levels.last() {
+            Some(pixels) => GrayView::new(pixels, pw, ph, pw).expect("level geometry"),
+            None => *img,
+        };
+        let (pixels, w, h) = downscale(&previous, plan.step);
+        debug_assert_eq!((w, h), plan.sizes[l]);
+        levels.push(pixels);
+    }
+    levels
+}
+
+/// Level `l` of `img` with its `levels` from [`build_levels`].
+fn level_view<'a>(
+    img: &GrayView<'a>,
+    levels: &'a [Vec<u8>],
+    plan: &Plan,
+    l: usize,
+) -> GrayView<'a> {
+    if l == 0 {
+        return *img;
+    }
+    let (w, h) = plan.sizes[l];
+    GrayView::new(&levels[l - 1], w, h, w).expect("level geometry")
+}
+
+/// Detects on every level and keeps the strongest `max_keypoints` over all (level coordinates).
+fn detect_levels(
+    img: &GrayView,
+    levels: &[Vec<u8>],
+    plan: &Plan,
+    config: &DetectorConfig,
+) -> Vec<LevelKeypoint> {
+    let per_level: Vec<_> = (0..plan.sizes.len())
+        .map(|l| detect::cpu::detect(&level_view(img, levels, plan, l), config))
+        .collect();
+    super::select(&per_level, config.max_keypoints)
+}
+
+/// Multi-scale detection on the CPU: keypoints in level-0 coordinates, strongest first.
+pub fn detect(
+    img: &GrayView,
+    config: &DetectorConfig,
+    pyramid: &Pyramid,
+) -> Vec<crate::keypoint::KeyPoint> {
+    let plan = Plan::new(pyramid, img.width(), img.height(), config.margin());
+    let levels = build_levels(img, &plan);
+    detect_levels(img, &levels, &plan, config)
+        .iter()
+        .map(|k| super::report(k, pyramid, plan.step))
+        .collect()
+}
+
+/// Multi-scale detection and description on the CPU: each keypoint described on its own level.
+pub fn detect_and_describe(
+    img: &GrayView,
+    detector: &DetectorConfig,
+    descriptor: &DescriptorConfig,
+    pyramid: &Pyramid,
+) -> Result<Features> {
+    let plan = Plan::new(pyramid, img.width(), img.height(), detector.margin());
+    let levels = build_levels(img, &plan);
+    let selected = detect_levels(img, &levels, &plan, detector);
+    let per_level: Vec<_> = (0..plan.sizes.len())
+        .map(|l| {
+            let view = level_view(img, &levels, &plan, l);
+            let described =
+                describe::cpu::describe(&view, &super::of_level(&selected, l), descriptor);
+            // The detector's margin makes every window fit on its level.
+            debug_assert!(described.skipped.is_empty());
+            described.descriptors
+        })
+        .collect();
+    Ok(Features {
+        keypoints: selected
+            .iter()
+            .map(|k| super::report(k, pyramid, plan.step))
+            .collect(),
+        descriptors: super::assemble(&selected, &per_level, descriptor.width)?,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn factor_two_is_the_rounded_2x2_mean() {
+        // 5x3 -> 2x1. Block (0..2, 0..2) = 10, 11, 20, 22: 63 / 4 = 15.75 -> 16; block (2..4, 0..2)
+        // = 1, 2, 3, 4: 10 / 4 = 2.5 -> 3 (half up). Column 4 and row 2 are dropped.
+        let pixels = [
+            10, 11, 1, 2, 99, //
+            20, 22, 3, 4, 99, //
+            99, 99, 99, 99, 99,
+        ];
+        let img = GrayView::new(&pixels, 5, 3, 5).unwrap();
+        assert_eq!(downscale(&img, 131_072), (vec![16, 3], 2, 1));
+    }
+
+    #[test]
+    fn factor_one_point_two_worked_by_hand() {
+        // 7x1 image of 0, 40, ..., 240; step 78643: width floor(7 · 65536 / 78643) = 5. Source
+        // positions (16.16) of X = 0..4: 6553, 85196, 163839, 242482, 321125; 24.8: (p + 128) >> 8 =
+        // 26, 333, 640, 947, 1254, i.e. (low, weight) = (0, 26), (1, 77), (2, 128), (3, 179),
+        // (4, 230). Value 40 low + 40 weight / 256 = 4.06, 52.03, 100, 147.97, 195.94, rounded.
+        // Two equal rows: height floor(2 · 65536 / 78643) = 1, whatever the row weight.
+        let pixels: Vec<u8> = (0..14).map(|i| 40 * (i % 7)).collect();
+        let img = GrayView::new(&pixels, 7, 2, 7).unwrap();
+        assert_eq!(downscale(&img, 78_643), (vec![4, 52, 100, 148, 196], 5, 1));
+    }
+
+    #[test]
+    fn factor_one_point_five_worked_by_hand() {
+        // 3x3 at factor 1.5 (step 98304): width 2, X = 1 samples (3 · 98304 - 65536) >> 1 = 114688
+        // = 1.75 px: pixels 1 and 2 with weight 192. Every row 0, 64, 128.
+        let pixels = [0, 64, 128, 0, 64, 128, 0, 64, 128];
+        let img = GrayView::new(&pixels, 3, 3, 3).unwrap();
+        // X = 0: (98304 - 65536) >> 1 = 16384 = 0.25 px -> 64 · 64 / 256 = 16. X = 1: 64 + 64 · 0.75 = 112.
+        assert_eq!(downscale(&img, 98_304), (vec![16, 112, 16, 112], 2, 2));
+    }
+}

@@ -1,0 +1,358 @@
+//! Multi-scale detection: FAST over an image pyramid, each keypoint described on its own level.
+//!
+//! FAST and the 64x64 window alone give no scale invariance. With [`Pyramid`] set in
+//! [`crate::ExtractorConfig::pyramid`] the extractor builds levels `1..levels`, each a downscale of the
+//! one before by `scale_factor`, detects on every level with the usual detector, keeps the strongest
+//! `max_keypoints` over all levels, and describes each keypoint **on its own level** with the level's
+//! window (so a level-`l` keypoint's descriptor sees `scale_factor^l` times more of the scene, from an
+//! image that was averaged down rather than sampled sparsely). Keypoints are reported in level-0
+//! coordinates with `octave = level` and `size = keypoint_size · scale_factor^level`.
+//!
+//! Every rule is integer arithmetic (docs/numerics.md, section 6):
+//! - **Step**: `step = round_half_even(scale_factor · 2^16)`, `2^16 < step ≤ 2^17`.
+//! - **Level size**: `W_l = floor(W_{l-1} · 2^16 / step)`, likewise `H_l`. A level is used only if it
+//!   has a pixel the detector can score (`W_l, H_l > 2 · margin`); the levels stop at the first that
+//!   has none.
+//! - **Downscale** ([`cpu::downscale`]): level pixel `X` samples the previous level at
+//!   `sx = ((2X + 1) · step - 2^16) >> 1` (16.16, the pixel-centre rule `(X + 1/2) f - 1/2`), then the
+//!   bilinear rule of description (24.8 position `(sx + 128) >> 8`, clamped neighbours, rounded
+//!   `>> 16`). For `scale_factor = 2` this is exactly the 2x2 mean rounded half up.
+//! - **Selection** ([`select`]): all levels' keypoints sorted by (score descending, level, y, x
+//!   ascending, in level coordinates), the first `max_keypoints` kept.
+//! - **Back to level 0** ([`to_level0`]): `p = X · 2^16`, then `level` times
+//!   `p = (((p + 2^15) · step) >> 16) - 2^15`, then `x = ((p + 128) >> 8) / 256` (exact in `f32`).
+
+pub mod cpu;
+
+use crate::descriptor::{DescriptorSet, DescriptorWidth};
+use crate::error::{Error, Result};
+use crate::keypoint::KeyPoint;
+
+/// Fractional bits of the scale step.
+pub const STEP_FRAC_BITS: u32 = 16;
+/// Most levels a pyramid may have.
+pub const MAX_LEVELS: usize = 32;
+
+/// Pyramid settings.
+///
+/// ```
+/// use clatch::{Backend, Extractor, ExtractorConfig, GrayView, pyramid::Pyramid};
+///
+/// let pixels = clatch::synthetic::rectangles(640, 480, 1);
+/// let image = GrayView::new(&pixels, 640, 480, 640)?;
+/// let config = ExtractorConfig {
+///     pyramid: Some(Pyramid { levels: 3, scale_factor: 2.0 }),
+///     ..ExtractorConfig::default()
+/// };
+/// let features = Extractor::new(Backend::Cpu, config)?.detect_and_describe(&image)?;
+/// assert!(features.keypoints.iter().any(|k| k.octave == 1 && k.size == 128.0));
+/// # Ok::<(), clatch::Error>(())
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pyramid {
+    /// Levels including the full-resolution image (1 = no downscaling). 1..=32, and the top level's
+    /// keypoint size must stay within 1024 pixels.
+    pub levels: usize,
+    /// Ratio of the sizes of consecutive levels, in (1, 2] (stored as 16.16 fixed point, see
+    /// [`Pyramid::step`]).
+    pub scale_factor: f32,
+}
+
+impl Pyramid {
+    /// The scale factor in 16.16 fixed point: `round_half_even(scale_factor · 2^16)`.
+    pub fn step(&self) -> i64 {
+        (self.scale_factor as f64 * (1u64 << STEP_FRAC_BITS) as f64).round_ties_even() as i64
+    }
+
+    /// `keypoint_size · (step / 2^16)^level`: `level` successive `f64` products, rounded to `f32`
+    /// (computed on the host for every backend).
+    pub fn level_size(&self, keypoint_size: f32, level: usize) -> f32 {
+        let factor = self.step() as f64 / (1u64 << STEP_FRAC_BITS) as f64;
+        (0..level).fold(keypoint_size as f64, |s, _| s * factor) as f32
+    }
+
+    /// Checks the ranges (the sizes of all levels' keypoints must be valid keypoint sizes).
+    pub fn validate(&self, keypoint_size: f32) -> Result<()> {
+        if !(1..=MAX_LEVELS).contains(&self.levels) {
+            return Err(Error::InvalidConfig {
+                field: "pyramid.levels",
+                value: self.levels.to_string(),
+                reason: "must be in 1..=32",
+            });
+        }
+        let one = 1i64 << STEP_FRAC_BITS;
+        let finite = self.scale_factor.is_finite();
+        if !finite || !(one + 1..=2 * one).contains(&self.step()) {
+            return Err(Error::InvalidConfig {
+                field: "pyramid.scale_factor",
+                value: self.scale_factor.to_string(),
+                reason: "must be in (1, 2] (at 1/65536 precision)",
+            });
+        }
+        let top = self.level_size(keypoint_size, self.levels - 1);
+        crate::describe::check_size(top).map_err(|_| Error::InvalidConfig {
+            field: "pyramid.levels",
+            value: self.levels.to_string(),
+            reason: "the top level's keypoint size (keypoint_size x scale_factor^(levels - 1)) \
+                     must stay within 1024 pixels",
+        })
+    }
+}
+
+/// The levels one image gets: their sizes, level 0 first.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Plan {
+    /// The 16.16 step between levels.
+    pub step: i64,
+    /// `(width, height)` of each used level; level 0 is the input.
+    pub sizes: Vec<(usize, usize)>,
+}
+
+impl Plan {
+    /// The levels of a `width` x `height` image for a detector margin of `margin` pixels.
+    pub fn new(pyramid: &Pyramid, width: usize, height: usize, margin: usize) -> Self {
+        let step = pyramid.step();
+        let mut sizes = vec![(width, height)];
+        while sizes.len() < pyramid.levels {
+            let (w, h) = *sizes.last().expect("level 0 is there");
+            let next = (downscaled(w, step), downscaled(h, step));
+            if next.0 <= 2 * margin || next.1 <= 2 * margin {
+                break;
+            }
+            sizes.push(next);
+        }
+        Self { step, sizes }
+    }
+}
+
+/// `floor(n · 2^16 / step)`: a level's side from the previous level's.
+pub fn downscaled(n: usize, step: i64) -> usize {
+    ((n as i64) << STEP_FRAC_BITS) as usize / step as usize
+}
+
+/// Where level pixel `index` samples the previous level, 16.16: `((2 index + 1) · step - 2^16) >> 1`.
+pub fn source_position(index: usize, step: i64) -> i64 {
+    ((2 * index as i64 + 1) * step - (1 << STEP_FRAC_BITS)) >> 1
+}
+
+/// The level-0 coordinate of coordinate `index` on `level` (see the module docs), exact in `f32`.
+pub fn to_level0(index: usize, level: usize, step: i64) -> f32 {
+    let half = 1i64 << (STEP_FRAC_BITS - 1);
+    let mut p = (index as i64) << STEP_FRAC_BITS;
+    for _ in 0..level {
+        p = (((p + half) * step) >> STEP_FRAC_BITS) - half;
+    }
+    ((p + 128) >> 8) as f32 / 256.0
+}
+
+/// A keypoint found on a level, in that level's coordinates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LevelKeypoint {
+    /// The level (0 = full resolution).
+    pub level: usize,
+    /// The detector's keypoint on that level (integer position, the configured size).
+    pub keypoint: KeyPoint,
+}
+
+/// The strongest `max_keypoints` of all levels: sorted by (score descending, level, y, x ascending).
+/// `per_level[l]` is level `l`'s detection (at most `max_keypoints` each, as the detector returns).
+pub fn select(per_level: &[Vec<KeyPoint>], max_keypoints: usize) -> Vec<LevelKeypoint> {
+    let mut all: Vec<LevelKeypoint> = per_level
+        .iter()
+        .enumerate()
+        .flat_map(|(level, kps)| {
+            kps.iter()
+                .map(move |&keypoint| LevelKeypoint { level, keypoint })
+        })
+        .collect();
+    // Scores are integers 1..=255 and positions integers: exact comparisons.
+    let key = |k: &LevelKeypoint| {
+        (
+            -(k.keypoint.response as i32),
+            k.level,
+            k.keypoint.y as u32,
+            k.keypoint.x as u32,
+        )
+    };
+    all.sort_by_key(key);
+    all.truncate(max_keypoints);
+    all
+}
+
+/// The selected keypoints of one level, in selection order.
+pub fn of_level(selected: &[LevelKeypoint], level: usize) -> Vec<KeyPoint> {
+    selected
+        .iter()
+        .filter(|k| k.level == level)
+        .map(|k| k.keypoint)
+        .collect()
+}
+
+/// The reported keypoint: level-0 position, `size = level_size`, `octave = level`.
+pub fn report(k: &LevelKeypoint, pyramid: &Pyramid, step: i64) -> KeyPoint {
+    KeyPoint {
+        x: to_level0(k.keypoint.x as usize, k.level, step),
+        y: to_level0(k.keypoint.y as usize, k.level, step),
+        size: pyramid.level_size(k.keypoint.size, k.level),
+        octave: k.level as i32,
+        ..k.keypoint
+    }
+}
+
+/// Descriptor rows in selection order, from each level's descriptors of [`of_level`]'s keypoints.
+pub fn assemble(
+    selected: &[LevelKeypoint],
+    per_level: &[DescriptorSet],
+    width: DescriptorWidth,
+) -> Result<DescriptorSet> {
+    let mut next = vec![0usize; per_level.len()];
+    let mut words = Vec::with_capacity(selected.len() * width.words());
+    for k in selected {
+        let row = per_level[k.level]
+            .get(next[k.level])
+            .expect("one descriptor per selected keypoint of the level");
+        next[k.level] += 1;
+        words.extend_from_slice(row);
+    }
+    DescriptorSet::from_words(width, words)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pyramid(levels: usize, scale_factor: f32) -> Pyramid {
+        Pyramid {
+            levels,
+            scale_factor,
+        }
+    }
+
+    #[test]
+    fn steps_and_sizes_worked_by_hand() {
+        assert_eq!(pyramid(2, 2.0).step(), 131_072);
+        // 1.2 · 65536 = 78643.2 -> 78643.
+        assert_eq!(pyramid(2, 1.2).step(), 78_643);
+        // 640 · 65536 / 78643 = 533.33 -> 533; 533 · 65536 / 78643 = 444.17 -> 444.
+        assert_eq!(downscaled(640, 78_643), 533);
+        assert_eq!(downscaled(533, 78_643), 444);
+        assert_eq!(downscaled(641, 131_072), 320);
+        assert_eq!(pyramid(5, 2.0).level_size(64.0, 4), 1024.0);
+        assert_eq!(pyramid(3, 1.5).level_size(64.0, 2), 144.0);
+    }
+
+    #[test]
+    fn plan_stops_at_the_first_level_without_a_scorable_pixel() {
+        // Margin 48: a level needs both sides > 96. 640x480 -> 320x240 -> 160x120 -> 80x60 (stop).
+        let plan = Plan::new(&pyramid(8, 2.0), 640, 480, 48);
+        assert_eq!(plan.sizes, vec![(640, 480), (320, 240), (160, 120)]);
+        assert_eq!(Plan::new(&pyramid(2, 2.0), 640, 480, 48).sizes.len(), 2);
+        assert_eq!(Plan::new(&pyramid(1, 2.0), 640, 480, 48).sizes.len(), 1);
+    }
+
+    #[test]
+    fn source_positions_worked_by_hand() {
+        // Factor 2: pixel X samples 2X + 1/2, i.e. the middle of pixels 2X and 2X + 1.
+        assert_eq!(source_position(0, 131_072), 32_768);
+        assert_eq!(source_position(7, 131_072), 14 * 65_536 + 32_768);
+        // Factor 1.2 (step 78643): X = 0 -> (78643 - 65536) >> 1 = 6553 (0.09999 px);
+        // X = 10 -> (21 · 78643 - 65536) >> 1 = 1585967 >> 1 = 792983 (12.1 px).
+        assert_eq!(source_position(0, 78_643), 6_553);
+        assert_eq!(source_position(10, 78_643), 792_983);
+    }
+
+    #[test]
+    fn level0_coordinates_worked_by_hand() {
+        // Factor 2: level 1 pixel X is at 2X + 0.5; level 2 at 2(2X + 0.5) + 0.5 = 4X + 1.5; level 3
+        // at 8X + 3.5.
+        for x in [0usize, 1, 17, 400] {
+            assert_eq!(to_level0(x, 0, 131_072), x as f32);
+            assert_eq!(to_level0(x, 1, 131_072), 2.0 * x as f32 + 0.5);
+            assert_eq!(to_level0(x, 2, 131_072), 4.0 * x as f32 + 1.5);
+            assert_eq!(to_level0(x, 3, 131_072), 8.0 * x as f32 + 3.5);
+        }
+        // Factor 1.2, X = 10 on level 1: 792983 / 65536 = 12.09996 -> (792983 + 128) >> 8 = 3098
+        // -> 3098 / 256 = 12.1015625. On level 2: p = ((792983 + 32768) · 78643 >> 16) - 32768
+        // = 990898 - 32768 = 958130 -> (958130 + 128) >> 8 = 3743 -> 14.62109375.
+        assert_eq!(to_level0(10, 1, 78_643), 12.101_562_5);
+        assert_eq!(to_level0(10, 2, 78_643), 14.621_094);
+    }
+
+    #[test]
+    fn selection_is_by_score_then_level_then_raster_order() {
+        let kp = |x: f32, y: f32, score: f32| KeyPoint {
+            response: score,
+            ..KeyPoint::new(x, y)
+        };
+        let per_level = vec![
+            vec![kp(50.0, 60.0, 90.0), kp(70.0, 50.0, 40.0)],
+            vec![kp(60.0, 60.0, 90.0), kp(55.0, 55.0, 40.0)],
+            vec![kp(50.0, 50.0, 95.0)],
+        ];
+        let selected = select(&per_level, 4);
+        let got: Vec<(usize, f32, f32)> = selected
+            .iter()
+            .map(|k| (k.level, k.keypoint.x, k.keypoint.y))
+            .collect();
+        assert_eq!(
+            got,
+            vec![
+                (2, 50.0, 50.0),
+                (0, 50.0, 60.0),
+                (1, 60.0, 60.0),
+                (0, 70.0, 50.0)
+            ]
+        );
+        assert_eq!(of_level(&selected, 1), vec![kp(60.0, 60.0, 90.0)]);
+    }
+
+    #[test]
+    fn each_level_keeps_a_prefix_of_its_own_list() {
+        // The global cut keeps, on every level, the first k of that level's list (what a device-side
+        // merge could rely on: count per level, no reordering within a level).
+        let mut rng = crate::synthetic::SplitMix64::new(3);
+        for round in 0..200 {
+            let per_level: Vec<Vec<KeyPoint>> = (0..1 + rng.below(5))
+                .map(|_| {
+                    let mut kps: Vec<KeyPoint> = (0..rng.below(40))
+                        .map(|_| KeyPoint {
+                            response: (1 + rng.below(4)) as f32,
+                            ..KeyPoint::new(rng.below(50) as f32, rng.below(50) as f32)
+                        })
+                        .collect();
+                    kps.sort_by_key(|k| (-(k.response as i32), k.y as u32, k.x as u32));
+                    kps
+                })
+                .collect();
+            let max = 1 + rng.below(60) as usize;
+            let selected = select(&per_level, max);
+            let total: usize = per_level.iter().map(Vec::len).sum();
+            assert_eq!(selected.len(), max.min(total));
+            for (l, list) in per_level.iter().enumerate() {
+                let kept = of_level(&selected, l);
+                assert_eq!(kept[..], list[..kept.len()], "round {round}, level {l}");
+            }
+        }
+    }
+
+    #[test]
+    fn validation_rejects_each_bad_field() {
+        assert!(pyramid(5, 2.0).validate(64.0).is_ok());
+        assert!(pyramid(8, 1.2).validate(64.0).is_ok());
+        for bad in [
+            pyramid(0, 2.0),
+            pyramid(33, 1.01),
+            pyramid(6, 2.0),
+            pyramid(3, 1.0),
+            pyramid(3, 1.000_001),
+            pyramid(3, 2.01),
+            pyramid(3, f32::NAN),
+            pyramid(3, f32::INFINITY),
+        ] {
+            assert!(
+                matches!(bad.validate(64.0), Err(Error::InvalidConfig { .. })),
+                "{bad:?}"
+            );
+        }
+    }
+}

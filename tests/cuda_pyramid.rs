@@ -1,0 +1,237 @@
+//! The GPU pyramid against the CPU reference, bit for bit: every level's pixels, then keypoints
+//! (position, size, angle, response, octave, order) and descriptors of multi-scale extraction.
+//!
+//! Runs only with the `cuda` feature and a device; otherwise every test is reported as ignored with
+//! `skipped: no CUDA device`, never as passed.
+
+mod common;
+
+use libtest_mimic::Trial;
+
+fn main() {
+    common::gpu::run(trials())
+}
+
+#[cfg(not(feature = "cuda"))]
+fn trials() -> Vec<Trial> {
+    common::gpu::feature_missing("cuda_pyramid")
+}
+
+#[cfg(feature = "cuda")]
+fn trials() -> Vec<Trial> {
+    vec![
+        Trial::test("pyramid_levels_pixel_for_pixel", gpu::levels),
+        Trial::test("pyramid_detect_equals_cpu", gpu::detect),
+        Trial::test(
+            "pyramid_detect_and_describe_equals_cpu",
+            gpu::detect_and_describe,
+        ),
+        Trial::test(
+            "pyramid_async_on_several_streams_equals_cpu",
+            gpu::async_streams,
+        ),
+    ]
+}
+
+#[cfg(feature = "cuda")]
+mod gpu {
+    use clatch::pyramid::{Plan, cpu::build_levels};
+    use clatch::{Backend, DetectorConfig, Extractor, ExtractorConfig, GrayView, Pyramid};
+    use libtest_mimic::Failed;
+
+    use super::common::{Gray, astronaut, first_keypoint_difference, rectangles};
+
+    const GPU: Backend = Backend::Cuda { device: 0 };
+
+    fn images() -> Vec<(&'static str, Gray)> {
+        vec![
+            ("astronaut", astronaut()),
+            ("rectangles 1920x1080", rectangles(1920, 1080, 8)),
+            ("rectangles 333x517", rectangles(333, 517, 2)),
+            (
+                "noise 1023x769",
+                Gray::new(clatch::synthetic::noise(1023, 769, 6), 1023, 769),
+            ),
+        ]
+    }
+
+    fn pyramids() -> Vec<Pyramid> {
+        [(5, 2.0f32), (8, 1.2), (4, 1.5), (3, 1.999), (6, 1.0001)]
+            .into_iter()
+            .map(|(levels, scale_factor)| Pyramid {
+                levels,
+                scale_factor,
+            })
+            .collect()
+    }
+
+    fn extractor(backend: Backend, detector: &DetectorConfig, pyramid: Pyramid) -> Extractor {
+        Extractor::new(
+            backend,
+            ExtractorConfig {
+                detector: detector.clone(),
+                pyramid: Some(pyramid),
+                ..ExtractorConfig::default()
+            },
+        )
+        .expect("valid configuration")
+    }
+
+    fn detectors() -> Vec<DetectorConfig> {
+        let mut out = Vec::new();
+        for threshold in [5u8, 20, 80] {
+            for max_keypoints in [1usize, 300, 5000, usize::MAX] {
+                out.push(DetectorConfig {
+                    threshold,
+                    max_keypoints,
+                    ..DetectorConfig::default()
+                });
+            }
+        }
+        out.push(DetectorConfig {
+            keypoint_size: 16.0,
+            ..DetectorConfig::default()
+        });
+        out
+    }
+
+    pub fn levels() -> Result<(), Failed> {
+        let dev = clatch::cuda::device(0)?;
+        let mut count = 0;
+        for (name, image) in images() {
+            for p in pyramids() {
+                for margin in [16usize, 48] {
+                    let view = image.view();
+                    let plan = Plan::new(&p, image.width, image.height, margin);
+                    let mut cpu = vec![image.pixels.clone()];
+                    cpu.extend(build_levels(&view, &plan));
+                    let gpu = clatch::cuda::debug_pyramid_levels(&dev, &view, &p, margin)?;
+                    if cpu != gpu {
+                        let level = cpu.iter().zip(&gpu).position(|(c, g)| c != g);
+                        return Err(format!(
+                            "{name} {p:?} margin {margin}: levels differ (cpu {}, gpu {}, first differing level {level:?})",
+                            cpu.len(),
+                            gpu.len()
+                        )
+                        .into());
+                    }
+                    count += cpu.len() - 1;
+                }
+            }
+        }
+        println!("{count} pyramid levels equal pixel for pixel");
+        Ok(())
+    }
+
+    pub fn detect() -> Result<(), Failed> {
+        let (mut runs, mut keypoints) = (0, 0);
+        for (name, image) in images() {
+            for p in pyramids() {
+                for detector in detectors() {
+                    let view: GrayView = image.view();
+                    let cpu = extractor(Backend::Cpu, &detector, p).detect(&view)?;
+                    let gpu = extractor(GPU, &detector, p).detect(&view)?;
+                    if let Some(i) = first_keypoint_difference(&cpu, &gpu) {
+                        return Err(format!(
+                            "{name} {p:?} {detector:?}: cpu {} keypoints, gpu {}; first difference at {i}: cpu {:?}, gpu {:?}",
+                            cpu.len(),
+                            gpu.len(),
+                            cpu.get(i),
+                            gpu.get(i)
+                        )
+                        .into());
+                    }
+                    runs += 1;
+                    keypoints += cpu.len();
+                }
+            }
+        }
+        println!("{runs} multi-scale detections, {keypoints} keypoints, 0 differences");
+        Ok(())
+    }
+
+    pub fn detect_and_describe() -> Result<(), Failed> {
+        let (mut runs, mut descriptors, mut upper) = (0, 0, 0);
+        for (name, image) in images() {
+            for p in pyramids() {
+                for detector in [DetectorConfig::default(), detectors()[0].clone()] {
+                    let view = image.view();
+                    let cpu = extractor(Backend::Cpu, &detector, p).detect_and_describe(&view)?;
+                    let gpu = extractor(GPU, &detector, p).detect_and_describe(&view)?;
+                    if let Some(i) = first_keypoint_difference(&cpu.keypoints, &gpu.keypoints) {
+                        return Err(format!(
+                            "{name} {p:?} {detector:?}: keypoints differ at {i}: cpu {:?}, gpu {:?}",
+                            cpu.keypoints.get(i),
+                            gpu.keypoints.get(i)
+                        )
+                        .into());
+                    }
+                    if let Some(i) = (0..cpu.descriptors.len())
+                        .find(|&i| cpu.descriptors.get(i) != gpu.descriptors.get(i))
+                    {
+                        return Err(format!(
+                            "{name} {p:?} {detector:?}: descriptor {i} of {} differs (keypoint {:?})",
+                            cpu.descriptors.len(),
+                            cpu.keypoints[i]
+                        )
+                        .into());
+                    }
+                    if cpu.descriptors.len() != gpu.descriptors.len() {
+                        return Err(format!("{name} {p:?}: descriptor counts differ").into());
+                    }
+                    runs += 1;
+                    descriptors += cpu.descriptors.len();
+                    upper += cpu.keypoints.iter().filter(|k| k.octave > 0).count();
+                }
+            }
+        }
+        println!(
+            "{runs} multi-scale extractions, {descriptors} descriptors ({upper} above level 0), 0 differences"
+        );
+        if upper == 0 {
+            return Err("no keypoint above level 0: the comparison proved nothing".into());
+        }
+        Ok(())
+    }
+
+    pub fn async_streams() -> Result<(), Failed> {
+        // Every image with two pyramids queued at once, round-robin over three streams, then waited
+        // for in order: each result equals the CPU's.
+        let streams = (0..3)
+            .map(|_| clatch::cuda::GpuStream::new(0))
+            .collect::<Result<Vec<_>, _>>()?;
+        let images = images();
+        let two = &pyramids()[..2];
+        let jobs: Vec<(&str, &Gray, Pyramid)> = images
+            .iter()
+            .flat_map(|(name, image)| two.iter().map(move |&p| (*name, image, p)))
+            .collect();
+        let detector = DetectorConfig::default();
+        let pending = jobs
+            .iter()
+            .zip(streams.iter().cycle())
+            .map(|((_, image, p), stream)| {
+                extractor(GPU, &detector, *p).detect_and_describe_async(stream, &image.view())
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut descriptors = 0;
+        for ((name, image, p), pending) in jobs.iter().zip(pending) {
+            let gpu = pending.wait()?;
+            let cpu = extractor(Backend::Cpu, &detector, *p).detect_and_describe(&image.view())?;
+            if first_keypoint_difference(&cpu.keypoints, &gpu.keypoints).is_some()
+                || cpu.descriptors != gpu.descriptors
+            {
+                return Err(format!(
+                    "{name} {p:?}: the asynchronous result differs from the CPU's"
+                )
+                .into());
+            }
+            descriptors += cpu.descriptors.len();
+        }
+        println!(
+            "{} asynchronous multi-scale extractions on 3 streams, {descriptors} descriptors, 0 differences",
+            jobs.len()
+        );
+        Ok(())
+    }
+}

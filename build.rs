@@ -8,6 +8,11 @@
 //!   which is also the ptxas check for sm_90, and keeps ptxas's resource report;
 //! - writes `kernels.rs` (the PTX as string constants) and `clatch_h.rs` (bindgen of `kernels/clatch.h`)
 //!   into OUT_DIR.
+//!
+//! `kernels/bench_*.cu` (bench and diagnostic kernels) are compiled only with the `internals` feature.
+//! On docs.rs (`DOCS_RS` set, no nvcc there), or with `CLATCH_STUB_KERNELS=1`, every kernel constant is
+//! an empty stub, so the documentation of every feature builds without a CUDA toolkit; a library built
+//! that way refuses to start a device (`Error::BackendUnavailable`), so a stub is never launched.
 
 fn main() {
     println!("cargo::rerun-if-changed=build.rs");
@@ -31,11 +36,45 @@ mod cuda {
     const NVCC_FLAGS: &[&str] = &["-O3", "--fmad=false", "-lineinfo", "-std=c++17"];
 
     pub fn build() {
-        for var in ["NVCC", "CUDA_HOME", "CUDA_PATH", "PATH"] {
+        for var in [
+            "NVCC",
+            "CUDA_HOME",
+            "CUDA_PATH",
+            "PATH",
+            "DOCS_RS",
+            "CLATCH_STUB_KERNELS",
+        ] {
             println!("cargo::rerun-if-env-changed={var}");
         }
         let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
         let kernels = Path::new("kernels");
+        let stub = std::env::var_os("DOCS_RS").is_some()
+            || std::env::var_os("CLATCH_STUB_KERNELS").is_some_and(|v| v == "1");
+        let with_bench = std::env::var_os("CARGO_FEATURE_INTERNALS").is_some();
+
+        let mut sources: Vec<PathBuf> = fs::read_dir(kernels)
+            .expect("kernels/ exists")
+            .map(|entry| entry.expect("readable kernels/ entry").path())
+            .filter(|p| p.extension().is_some_and(|e| e == "cu"))
+            .filter(|p| with_bench || !is_bench(p))
+            .collect();
+        sources.sort();
+
+        let mut constants = format!(
+            "/// True when the kernels below are empty stubs (a documentation build).\npub const STUB: bool = {stub};\n"
+        );
+        if stub {
+            for source in &sources {
+                let name = stem(source).to_uppercase();
+                constants.push_str(&format!(
+                    "/// Stub (documentation build): never launched.\npub const {name}_PTX: &str = \"\";\n\
+                     /// Stub (documentation build): never launched.\npub const {name}_FATBIN: &[u8] = &[];\n"
+                ));
+            }
+            fs::write(out.join("kernels.rs"), constants).expect("write kernels.rs");
+            bind_header(kernels, &out);
+            return;
+        }
         let nvcc = find_nvcc().unwrap_or_else(|| {
             panic!(
                 "\n\nclatch: the `cuda` feature compiles kernels/*.cu with nvcc, and none was found.\n\
@@ -47,18 +86,10 @@ mod cuda {
             )
         });
 
-        let mut sources: Vec<PathBuf> = fs::read_dir(kernels)
-            .expect("kernels/ exists")
-            .map(|entry| entry.expect("readable kernels/ entry").path())
-            .filter(|p| p.extension().is_some_and(|e| e == "cu"))
-            .collect();
-        sources.sort();
-
-        let mut constants = String::new();
         let mut report = String::new();
         for source in &sources {
             println!("cargo::rerun-if-changed={}", source.display());
-            let stem = source.file_stem().unwrap().to_string_lossy().into_owned();
+            let stem = stem(source);
             let arch = ptx_arch(source);
             let ptx = out.join(format!("{stem}.ptx"));
             run(Command::new(&nvcc)
@@ -94,7 +125,24 @@ mod cuda {
         }
         fs::write(out.join("kernels.rs"), constants).expect("write kernels.rs");
         fs::write(out.join("ptxas-report.txt"), report).expect("write ptxas report");
+        bind_header(kernels, &out);
+    }
 
+    fn stem(source: &Path) -> String {
+        source
+            .file_stem()
+            .expect("a .cu file has a stem")
+            .to_string_lossy()
+            .into_owned()
+    }
+
+    /// Bench and diagnostic kernels: `kernels/bench_*.cu`.
+    fn is_bench(source: &Path) -> bool {
+        stem(source).starts_with("bench_")
+    }
+
+    /// `clatch_h.rs`: the constants and record layouts of `kernels/clatch.h`, by bindgen.
+    fn bind_header(kernels: &Path, out: &Path) {
         let header = kernels.join("clatch.h");
         bindgen::Builder::default()
             .header(header.to_string_lossy())

@@ -2,7 +2,7 @@
 //! (throughput in keypoints = descriptors per second), detection alone, detection + description
 //! with and without the pyramid option, and the CPU describe on one thread and on all threads, same
 //! photograph and keypoints (`assets/astronaut.png` enlarged to 1024x768, 5000 detected keypoints: the
-//! image `bench/cpu_vs_opencv.py` compares with OpenCV).
+//! image `tools/cpu_vs_opencv.py` compares with OpenCV).
 //!
 //! `cargo bench --bench extract`
 
@@ -95,7 +95,7 @@ fn extraction(c: &mut Criterion) {
 /// The embedded photograph enlarged to 1024x768 (bilinear) and its 5000 strongest keypoints.
 fn astronaut_and_keypoints() -> (image::GrayImage, Vec<KeyPoint>) {
     let decoded = image::load_from_memory(include_bytes!("../assets/astronaut.png")).unwrap();
-    let gray = clatch::image::gray_from_dynamic(&decoded);
+    let gray = clatch::decode::gray_from_dynamic(&decoded);
     let big = image::imageops::resize(
         &gray,
         WIDTH as u32,

@@ -2,7 +2,7 @@
 //! each launch, after warm-up; the median of the repeats is reported with the device's name.
 //!
 //! With `CLATCH_BENCH_DUMP=DIR` it also writes each image (`DIR/<name>.pgm`) and its 10k keypoints
-//! (`DIR/<name>_10000.csv`: x, y, size, angle), so `bench/peers.py` can time OpenCV's LATCH on the same
+//! (`DIR/<name>_10000.csv`: x, y, size, angle), so `tools/peers.py` can time OpenCV's LATCH on the same
 //! image and keypoints.
 
 #[cfg(feature = "cuda")]
@@ -24,7 +24,8 @@ fn main() {
     println!("device: {}", dev.name());
     // Issue bounds for 512 triplets x 64 pixels x 2 SSDs, each term a subtract and a multiply-add:
     // 131072 operations per descriptor; Hopper issues 64 INT32 or 128 FP32 lanes per SM and clock.
-    let (sms, clock_khz) = clatch::cuda::multiprocessors_and_clock_khz(&dev).expect("attributes");
+    let (sms, clock_khz) =
+        clatch::cuda::hooks::multiprocessors_and_clock_khz(&dev).expect("attributes");
     let per_s = sms as f64 * clock_khz as f64 * 1e3;
     let int32_bound = per_s * 64.0 / 131_072.0;
     let fp32_bound = per_s * 128.0 / 131_072.0;
@@ -81,9 +82,10 @@ fn main() {
                     weights,
                     ..DescriptorConfig::default()
                 };
-                let times =
-                    clatch::cuda::time_describe_kernel(&dev, &image, &keypoints, &config, 3, 15)
-                        .expect("describe kernel");
+                let times = clatch::cuda::hooks::time_describe_kernel(
+                    &dev, &image, &keypoints, &config, 3, 15,
+                )
+                .expect("describe kernel");
                 let ms = median(times);
                 let rate = n as f64 / (ms * 1e-3);
                 println!(

@@ -60,7 +60,7 @@ fn main() {
                 ..DetectorConfig::default()
             };
             let (times, keypoints) =
-                clatch::cuda::time_detect(&dev, &image, &detector, WARMUP, REPEATS)
+                clatch::cuda::hooks::time_detect(&dev, &image, &detector, WARMUP, REPEATS)
                     .expect("detection kernels");
             let detect_ms = median(times.into_iter().map(f64::from).collect());
             let limit = if max_keypoints == usize::MAX {
@@ -77,7 +77,7 @@ fn main() {
                 continue;
             }
             let describe_ms = median(
-                clatch::cuda::time_describe_kernel(
+                clatch::cuda::hooks::time_describe_kernel(
                     &dev,
                     &image,
                     &keypoints,

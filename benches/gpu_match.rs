@@ -7,7 +7,7 @@
 //! as the CLATCH paper counts; a 64-bit popcount is two 32-bit POPC instructions in SASS, so the bound of
 //! the plain instruction count is half that). Then the device time of `match_descriptors` (kNN, fused
 //! reverse 1-NN for the cross-check, filter, compaction), the kernel alternatives of
-//! kernels/match_variants.cu, and the end-to-end `Matcher::match_descriptors` wall time (uploads
+//! kernels/bench_knn_variants.cu, and the end-to-end `Matcher::match_descriptors` wall time (uploads
 //! included).
 
 #[cfg(feature = "cuda")]
@@ -22,7 +22,7 @@ fn main() {
 fn main() {
     use std::time::Instant;
 
-    use clatch::cuda::MatchKernel;
+    use clatch::cuda::hooks::MatchKernel;
     use clatch::synthetic::SplitMix64;
     use clatch::{Backend, DescriptorSet, DescriptorWidth, MatchConfig, Matcher};
 
@@ -38,7 +38,8 @@ fn main() {
         dev.name(),
         start.elapsed().as_secs_f64() * 1e3
     );
-    let (sms, clock_khz) = clatch::cuda::multiprocessors_and_clock_khz(&dev).expect("attributes");
+    let (sms, clock_khz) =
+        clatch::cuda::hooks::multiprocessors_and_clock_khz(&dev).expect("attributes");
     let popc_per_s = sms as f64 * clock_khz as f64 * 1e3 * 16.0;
     let bound = popc_per_s / 8.0;
     println!(
@@ -59,7 +60,8 @@ fn main() {
     );
     if dev.has_tensor_matcher() {
         for blocks_per_sm in [4, 1] {
-            let rate = clatch::cuda::measure_mma_s8_rate(&dev, blocks_per_sm).expect("mma rate");
+            let rate =
+                clatch::cuda::hooks::measure_mma_s8_rate(&dev, blocks_per_sm).expect("mma rate");
             println!(
                 "int8 mma.sync measured, {} warps per SM: {:.1} T multiply-adds/s = {:.1} G pairs/s at 512 per \
                  pair ({:.0}% of the dense tensor figure above)",
@@ -88,7 +90,7 @@ fn main() {
     for n in [1usize << 10, 1 << 14, 1 << 16, 1 << 17] {
         let (query, train) = (random_set(n, &mut rng), random_set(n, &mut rng));
         for &family in &families {
-            let times = clatch::cuda::time_knn_kernel(
+            let times = clatch::cuda::hooks::time_knn_kernel(
                 &dev,
                 &query,
                 &train,
@@ -130,7 +132,7 @@ fn main() {
             ),
         ] {
             for &family in &families {
-                let times = clatch::cuda::time_match_kernels(
+                let times = clatch::cuda::hooks::time_match_kernels(
                     &dev,
                     query,
                     train,
@@ -152,8 +154,8 @@ fn main() {
 
     for (n, query, train) in sets.iter().filter(|(n, ..)| [1 << 14, 1 << 16].contains(n)) {
         println!("kernel alternatives, {n} x {n} (all checked equal to the production kernel):");
-        let variants =
-            clatch::cuda::time_knn_variants(&dev, query, train, WARMUP, 10).expect("kNN variants");
+        let variants = clatch::cuda::hooks::time_knn_variants(&dev, query, train, WARMUP, 10)
+            .expect("kNN variants");
         for (name, times) in variants {
             let ms = median(times);
             println!(

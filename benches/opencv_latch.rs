@@ -8,7 +8,7 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use clatch::synthetic::SplitMix64;
-use clatch::{Backend, GrayView, KeyPoint, OpencvLatch};
+use clatch::{Backend, Extractor, ExtractorConfig, GrayView, KeyPoint, OpencvLatch};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 
 const WIDTH: usize = 1024;
@@ -19,7 +19,7 @@ fn backends() -> Vec<Backend> {
     #[allow(unused_mut)]
     let mut backends = vec![Backend::Cpu];
     #[cfg(feature = "cuda")]
-    match clatch::cuda::device(0) {
+    match clatch::cuda::hooks::device(0) {
         Ok(_) => backends.push(Backend::Cuda { device: 0 }),
         Err(e) => println!("skipped: no CUDA device ({e})"),
     }
@@ -46,17 +46,20 @@ fn opencv_latch(c: &mut Criterion) {
         .sample_size(10)
         .throughput(Throughput::Elements(KEYPOINTS as u64));
     for backend in backends() {
+        let extractor = Extractor::new(backend, ExtractorConfig::default()).unwrap();
         for latch in [
             OpencvLatch::default(),
             OpencvLatch::new(64, true, 3, 2.0).unwrap(),
         ] {
-            let described = latch.describe(backend, &image, &keypoints).unwrap();
+            let described = extractor
+                .describe_opencv(&latch, &image, &keypoints)
+                .unwrap();
             assert!(described.skipped.is_empty());
             let id = BenchmarkId::new(backend.to_string(), format!("{} bytes", latch.bytes()));
             group.bench_with_input(id, &latch, |b, latch| {
                 b.iter(|| {
-                    latch
-                        .describe(backend, black_box(&image), black_box(&keypoints))
+                    extractor
+                        .describe_opencv(latch, black_box(&image), black_box(&keypoints))
                         .unwrap()
                 })
             });

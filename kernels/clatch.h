@@ -21,7 +21,7 @@
 
 /* Launch shapes the host must use. */
 #define CLATCH_DESCRIBE_WARPS 8 /* one 64-bit descriptor word per warp */
-/* Matching (kernels/match.cu, kernels/knn.cuh). */
+/* Matching (kernels/matching.cu, kernels/knn.cuh). */
 #define CLATCH_MATCH_THREADS 128 /* threads per block of the kNN kernels */
 #define CLATCH_MATCH_QUERIES_PER_THREAD 2 /* queries held in each thread's registers */
 #define CLATCH_MATCH_TILE 64 /* gallery descriptors per shared-memory tile */
@@ -29,7 +29,7 @@
 #define CLATCH_MATCH_ROW_PAD 256 /* device descriptor buffers hold a multiple of this many rows */
 #define CLATCH_MATCH_SELECT_THREADS 256 /* clatch_match_filter / clatch_match_compact (8 warps) */
 #define CLATCH_MATCH_SCAN_THREADS 1024 /* clatch_match_scan: one block */
-/* Tensor-core matching (kernels/match_tensor.cu): descriptors as +-1 bytes, int8 MMA. */
+/* Tensor-core matching (kernels/matching_tensor.cu): descriptors as +-1 bytes, int8 MMA. */
 #define CLATCH_TENSOR_WARPS 8 /* warps per block; each holds 32 queries in registers */
 #define CLATCH_TENSOR_QUERIES 256 /* queries per block (CLATCH_TENSOR_WARPS * 32) */
 #define CLATCH_TENSOR_TILE 64 /* gallery descriptors per shared-memory stage */

@@ -1,5 +1,5 @@
-// Brute-force Hamming kNN: the kernel template shared by kernels/match.cu (the production instantiations)
-// and kernels/match_variants.cu (the alternatives the bench measures). Reproduces
+// Brute-force Hamming kNN: the kernel template shared by kernels/matching.cu (the production instantiations)
+// and kernels/bench_knn_variants.cu (the alternatives the bench measures). Reproduces
 // src/matching/cpu.rs::knn exactly (docs/numerics.md, section 5): the k smallest (distance, train index)
 // pairs, nearest first, ties to the lowest train index.
 //

@@ -1,5 +1,5 @@
 // Where a kNN kernel puts one query's list: shared by kernels/knn.cuh (popcount) and
-// kernels/match_tensor.cu (tensor cores), so both write the layout the host and clatch_knn_merge read.
+// kernels/matching_tensor.cu (tensor cores), so both write the layout the host and clatch_knn_merge read.
 #ifndef CLATCH_KNN_OUTPUT_CUH
 #define CLATCH_KNN_OUTPUT_CUH
 

@@ -57,9 +57,10 @@ impl Default for DescriptorWidth {
 pub struct Descriptor(pub [u64; DESCRIPTOR_WORDS]);
 
 impl Descriptor {
-    /// Bit `t` (the outcome of triplet `t`).
-    pub fn bit(&self, t: usize) -> bool {
-        (self.0[t / 64] >> (t % 64)) & 1 == 1
+    /// Bit `t` (the outcome of triplet `t`), or `None` for `t >= 512`.
+    pub fn bit(&self, t: usize) -> Option<bool> {
+        let word = self.0.get(t / 64)?;
+        Some((word >> (t % 64)) & 1 == 1)
     }
 
     /// Hamming distance to another descriptor.

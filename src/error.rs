@@ -3,6 +3,9 @@
 use thiserror::Error;
 
 /// Everything that can go wrong in clatch. Bad input is always reported here, never by a panic.
+///
+/// `Error` is `Send + Sync + 'static`, so it crosses threads and fits `Box<dyn std::error::Error>`
+/// and `anyhow`. CUDA driver failures keep the driver's error as their [`std::error::Error::source`].
 // Field names are described by each variant's message.
 #[allow(missing_docs)]
 #[derive(Debug, Error, Clone, PartialEq)]
@@ -115,17 +118,32 @@ pub enum Error {
         reason: &'static str,
     },
 
-    /// A CUDA driver call or kernel launch failed.
-    #[error("CUDA {operation} failed: {message}")]
-    Cuda { operation: String, message: String },
+    /// A CUDA driver call or kernel launch failed. `source` is the driver's own error: its
+    /// `CUresult` code (`source.0`) and the driver's description.
+    #[cfg(feature = "cuda")]
+    #[cfg_attr(docsrs, doc(cfg(feature = "cuda")))]
+    #[error("CUDA {operation} failed: {source}")]
+    Cuda {
+        operation: String,
+        #[source]
+        source: cudarc::driver::DriverError,
+    },
 
-    /// The device ran out of memory; the context stays usable.
+    /// The device ran out of memory (`CUDA_ERROR_OUT_OF_MEMORY`); the context stays usable.
     #[error("CUDA device out of memory during {operation} ({bytes} bytes requested)")]
     DeviceOutOfMemory { operation: String, bytes: usize },
 
-    /// The requested backend cannot run here.
+    /// The requested backend cannot run here: not compiled in (`Backend::Cuda` without the `cuda`
+    /// feature), no driver, no such device, or its kernels do not load.
     #[error("backend {backend} is unavailable: {reason}")]
     BackendUnavailable { backend: String, reason: String },
+
+    /// A broken internal invariant: a bug in clatch, never the caller's input. Please report it.
+    #[error("internal error in {operation}: {message} (a bug in clatch; please report it)")]
+    Internal {
+        operation: &'static str,
+        message: String,
+    },
 }
 
 /// Shorthand for `Result<T, clatch::Error>`.

@@ -27,6 +27,9 @@ pub struct KeyPoint {
 pub const DEFAULT_KEYPOINT_SIZE: f32 = 64.0;
 
 impl KeyPoint {
+    /// The window side given to detected keypoints: one sample per pixel (64).
+    pub const DEFAULT_SIZE: f32 = DEFAULT_KEYPOINT_SIZE;
+
     /// An upright keypoint of the default size at `(x, y)`.
     pub fn new(x: f32, y: f32) -> Self {
         Self {

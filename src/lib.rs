@@ -1,33 +1,65 @@
 #![doc = include_str!("../README.md")]
 #![deny(missing_docs)]
+#![cfg_attr(docsrs, feature(doc_cfg))]
 
-pub mod angle;
-pub mod backend;
+/// Declares a module of the pipeline's internals: crate-private, or public but hidden from the docs
+/// with the `internals` feature (the test suites' and benches' hooks; no semver promise).
+macro_rules! internal_modules {
+    ($($name:ident),* $(,)?) => {$(
+        #[cfg(feature = "internals")]
+        #[doc(hidden)]
+        pub mod $name;
+        #[cfg(not(feature = "internals"))]
+        mod $name;
+    )*};
+}
+
+internal_modules!(angle, describe, detect, gray_view, matching, pyramid);
+
+mod backend;
+mod descriptor;
+mod error;
+mod facade;
+mod features;
+mod keypoint;
+mod parallel;
+
 #[cfg(feature = "colmap")]
+#[cfg_attr(docsrs, doc(cfg(feature = "colmap")))]
 pub mod colmap;
 #[cfg(feature = "cuda")]
 pub mod cuda;
-pub mod describe;
-pub mod descriptor;
-pub mod detect;
-pub mod error;
-pub mod extractor;
-pub mod image;
-pub mod keypoint;
-pub mod matcher;
-pub mod matching;
-pub mod pyramid;
+#[cfg(not(feature = "cuda"))]
+#[path = "cuda_unavailable.rs"]
+pub mod cuda;
+#[cfg(feature = "image")]
+#[cfg_attr(docsrs, doc(cfg(feature = "image")))]
+pub mod decode;
 pub mod synthetic;
+
+/// The numeric contract: every rule whose arithmetic decides a keypoint, a bit or a match, exactly as
+/// every backend computes it.
+#[doc = include_str!("../docs/numerics.md")]
+pub mod numerics {}
+
+/// OpenCV compatibility: what [`OpencvLatch`] reproduces of OpenCV's LATCH, and where the default
+/// CLATCH descriptor differs from it.
+#[doc = include_str!("../docs/opencv_compat.md")]
+pub mod opencv_compat {}
 
 pub use backend::Backend;
 pub use describe::opencv::OpencvLatch;
-pub use describe::{Described, DescriptorConfig, PatchWeights, SkipReason, Skipped};
+pub use describe::{DescriptorConfig, PatchWeights, SkipReason, Skipped, WINDOW};
 pub use descriptor::{Descriptor, DescriptorSet, DescriptorWidth};
-pub use detect::DetectorConfig;
+pub use detect::{DetectorConfig, fast_score};
 pub use error::{Error, Result};
-pub use extractor::{Extractor, ExtractorConfig, Features};
-pub use image::GrayView;
+pub use facade::{Extractor, ExtractorConfig, Matcher};
+pub use features::Features;
+pub use gray_view::{GrayView, MAX_IMAGE_SIDE};
 pub use keypoint::KeyPoint;
-pub use matcher::Matcher;
 pub use matching::{KnnMatches, Match, MatchConfig};
 pub use pyramid::Pyramid;
+
+#[cfg(feature = "cuda")]
+#[cfg_attr(docsrs, doc(cfg(feature = "cuda")))]
+pub use cudarc::driver::DriverError;

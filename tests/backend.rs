@@ -1,9 +1,8 @@
 //! Backend selection: `Backend::auto()` picks CUDA only when it can really run, and a CUDA backend
 //! that cannot run is a typed error, never a panic (this runs in CI, where there is no driver).
 
-#[cfg(feature = "cuda")]
-use clatch::Error;
-use clatch::{Backend, Extractor, ExtractorConfig, MatchConfig, Matcher};
+use clatch::cuda::GpuStream;
+use clatch::{Backend, Error, Extractor, ExtractorConfig, MatchConfig, Matcher};
 
 #[test]
 fn cpu_is_always_available() {
@@ -18,10 +17,84 @@ fn without_the_cuda_feature_auto_is_the_cpu() {
     assert_eq!(Backend::auto(), Backend::Cpu);
 }
 
+/// `Backend::Cuda` and the stream types exist in every build: without the feature they are refused at
+/// run time with a typed error that says why.
+#[cfg(not(feature = "cuda"))]
+#[test]
+fn without_the_cuda_feature_cuda_is_a_typed_error() {
+    let cuda = Backend::Cuda { device: 0 };
+    for result in [
+        cuda.ensure_available(),
+        Extractor::new(cuda, ExtractorConfig::default()).map(drop),
+        Matcher::new(cuda, MatchConfig::default()).map(drop),
+        GpuStream::new(0).map(drop),
+    ] {
+        match result {
+            Err(Error::BackendUnavailable { backend, reason }) => {
+                assert_eq!(backend, "cuda:0");
+                assert!(reason.contains("`cuda` feature"), "{reason}");
+            }
+            other => panic!("expected BackendUnavailable, got {other:?}"),
+        }
+    }
+}
+
+/// Asynchronous calls need a CUDA extractor: on the CPU they are a typed error in every build.
+#[test]
+fn asynchronous_calls_on_the_cpu_are_refused() {
+    // No stream can be had without a device, so the check is on the extractor: building one for the
+    // CPU and asking for a stream of device 0 either fails for the stream (no device) or for the backend.
+    let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
+    if let Ok(stream) = GpuStream::new(0) {
+        let pixels = vec![0u8; 128 * 128];
+        let image = clatch::GrayView::new(&pixels, 128, 128, 128).unwrap();
+        assert!(matches!(
+            cpu.detect_and_describe_async(&stream, &image),
+            Err(Error::InvalidConfig { field: "backend", .. })
+        ));
+    }
+}
+
+fn send_sync<T: Send + Sync>() {}
+
+/// What the docs promise: every public type crosses threads, in every build.
+#[test]
+fn public_types_are_send_and_sync() {
+    send_sync::<Backend>();
+    send_sync::<Error>();
+    send_sync::<Extractor>();
+    send_sync::<ExtractorConfig>();
+    send_sync::<Matcher>();
+    send_sync::<MatchConfig>();
+    send_sync::<clatch::Features>();
+    send_sync::<clatch::DescriptorSet>();
+    send_sync::<clatch::Descriptor>();
+    send_sync::<clatch::KnnMatches>();
+    send_sync::<clatch::Match>();
+    send_sync::<clatch::KeyPoint>();
+    send_sync::<clatch::GrayView<'static>>();
+    send_sync::<clatch::OpencvLatch>();
+    send_sync::<clatch::Pyramid>();
+    send_sync::<GpuStream>();
+    send_sync::<clatch::cuda::PendingFeatures>();
+    send_sync::<clatch::cuda::PendingMatches>();
+    send_sync::<clatch::colmap::MatchList<Vec<u8>>>();
+    // The database holds a SQLite connection: it may move to another thread, not be shared.
+    fn send<T: Send>() {}
+    send::<clatch::colmap::Database>();
+}
+
+/// `Error` fits the usual boxed-error plumbing.
+#[test]
+fn errors_box_and_keep_their_message() {
+    let error: Box<dyn std::error::Error + Send + Sync> = Box::new(Error::EmptyGallery);
+    assert!(error.to_string().contains("gallery"));
+}
+
 #[cfg(feature = "cuda")]
 #[test]
 fn auto_agrees_with_device_availability() {
-    match clatch::cuda::device(0) {
+    match clatch::cuda::hooks::device(0) {
         Ok(dev) => {
             assert_eq!(
                 Backend::auto(),

@@ -37,7 +37,7 @@ fn trials() -> Vec<Trial> {
 mod gpu {
     use clatch::describe::opencv::OPENCV_BYTES;
     use clatch::synthetic::SplitMix64;
-    use clatch::{Backend, GrayView, KeyPoint, OpencvLatch};
+    use clatch::{Backend, Extractor, ExtractorConfig, GrayView, KeyPoint, OpencvLatch};
     use libtest_mimic::Failed;
 
     use super::common::{Gray, astronaut, rectangles};
@@ -50,8 +50,9 @@ mod gpu {
         keypoints: &[KeyPoint],
         latch: &OpencvLatch,
     ) -> Result<usize, Failed> {
-        let cpu = latch.describe(Backend::Cpu, image, keypoints)?;
-        let gpu = latch.describe(GPU, image, keypoints)?;
+        let on = |backend| Extractor::new(backend, ExtractorConfig::default());
+        let cpu = on(Backend::Cpu)?.describe_opencv(latch, image, keypoints)?;
+        let gpu = on(GPU)?.describe_opencv(latch, image, keypoints)?;
         if cpu.keypoint_index != gpu.keypoint_index || cpu.skipped != gpu.skipped {
             return Err(format!(
                 "{latch:?}: different keypoints described: cpu {} (skipped {}), gpu {} (skipped {})",

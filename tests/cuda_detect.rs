@@ -176,8 +176,8 @@ mod gpu {
         ] {
             let view = image.view();
             let (w, h) = (image.width, image.height);
-            let dev = clatch::cuda::device(0)?;
-            let st = clatch::cuda::debug_detect_stages(&dev, &view, &cfg)?;
+            let dev = clatch::cuda::hooks::device(0)?;
+            let st = clatch::cuda::hooks::debug_detect_stages(&dev, &view, &cfg)?;
             let mut report = Vec::new();
             let bad_texels: Vec<usize> = (0..w * h)
                 .filter(|&i| st.texture[i] != image.pixels[i])
@@ -502,7 +502,7 @@ mod gpu {
     }
 
     pub fn extreme_shapes() -> Result<(), Failed> {
-        let max = clatch::image::MAX_IMAGE_SIDE;
+        let max = clatch::MAX_IMAGE_SIDE;
         let (mut runs, mut keypoints) = (0, 0);
         for (w, h) in [(max, 64), (64, max), (max, 300)] {
             let image = noise(w, h, (w * 3 + h) as u64);

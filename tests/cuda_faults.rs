@@ -36,7 +36,7 @@ mod gpu {
 
     pub fn out_of_memory() -> Result<(), Failed> {
         let huge = 1usize << 42; // 4 TiB
-        match clatch::cuda::probe_allocation(0, huge) {
+        match clatch::cuda::hooks::probe_allocation(0, huge) {
             Err(Error::DeviceOutOfMemory { bytes, .. }) if bytes == huge => {}
             other => {
                 return Err(
@@ -45,7 +45,7 @@ mod gpu {
             }
         }
         // The context is still usable: a real describe after the failure matches the CPU.
-        clatch::cuda::probe_allocation(0, 1 << 20)?;
+        clatch::cuda::hooks::probe_allocation(0, 1 << 20)?;
         let image = rectangles(300, 200, 1);
         let keypoints = [KeyPoint::new(150.0, 100.0).with_angle(33.0)];
         let gpu =
@@ -60,7 +60,7 @@ mod gpu {
     }
 
     pub fn extreme_shapes() -> Result<(), Failed> {
-        let max = clatch::image::MAX_IMAGE_SIDE;
+        let max = clatch::MAX_IMAGE_SIDE;
         for (w, h) in [(max, 64), (64, max), (max, 300)] {
             let pixels = clatch::synthetic::noise(w, h, (w * 7 + h) as u64);
             let image = GrayView::new(&pixels, w, h, w)?;

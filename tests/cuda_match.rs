@@ -37,7 +37,7 @@ fn trials() -> Vec<Trial> {
 
 #[cfg(feature = "cuda")]
 mod gpu {
-    use clatch::cuda::MatchKernel;
+    use clatch::cuda::hooks::MatchKernel;
     use clatch::synthetic::SplitMix64;
     use clatch::{
         Backend, DescriptorSet, DescriptorWidth, Error, Extractor, ExtractorConfig, KnnMatches,
@@ -55,7 +55,7 @@ mod gpu {
     /// The kNN kernel families the device runs for k neighbours: the popcount kernels always, the
     /// tensor-core kernels where the device has them and k <= 2.
     fn families(k: usize) -> Result<Vec<MatchKernel>, Failed> {
-        let dev = clatch::cuda::device(0)?;
+        let dev = clatch::cuda::hooks::device(0)?;
         let mut all = vec![MatchKernel::Popcount];
         if dev.has_tensor_matcher() && k <= 2 {
             all.push(MatchKernel::Tensor);
@@ -76,11 +76,11 @@ mod gpu {
     }
 
     fn describe_difference(what: &str, cpu: &KnnMatches, gpu: &KnnMatches) -> Failed {
-        if cpu.matches.len() != gpu.matches.len() {
+        if cpu.as_slice().len() != gpu.as_slice().len() {
             return format!(
                 "{what}: cpu returned {} matches, gpu {}",
-                cpu.matches.len(),
-                gpu.matches.len()
+                cpu.as_slice().len(),
+                gpu.as_slice().len()
             )
             .into();
         }
@@ -113,12 +113,12 @@ mod gpu {
         if cpu != gpu {
             return Err(describe_difference(&format!("{what}, k {k}"), &cpu, &gpu));
         }
-        let dev = clatch::cuda::device(0)?;
+        let dev = clatch::cuda::hooks::device(0)?;
         let mut runs = 1;
         for family in families(k)? {
             let segments = if segmented { &SEGMENTS[..] } else { &[] };
             for tiles in std::iter::once(None).chain(segments.iter().map(|&t| Some(t))) {
-                let got = clatch::cuda::knn_on(&dev, query, train, k, tiles, family)?;
+                let got = clatch::cuda::hooks::knn_on(&dev, query, train, k, tiles, family)?;
                 if cpu != got {
                     return Err(describe_difference(
                         &format!("{what}, k {k}, {family:?}, segments of {tiles:?} tiles"),
@@ -273,13 +273,14 @@ mod gpu {
                 continue;
             }
             let cpu = matcher(Backend::Cpu, config.clone()).match_descriptors(query, train)?;
-            let dev = clatch::cuda::device(0)?;
+            let dev = clatch::cuda::hooks::device(0)?;
             let mut runs = vec![(
                 "Matcher".to_string(),
                 matcher(GPU, config.clone()).match_descriptors(query, train)?,
             )];
             for family in families(2)? {
-                let got = clatch::cuda::match_descriptors_on(&dev, query, train, &config, family)?;
+                let got =
+                    clatch::cuda::hooks::match_descriptors_on(&dev, query, train, &config, family)?;
                 runs.push((format!("{family:?}"), got));
             }
             for (how, gpu) in runs {
@@ -455,10 +456,11 @@ mod gpu {
             },
         ] {
             let cpu = matcher(Backend::Cpu, config.clone()).match_descriptors(&query, &train)?;
-            let dev = clatch::cuda::device(0)?;
+            let dev = clatch::cuda::hooks::device(0)?;
             for family in families(2)? {
-                let gpu =
-                    clatch::cuda::match_descriptors_on(&dev, &query, &train, &config, family)?;
+                let gpu = clatch::cuda::hooks::match_descriptors_on(
+                    &dev, &query, &train, &config, family,
+                )?;
                 if cpu != gpu {
                     return Err(format!(
                         "tied 512 bits 20000x20000, {config:?}, {family:?}: cpu kept {}, gpu {}",

@@ -96,7 +96,7 @@ mod gpu {
     }
 
     pub fn levels() -> Result<(), Failed> {
-        let dev = clatch::cuda::device(0)?;
+        let dev = clatch::cuda::hooks::device(0)?;
         let mut count = 0;
         for (name, image) in images() {
             for p in pyramids() {
@@ -105,7 +105,7 @@ mod gpu {
                     let plan = Plan::new(&p, image.width, image.height, margin);
                     let mut cpu = vec![image.pixels.clone()];
                     cpu.extend(build_levels(&view, &plan));
-                    let gpu = clatch::cuda::debug_pyramid_levels(&dev, &view, &p, margin)?;
+                    let gpu = clatch::cuda::hooks::debug_pyramid_levels(&dev, &view, &p, margin)?;
                     if cpu != gpu {
                         let level = cpu.iter().zip(&gpu).position(|(c, g)| c != g);
                         return Err(format!(

@@ -37,7 +37,7 @@ fn matcher(ratio: Option<f32>) -> Matcher {
 }
 
 /// Describes `bad` placed at index 2 after two valid keypoints on a 100x80 image.
-fn describe_with(bad: KeyPoint) -> clatch::Result<clatch::Described> {
+fn describe_with(bad: KeyPoint) -> clatch::Result<clatch::Features> {
     let pixels = image(100, 80);
     let view = GrayView::new(&pixels, 100, 80, 100).unwrap();
     let ok = KeyPoint::new(50.0, 40.0);

@@ -216,10 +216,9 @@ fn run_cv2(jobs: &[Job]) -> Result<Vec<Cv2Rows>, Failed> {
 fn compare(jobs: &[Job]) -> Result<Tally, Failed> {
     let expected = run_cv2(jobs)?;
     let mut tally = Tally::default();
+    let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
     for (job, cv2) in jobs.iter().zip(expected) {
-        let ours = job
-            .latch
-            .describe(Backend::Cpu, &job.image.view(), job.keypoints)?;
+        let ours = extractor.describe_opencv(&job.latch, &job.image.view(), job.keypoints)?;
         let rows = ours.descriptors.to_opencv_bytes();
         let bytes = job.latch.bytes();
         let ours_rows: HashMap<usize, &[u8]> = ours
@@ -512,7 +511,7 @@ fn extra_images() -> Result<(), Failed> {
     let mut total = Tally::default();
     for path in paths.split(':').filter(|p| !p.is_empty()) {
         let decoded = image::open(path).map_err(|e| format!("{path}: {e}"))?;
-        let gray = clatch::image::gray_from_dynamic(&decoded);
+        let gray = clatch::decode::gray_from_dynamic(&decoded);
         let (w, h) = (gray.width() as usize, gray.height() as usize);
         let image = Gray::new(gray.into_raw(), w, h);
         let mut keypoints = fast_keypoints(&image);

@@ -8,8 +8,8 @@ use clatch::angle::{ANGLE_BINS, bin_degrees};
 use clatch::describe::SamplingFrame;
 use clatch::synthetic::SplitMix64;
 use clatch::{
-    Backend, Described, DescriptorConfig, DescriptorWidth, DetectorConfig, Extractor,
-    ExtractorConfig, Features, KeyPoint, MatchConfig, Matcher, PatchWeights,
+    Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, Extractor, ExtractorConfig,
+    Features, KeyPoint, MatchConfig, Matcher, PatchWeights,
 };
 use common::{Gray, astronaut, rectangles};
 
@@ -216,7 +216,7 @@ fn auto_backend_is_the_cpu_without_cuda() {
 }
 
 /// Descriptor rows keyed by input keypoint (`None` = skipped).
-fn by_keypoint(described: &Described, count: usize) -> Vec<Option<Vec<u64>>> {
+fn by_keypoint(described: &Features, count: usize) -> Vec<Option<Vec<u64>>> {
     let mut rows = vec![None; count];
     for (row, &i) in described.keypoint_index.iter().enumerate() {
         assert!(rows[i].is_none(), "keypoint {i} described twice");
@@ -302,7 +302,7 @@ fn descriptors_do_not_depend_on_order_or_company() {
     }
 }
 
-fn run_everything(image: &Gray) -> (Features, Described, Vec<clatch::Match>, clatch::KnnMatches) {
+fn run_everything(image: &Gray) -> (Features, Features, Vec<clatch::Match>, clatch::KnnMatches) {
     let config = ExtractorConfig {
         descriptor: DescriptorConfig {
             width: DescriptorWidth::from_bits(256).unwrap(),

@@ -48,7 +48,7 @@ fn distances(a: &DescriptorSet, b: &DescriptorSet) -> Vec<u32> {
     assert_eq!(a.len(), b.len());
     a.rows()
         .zip(b.rows())
-        .map(|(x, y)| clatch::descriptor::hamming(x, y))
+        .map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p ^ q).count_ones()).sum())
         .collect()
 }
 

@@ -2,8 +2,8 @@
 
 /// CUDA device 0, or `None` after printing `skipped: no CUDA device (why)`.
 #[cfg(feature = "cuda")]
-pub fn device_or_skip() -> Option<std::sync::Arc<clatch::cuda::GpuDevice>> {
-    match clatch::cuda::device(0) {
+pub fn device_or_skip() -> Option<std::sync::Arc<clatch::cuda::hooks::GpuDevice>> {
+    match clatch::cuda::hooks::device(0) {
         Ok(dev) => Some(dev),
         Err(e) => {
             println!("skipped: no CUDA device ({e})");

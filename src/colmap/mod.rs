@@ -1,5 +1,5 @@
 //! Handing keypoints and matches to [COLMAP](https://colmap.github.io) 3.8 for structure from motion
-//! (feature `colmap`, on with the default `cli`).
+//! (feature `colmap`).
 //!
 //! COLMAP cannot match binary descriptors and needs none: it gets keypoints in its SQLite database
 //! ([`Database`]) and putative matches as a text file ([`MatchList`]) that

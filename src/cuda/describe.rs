@@ -4,14 +4,14 @@ use std::sync::Arc;
 
 use cudarc::driver::{CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg};
 
-use super::device::{GpuDevice, driver_error, time_launches};
+use super::device::{GpuDevice, driver_error};
 use super::header::CLATCH_DESCRIBE_WARPS;
 use super::memory::{alloc_zeros, upload};
 use super::texture::DeviceImage;
 use crate::describe::{Described, DescriptorConfig, SamplingFrame, SkipReason, Skipped};
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
-use crate::image::GrayView;
+use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
 
 // SAFETY: KeyPoint is #[repr(C)] plain old data with the layout of clatch_keypoint (checked in tests).
@@ -147,9 +147,9 @@ pub(crate) fn launch_describe(
     out: &mut CudaSlice<u64>,
 ) -> Result<()> {
     let capacity = keypoints.len() as i32;
-    let texture = image.quads().ok_or_else(|| Error::Cuda {
-        operation: "describe".into(),
-        message: "internal: the image's quad texture was not built".into(),
+    let texture = image.quads().ok_or_else(|| Error::Internal {
+        operation: "describe",
+        message: "the image's quad texture was not built".into(),
     })?;
     let (width, height) = (image.width() as i32, image.height() as i32);
     let blocks = keypoints
@@ -185,18 +185,5 @@ pub(crate) fn launch_describe(
     Ok(())
 }
 
-/// Kernel times in milliseconds of `repeats` launches after `warmup` launches, measured with CUDA
-/// events on the job's stream (upload and download excluded). Keypoints must all fit.
-#[doc(hidden)]
-pub fn time_describe_kernel(
-    dev: &GpuDevice,
-    image: &GrayView,
-    keypoints: &[KeyPoint],
-    config: &DescriptorConfig,
-    warmup: usize,
-    repeats: usize,
-) -> Result<Vec<f32>> {
-    let mut job = Job::prepare(dev, image, keypoints, config)?;
-    let stream = job.stream.clone();
-    time_launches(dev, &stream, warmup, repeats, || job.launch(dev))
-}
+#[cfg(feature = "internals")]
+pub mod hooks;

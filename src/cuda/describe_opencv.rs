@@ -14,11 +14,11 @@ use cudarc::driver::{DeviceRepr, LaunchConfig, PushKernelArg};
 use super::device::{GpuDevice, driver_error};
 use super::header::CLATCH_OPENCV_THREADS;
 use super::memory::{alloc_zeros, upload};
-use crate::describe::opencv::{OpencvLatch, Placement};
-use crate::describe::{Described, Skipped};
+use crate::describe::Described;
+use crate::describe::opencv::{OpencvLatch, Placed, Placement};
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
-use crate::image::GrayView;
+use crate::gray_view::GrayView;
 
 // SAFETY: Placement is #[repr(C)] plain old data with the layout of clatch_opencv_placement (checked in
 // tests).
@@ -29,10 +29,13 @@ pub(crate) fn describe_opencv(
     dev: &GpuDevice,
     image: &GrayView,
     latch: &OpencvLatch,
-    keypoint_index: Vec<usize>,
-    skipped: Vec<Skipped>,
-    placements: &[Placement],
+    placed: Placed,
 ) -> Result<Described> {
+    let Placed {
+        keypoint_index,
+        skipped,
+        placements,
+    } = placed;
     let width = latch.width();
     if placements.is_empty() {
         return Ok(Described {
@@ -62,7 +65,7 @@ pub(crate) fn describe_opencv(
         })?;
     let stream = dev.new_stream()?;
     let device_image = upload(&stream, &packed, "image upload")?;
-    let device_placements = upload(&stream, placements, "keypoint placement upload")?;
+    let device_placements = upload(&stream, &placements, "keypoint placement upload")?;
     let mut out = alloc_zeros::<u32>(&stream, count * chunks, "descriptor allocation")?;
     let (stride, count_arg) = (w as i32, count as i32);
     let (half, bits) = (latch.half_ssd_size() as i32, width.bits() as i32);

@@ -12,7 +12,7 @@ use std::sync::Arc;
 
 use cudarc::driver::{CudaSlice, CudaStream, LaunchConfig, PushKernelArg, ValidAsZeroBits};
 
-use super::device::{GpuDevice, driver_error, time_launches};
+use super::device::{GpuDevice, driver_error};
 use super::header::{
     CLATCH_DETECT_ROW_ALIGN, CLATCH_DETECT_TILE_X, CLATCH_DETECT_TILE_Y, CLATCH_DETECT_WARPS,
     CLATCH_SCAN_CHUNK, CLATCH_SCAN_THREADS, CLATCH_SCAN_TOP_THREADS,
@@ -21,7 +21,7 @@ use super::memory::alloc_zeros;
 use super::texture::DeviceImage;
 use crate::detect::DetectorConfig;
 use crate::error::Result;
-use crate::image::GrayView;
+use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
 
 // SAFETY: KeyPoint is #[repr(C)] f32s and an i32; all-zero bits are a valid value.
@@ -310,26 +310,8 @@ pub(crate) fn detect(
     detect_on_device(dev, &stream, &device_image, config)?.download(&stream)
 }
 
-/// Times the detector: `repeats` runs of all its launches after `warmup` runs, each measured with CUDA
-/// events on its stream (image upload, allocation and read-back excluded). Returns the times in
-/// milliseconds and the keypoints of the last run.
-#[doc(hidden)]
-pub fn time_detect(
-    dev: &GpuDevice,
-    image: &GrayView,
-    config: &DetectorConfig,
-    warmup: usize,
-    repeats: usize,
-) -> Result<(Vec<f32>, Vec<KeyPoint>)> {
-    let stream = dev.new_stream()?;
-    let device_image = DeviceImage::upload(dev, &stream, image)?;
-    let mut job = DetectJob::new(&stream, image.width(), image.height(), config)?;
-    let times = time_launches(dev, &stream, warmup, repeats, || {
-        job.launch(dev, &stream, &device_image)
-    })?;
-    let keypoints = job.output.download(&stream)?;
-    Ok((times, keypoints))
-}
+#[cfg(feature = "internals")]
+pub mod hooks;
 
 #[cfg(test)]
 mod tests {
@@ -378,82 +360,4 @@ mod tests {
             assert_eq!(geometry.pitch % CLATCH_DETECT_ROW_ALIGN as usize, 0);
         }
     }
-}
-
-/// Intermediate results of one detection, for diagnosing a difference from the CPU.
-#[doc(hidden)]
-#[derive(Clone, Debug)]
-pub struct DetectStages {
-    /// Every texel as the texture returns it, `width x height`.
-    pub texture: Vec<u8>,
-    /// Row pitch of `kept`.
-    pub pitch: usize,
-    /// Suppression's output: the score of each survivor, 0 elsewhere (`pitch x height`).
-    pub kept: Vec<u8>,
-    /// The scanned counts: `offsets[(255 - s) * height + y]` = first output position of score `s`, row
-    /// `y`.
-    pub offsets: Vec<u32>,
-    /// Survivors in all.
-    pub total: u32,
-    /// The scatter's records (angle still 0), then the final keypoints.
-    pub scattered: Vec<KeyPoint>,
-    /// The final keypoints.
-    pub keypoints: Vec<KeyPoint>,
-}
-
-/// Runs the detector stage by stage and reads every intermediate buffer back.
-#[doc(hidden)]
-pub fn debug_detect_stages(
-    dev: &GpuDevice,
-    image: &GrayView,
-    config: &DetectorConfig,
-) -> Result<DetectStages> {
-    let stream = dev.new_stream()?;
-    let device_image = DeviceImage::upload(dev, &stream, image)?;
-    let (width, height) = (image.width(), image.height());
-    let mut texels = alloc_zeros::<u8>(&stream, width * height, "debug texels")?;
-    let mut read = stream.launch_builder(dev.kernel("clatch_debug_read_texture"));
-    let texture = device_image.texture();
-    let (w, h) = (width as i32, height as i32);
-    read.arg(&texture).arg(&w).arg(&h).arg(&mut texels);
-    // SAFETY: one thread per texel of the width x height output.
-    unsafe {
-        read.launch(LaunchConfig {
-            grid_dim: (width.div_ceil(128) as u32, height as u32, 1),
-            block_dim: (128, 1, 1),
-            shared_mem_bytes: 0,
-        })
-    }
-    .map_err(driver_error("launching clatch_debug_read_texture"))?;
-    let texture = stream
-        .clone_dtoh(&texels)
-        .map_err(driver_error("debug texels"))?;
-    let mut job = DetectJob::new(&stream, width, height, config)?;
-    job.launch_stages(dev, &stream, &device_image, Stage::Suppress)?;
-    let kept = stream
-        .clone_dtoh(&job.kept)
-        .map_err(driver_error("debug kept map"))?;
-    let mut job = DetectJob::new(&stream, width, height, config)?;
-    job.launch_stages(dev, &stream, &device_image, Stage::Scan)?;
-    let offsets = stream
-        .clone_dtoh(&job.counts)
-        .map_err(driver_error("debug offsets"))?;
-    let total = stream
-        .clone_dtoh(&job.output.total)
-        .map_err(driver_error("debug total"))?[0];
-    let mut job = DetectJob::new(&stream, width, height, config)?;
-    job.launch_stages(dev, &stream, &device_image, Stage::Scatter)?;
-    let scattered = job.output.download(&stream)?;
-    let mut job = DetectJob::new(&stream, width, height, config)?;
-    job.launch(dev, &stream, &device_image)?;
-    let keypoints = job.output.download(&stream)?;
-    Ok(DetectStages {
-        texture,
-        pitch: job.geometry.pitch,
-        kept,
-        offsets,
-        total,
-        scattered,
-        keypoints,
-    })
 }

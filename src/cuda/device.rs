@@ -6,72 +6,106 @@ use std::sync::{Arc, Mutex, OnceLock};
 use cudarc::driver::{CudaContext, CudaFunction, CudaSlice, CudaStream, DriverError, sys};
 use cudarc::nvrtc::Ptx;
 
+use super::matching_tensor::{self, MatchKernel};
 use super::ptx;
-use super::tensor_knn::{self, MatchKernel};
 use crate::angle::{quadrant_boundaries, rotation_table};
 use crate::describe::triplets::TRIPLETS;
 use crate::error::{Error, Result};
 
-/// Every kernel entry point, by the file that defines it (its portable PTX and its fatbin). Add a
-/// kernel here and fetch it with [`GpuDevice::kernel`].
-const KERNELS: &[(&str, &str, &[u8], &[&str])] = &[
-    (
-        "kernels/describe.cu",
-        ptx::DESCRIBE_PTX,
-        ptx::DESCRIBE_FATBIN,
-        &[
+/// One kernel file: its portable PTX, its fatbin and its entry points.
+struct KernelFile {
+    path: &'static str,
+    ptx: &'static str,
+    fatbin: &'static [u8],
+    names: &'static [&'static str],
+    /// Int8 MMA: loaded only on compute capability 8.0 and later.
+    needs_tensor_cores: bool,
+}
+
+/// Every kernel entry point the library launches, by the file that defines it. Add a kernel here and
+/// fetch it with [`GpuDevice::kernel`].
+const KERNELS: &[KernelFile] = &[
+    KernelFile {
+        path: "kernels/describe.cu",
+        ptx: ptx::DESCRIBE_PTX,
+        fatbin: ptx::DESCRIBE_FATBIN,
+        names: &[
             "clatch_describe",
             "clatch_describe_binary",
             "clatch_build_quads",
         ],
-    ),
-    (
-        "kernels/describe_opencv.cu",
-        ptx::DESCRIBE_OPENCV_PTX,
-        ptx::DESCRIBE_OPENCV_FATBIN,
-        &["clatch_describe_opencv"],
-    ),
-    (
-        "kernels/detect.cu",
-        ptx::DETECT_PTX,
-        ptx::DETECT_FATBIN,
-        &[
+        needs_tensor_cores: false,
+    },
+    KernelFile {
+        path: "kernels/describe_opencv.cu",
+        ptx: ptx::DESCRIBE_OPENCV_PTX,
+        fatbin: ptx::DESCRIBE_OPENCV_FATBIN,
+        names: &["clatch_describe_opencv"],
+        needs_tensor_cores: false,
+    },
+    KernelFile {
+        path: "kernels/detect.cu",
+        ptx: ptx::DETECT_PTX,
+        fatbin: ptx::DETECT_FATBIN,
+        names: &[
             "clatch_detect_nms",
             "clatch_scan_reduce",
             "clatch_scan_partials",
             "clatch_scan_apply",
             "clatch_detect_scatter",
             "clatch_detect_orient",
-            "clatch_debug_read_texture",
         ],
-    ),
-    (
-        "kernels/pyramid.cu",
-        ptx::PYRAMID_PTX,
-        ptx::PYRAMID_FATBIN,
-        &["clatch_downscale"],
-    ),
-    (
-        "kernels/match.cu",
-        ptx::MATCH_PTX,
-        ptx::MATCH_FATBIN,
-        super::matching::KERNELS,
-    ),
-    (
-        "kernels/match_variants.cu",
-        ptx::MATCH_VARIANTS_PTX,
-        ptx::MATCH_VARIANTS_FATBIN,
-        super::matching::VARIANT_KERNELS,
-    ),
+        needs_tensor_cores: false,
+    },
+    KernelFile {
+        path: "kernels/pyramid.cu",
+        ptx: ptx::PYRAMID_PTX,
+        fatbin: ptx::PYRAMID_FATBIN,
+        names: &["clatch_downscale"],
+        needs_tensor_cores: false,
+    },
+    KernelFile {
+        path: "kernels/matching.cu",
+        ptx: ptx::MATCHING_PTX,
+        fatbin: ptx::MATCHING_FATBIN,
+        names: super::matching::KERNELS,
+        needs_tensor_cores: false,
+    },
+    KernelFile {
+        path: "kernels/matching_tensor.cu",
+        ptx: ptx::MATCHING_TENSOR_PTX,
+        fatbin: ptx::MATCHING_TENSOR_FATBIN,
+        names: matching_tensor::KERNELS,
+        needs_tensor_cores: true,
+    },
 ];
 
-/// Kernels for compute capability 8.0 and later (int8 MMA), loaded only there.
-const TENSOR_KERNELS: (&str, &str, &[u8], &[&str]) = (
-    "kernels/match_tensor.cu",
-    ptx::MATCH_TENSOR_PTX,
-    ptx::MATCH_TENSOR_FATBIN,
-    tensor_knn::KERNELS,
-);
+/// Bench and diagnostic kernels (`kernels/bench_*.cu`), compiled and loaded only with the `internals`
+/// feature, on first use ([`GpuDevice::load_bench_kernels`]).
+#[cfg(feature = "internals")]
+const BENCH_KERNELS: &[KernelFile] = &[
+    KernelFile {
+        path: "kernels/bench_knn_variants.cu",
+        ptx: ptx::BENCH_KNN_VARIANTS_PTX,
+        fatbin: ptx::BENCH_KNN_VARIANTS_FATBIN,
+        names: super::matching::hooks::VARIANT_KERNELS,
+        needs_tensor_cores: false,
+    },
+    KernelFile {
+        path: "kernels/bench_mma_rate.cu",
+        ptx: ptx::BENCH_MMA_RATE_PTX,
+        fatbin: ptx::BENCH_MMA_RATE_FATBIN,
+        names: &["clatch_mma_s8_rate"],
+        needs_tensor_cores: true,
+    },
+    KernelFile {
+        path: "kernels/bench_texture_read.cu",
+        ptx: ptx::BENCH_TEXTURE_READ_PTX,
+        fatbin: ptx::BENCH_TEXTURE_READ_FATBIN,
+        names: &["clatch_debug_read_texture"],
+        needs_tensor_cores: false,
+    },
+];
 
 /// A CUDA device with clatch's kernels loaded and its tables uploaded.
 #[derive(Debug)]
@@ -89,16 +123,17 @@ pub struct GpuDevice {
     /// The kNN kernels asked for with `CLATCH_MATCH_KERNEL`, if any.
     match_kernel_override: Option<MatchKernel>,
     name: String,
+    /// Whether kernels are loaded from PTX rather than the fatbins (`CLATCH_FORCE_PTX=1`).
+    #[cfg(feature = "internals")]
+    force_ptx: bool,
+    #[cfg(feature = "internals")]
+    bench_kernels: OnceLock<HashMap<&'static str, CudaFunction>>,
 }
 
-/// Maps a driver error to ours, naming the operation.
+/// Maps a driver error to ours, naming the operation and keeping the driver's error as the source.
 pub(crate) fn driver_error(operation: &str) -> impl Fn(DriverError) -> Error + '_ {
-    move |e| {
-        let message = e
-            .error_string()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|_| format!("{e:?}"));
-        if e.0 == sys::cudaError_enum::CUDA_ERROR_OUT_OF_MEMORY {
+    move |source| {
+        if source.0 == sys::cudaError_enum::CUDA_ERROR_OUT_OF_MEMORY {
             Error::DeviceOutOfMemory {
                 operation: operation.to_string(),
                 bytes: 0,
@@ -106,18 +141,13 @@ pub(crate) fn driver_error(operation: &str) -> impl Fn(DriverError) -> Error + '
         } else {
             Error::Cuda {
                 operation: operation.to_string(),
-                message,
+                source,
             }
         }
     }
 }
 
-fn unavailable(ordinal: usize, reason: impl Into<String>) -> Error {
-    Error::BackendUnavailable {
-        backend: format!("cuda:{ordinal}"),
-        reason: reason.into(),
-    }
-}
+use crate::backend::cuda_unavailable as unavailable;
 
 /// The loaded device `ordinal`, created on first use and shared afterwards.
 pub fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
@@ -162,6 +192,12 @@ impl GpuDevice {
         // SAFETY: the invariant above: no buffer is used on a stream other than the one it was
         // allocated on, except the tables, which are complete before they are shared.
         unsafe { ctx.disable_event_tracking() };
+        if ptx::STUB {
+            return Err(unavailable(
+                ordinal,
+                "this clatch was built with stub kernels (a documentation build)",
+            ));
+        }
         let mut kernels = HashMap::new();
         // The fatbin's native code loads without JIT on the GPUs it was built for (and falls back to its
         // PTX elsewhere); CLATCH_FORCE_PTX=1 loads the plain PTX instead, so tests can prove both paths.
@@ -170,21 +206,11 @@ impl GpuDevice {
             .compute_capability()
             .map_err(driver_error("reading the compute capability"))?;
         let tensor_cores = major >= 8;
-        let files = KERNELS
+        for file in KERNELS
             .iter()
-            .chain(tensor_cores.then_some(&TENSOR_KERNELS));
-        for &(file, source, fatbin, names) in files {
-            let image = if force_ptx {
-                Ptx::from_src(source)
-            } else {
-                Ptx::from_binary(fatbin.to_vec())
-            };
-            let module = ctx.load_module(image).map_err(driver_error(file))?;
-            for &name in names {
-                let function = module.load_function(name).map_err(driver_error(name))?;
-                tensor_knn::configure(name, &function)?;
-                kernels.insert(name, function);
-            }
+            .filter(|f| tensor_cores || !f.needs_tensor_cores)
+        {
+            load_module(&ctx, force_ptx, file, &mut kernels)?;
         }
         let stream = ctx.default_stream();
         let rotation: Vec<i32> = rotation_table().iter().flatten().copied().collect();
@@ -225,13 +251,36 @@ impl GpuDevice {
             tensor_cores,
             match_kernel_override: MatchKernel::from_env(),
             name,
+            #[cfg(feature = "internals")]
+            force_ptx,
+            #[cfg(feature = "internals")]
+            bench_kernels: OnceLock::new(),
         })
+    }
+
+    /// Loads the bench and diagnostic kernels (once; later calls do nothing), so that
+    /// [`GpuDevice::kernel`] finds them.
+    #[cfg(feature = "internals")]
+    pub(crate) fn load_bench_kernels(&self) -> Result<()> {
+        if self.bench_kernels.get().is_some() {
+            return Ok(());
+        }
+        let mut kernels = HashMap::new();
+        let usable = BENCH_KERNELS
+            .iter()
+            .filter(|f| self.tensor_cores || !f.needs_tensor_cores);
+        for file in usable {
+            load_module(&self.ctx, self.force_ptx, file, &mut kernels)?;
+        }
+        // A concurrent caller may have won: its table is the same.
+        let _ = self.bench_kernels.set(kernels);
+        Ok(())
     }
 
     /// The kNN kernels matching uses for `k` neighbours: the tensor cores where the device has them and
     /// k <= 2, unless `CLATCH_MATCH_KERNEL=popcount` says otherwise; the popcount kernels elsewhere.
     pub(crate) fn match_kernel(&self, k: usize) -> MatchKernel {
-        let tensor_ok = self.tensor_cores && k <= tensor_knn::MAX_K;
+        let tensor_ok = self.tensor_cores && k <= matching_tensor::MAX_K;
         match self.match_kernel_override {
             Some(MatchKernel::Popcount) => MatchKernel::Popcount,
             _ if tensor_ok => MatchKernel::Tensor,
@@ -247,10 +296,10 @@ impl GpuDevice {
                 reason: "needs compute capability 8.0 or later".into(),
             });
         }
-        if kernel == MatchKernel::Tensor && k > tensor_knn::MAX_K {
+        if kernel == MatchKernel::Tensor && k > matching_tensor::MAX_K {
             return Err(Error::KTooLargeForBackend {
                 k,
-                max: tensor_knn::MAX_K,
+                max: matching_tensor::MAX_K,
                 backend: "cuda tensor-core matcher".into(),
             });
         }
@@ -262,8 +311,14 @@ impl GpuDevice {
         self.tensor_cores
     }
 
-    /// A loaded kernel, by its `extern "C"` name (one listed in `KERNELS`).
+    /// A loaded kernel, by its `extern "C"` name (one listed in `KERNELS`, or with the `internals`
+    /// feature in `BENCH_KERNELS` once loaded). Every name the crate asks for is one of its own
+    /// constants, so a miss is a bug in clatch.
     pub(crate) fn kernel(&self, name: &'static str) -> &CudaFunction {
+        #[cfg(feature = "internals")]
+        if let Some(f) = self.bench_kernels.get().and_then(|k| k.get(name)) {
+            return f;
+        }
         self.kernels
             .get(name)
             .unwrap_or_else(|| panic!("kernel {name} is not listed in KERNELS"))
@@ -282,6 +337,28 @@ impl GpuDevice {
     }
 }
 
+/// Loads one kernel file (its fatbin, or its PTX when `force_ptx`) and its entry points into `kernels`.
+fn load_module(
+    ctx: &Arc<CudaContext>,
+    force_ptx: bool,
+    file: &KernelFile,
+    kernels: &mut HashMap<&'static str, CudaFunction>,
+) -> Result<()> {
+    let image = if force_ptx {
+        Ptx::from_src(file.ptx)
+    } else {
+        Ptx::from_binary(file.fatbin.to_vec())
+    };
+    let module = ctx.load_module(image).map_err(driver_error(file.path))?;
+    for &name in file.names {
+        let function = module.load_function(name).map_err(driver_error(name))?;
+        matching_tensor::configure(name, &function)?;
+        kernels.insert(name, function);
+    }
+    Ok(())
+}
+
+#[cfg(feature = "internals")]
 /// Times `launch` with CUDA events on `stream`: `warmup` untimed calls, then `repeats` timed ones
 /// (milliseconds each).
 pub(crate) fn time_launches(
@@ -315,4 +392,33 @@ pub(crate) fn time_launches(
         );
     }
     Ok(times)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::error::Error as _;
+
+    use super::*;
+
+    #[test]
+    fn driver_errors_keep_the_driver_code_as_their_source() {
+        let invalid = DriverError(sys::cudaError_enum::CUDA_ERROR_INVALID_VALUE);
+        let error = driver_error("uploading the tables")(invalid);
+        match &error {
+            Error::Cuda { operation, source } => {
+                assert_eq!(operation, "uploading the tables");
+                assert_eq!(*source, invalid);
+            }
+            other => panic!("expected Error::Cuda, got {other:?}"),
+        }
+        let source = error.source().expect("the driver error is the source");
+        let driver = source.downcast_ref::<DriverError>().expect("a DriverError");
+        assert_eq!(driver.0, sys::cudaError_enum::CUDA_ERROR_INVALID_VALUE);
+        // Out of memory has its own variant (the caller may retry with less).
+        let oom = DriverError(sys::cudaError_enum::CUDA_ERROR_OUT_OF_MEMORY);
+        assert!(matches!(
+            driver_error("alloc")(oom),
+            Error::DeviceOutOfMemory { .. }
+        ));
+    }
 }

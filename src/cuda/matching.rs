@@ -1,4 +1,4 @@
-//! GPU matching: `kernels/match.cu` (with `kernels/knn.cuh`), reproducing [`crate::matching::cpu::knn`]
+//! GPU matching: `kernels/matching.cu` (with `kernels/knn.cuh`), reproducing [`crate::matching::cpu::knn`]
 //! and [`crate::matching::cpu::match_descriptors`] exactly, ties included.
 //!
 //! Exactness strategy: distances are integer popcounts; each kNN thread scans its gallery segment in
@@ -14,17 +14,16 @@
 use std::sync::Arc;
 
 use cudarc::driver::{
-    CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg, ValidAsZeroBits, sys,
+    CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg, ValidAsZeroBits,
 };
 
-use super::device::{GpuDevice, driver_error, time_launches};
+use super::device::{GpuDevice, driver_error};
 use super::header::{
-    CLATCH_MATCH_MAX_K, CLATCH_MATCH_QUERIES_PER_THREAD, CLATCH_MATCH_ROW_PAD,
-    CLATCH_MATCH_SCAN_THREADS, CLATCH_MATCH_SELECT_THREADS, CLATCH_MATCH_THREADS,
-    CLATCH_MATCH_TILE,
+    CLATCH_MATCH_QUERIES_PER_THREAD, CLATCH_MATCH_ROW_PAD, CLATCH_MATCH_SCAN_THREADS,
+    CLATCH_MATCH_SELECT_THREADS, CLATCH_MATCH_THREADS, CLATCH_MATCH_TILE,
 };
+use super::matching_tensor::{MatchKernel, TensorKnn};
 use super::memory::alloc_zeros;
-use super::tensor_knn::{MatchKernel, TensorKnn};
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
 use crate::matching::{KnnMatches, Match, MatchConfig};
@@ -35,8 +34,7 @@ unsafe impl DeviceRepr for Match {}
 // SAFETY: as above.
 unsafe impl ValidAsZeroBits for Match {}
 
-/// The most neighbours per query the GPU matcher returns.
-pub const MAX_K: usize = CLATCH_MATCH_MAX_K as usize;
+pub use crate::matching::GPU_MAX_K as MAX_K;
 
 /// List lengths the kNN kernels are compiled for; `k` is rounded up to one of them. The kernels with
 /// the fused reverse 1-NN (cross-check) exist for the first two.
@@ -63,7 +61,7 @@ macro_rules! match_kernels {
     };
 }
 
-/// Every entry point of `kernels/match.cu`: for descriptor widths of 1..8 words, the kNN kernels
+/// Every entry point of `kernels/matching.cu`: for descriptor widths of 1..8 words, the kNN kernels
 /// (`KERNELS_PER_WIDTH` each, see [`knn_kernel`]), then the merge and selection kernels.
 pub(crate) const KERNELS: &[&str] = match_kernels!(1 2 3 4 5 6 7 8);
 
@@ -77,20 +75,6 @@ fn knn_kernel(words: usize, k: usize, mutual: bool) -> &'static str {
     let slot = if mutual { 4 + slot } else { slot };
     KERNELS[(words - 1) * KERNELS_PER_WIDTH + slot]
 }
-
-/// The alternatives of `kernels/match_variants.cu` (512 bits, k = 2): `q` queries per thread, popcount
-/// groups of `g` words, gallery loop unrolled `u` times.
-pub(crate) const VARIANT_KERNELS: &[&str] = &[
-    "clatch_knn_variant_q1_g1_u1",
-    "clatch_knn_variant_q1_g3_u1",
-    "clatch_knn_variant_q1_g7_u1",
-    "clatch_knn_variant_q1_g15_u1",
-    "clatch_knn_variant_q2_g1_u1",
-    "clatch_knn_variant_q2_g3_u1",
-    "clatch_knn_variant_q2_g7_u1",
-    "clatch_knn_variant_q2_g15_u1",
-    "clatch_knn_variant_q2_g7_u2",
-];
 
 const THREADS: usize = CLATCH_MATCH_THREADS as usize;
 const TILE: usize = CLATCH_MATCH_TILE as usize;
@@ -188,7 +172,7 @@ struct KnnRun {
     /// Per gallery descriptor, `!(distance << 32 | query)` of its nearest query (one unused element
     /// unless `mutual`).
     reverse: CudaSlice<u64>,
-    /// The tensor-core kernels run this kNN instead of `kernel` (see `tensor_knn.rs`).
+    /// The tensor-core kernels run this kNN instead of `kernel` (see `matching_tensor.rs`).
     tensor: Option<TensorKnn>,
 }
 
@@ -352,42 +336,6 @@ pub(crate) fn knn(
     knn_with(dev, query, train, k, None, None)
 }
 
-/// [`knn`] with the gallery cut into segments of `segment_tiles` tiles of
-/// `CLATCH_MATCH_TILE` descriptors (1 = one block per tile, `usize::MAX` = one segment): lets the
-/// tests reach both the direct and the merged path at every size.
-#[doc(hidden)]
-pub fn knn_segmented(
-    dev: &GpuDevice,
-    query: &DescriptorSet,
-    train: &DescriptorSet,
-    k: usize,
-    segment_tiles: usize,
-) -> Result<KnnMatches> {
-    knn_with(dev, query, train, k, Some(segment_tiles.max(1)), None)
-}
-
-/// [`knn`] on the kernel family `kernel` (an error where the device or `k` does not allow it), with
-/// the gallery segments of [`knn_segmented`] when `segment_tiles` is given (tensor kernels: tiles of
-/// `CLATCH_TENSOR_TILE`).
-#[doc(hidden)]
-pub fn knn_on(
-    dev: &GpuDevice,
-    query: &DescriptorSet,
-    train: &DescriptorSet,
-    k: usize,
-    segment_tiles: Option<usize>,
-    kernel: MatchKernel,
-) -> Result<KnnMatches> {
-    knn_with(
-        dev,
-        query,
-        train,
-        k,
-        segment_tiles.map(|t| t.max(1)),
-        Some(kernel),
-    )
-}
-
 fn knn_with(
     dev: &GpuDevice,
     query: &DescriptorSet,
@@ -400,10 +348,7 @@ fn knn_with(
     check_rows(query, "query descriptors")?;
     check_rows(train, "gallery descriptors")?;
     if query.is_empty() {
-        return Ok(KnnMatches {
-            k,
-            matches: Vec::new(),
-        });
+        return Ok(KnnMatches::from_parts(k, Vec::new()));
     }
     let stream = dev.new_stream()?;
     let q = upload(&stream, query, "query descriptor upload")?;
@@ -415,7 +360,7 @@ fn knn_with(
     let matches = stream.clone_dtoh(&out).map_err(driver_error(
         "clatch_knn (running, or copying matches back)",
     ))?;
-    Ok(KnnMatches { k, matches })
+    Ok(KnnMatches::from_parts(k, matches))
 }
 
 /// The kept best matches in query order, exactly as [`crate::matching::cpu::match_descriptors`]
@@ -432,25 +377,6 @@ pub(crate) fn match_descriptors(
         return Ok(Vec::new());
     }
     let mut job = MatchJob::prepare(dev, dev.new_stream()?, query, train, config, None)?;
-    job.launch(dev)?;
-    job.fetch()
-}
-
-/// [`match_descriptors`] on the kernel family `kernel` (an error where the device does not allow it).
-#[doc(hidden)]
-pub fn match_descriptors_on(
-    dev: &GpuDevice,
-    query: &DescriptorSet,
-    train: &DescriptorSet,
-    config: &MatchConfig,
-    kernel: MatchKernel,
-) -> Result<Vec<Match>> {
-    check_rows(query, "query descriptors")?;
-    check_rows(train, "gallery descriptors")?;
-    if query.is_empty() {
-        return Ok(Vec::new());
-    }
-    let mut job = MatchJob::prepare(dev, dev.new_stream()?, query, train, config, Some(kernel))?;
     job.launch(dev)?;
     job.fetch()
 }
@@ -585,131 +511,8 @@ impl MatchJob {
     }
 }
 
-/// Kernel times in milliseconds of `repeats` runs of everything `match_descriptors` queues on the
-/// device (kNN with the fused reverse 1-NN, filter, scan, compaction) after `warmup` runs, measured
-/// with CUDA events (uploads and downloads excluded). Validated, non-empty sets.
-#[doc(hidden)]
-pub fn time_match_kernels(
-    dev: &GpuDevice,
-    query: &DescriptorSet,
-    train: &DescriptorSet,
-    config: &MatchConfig,
-    kernel: Option<MatchKernel>,
-    (warmup, repeats): (usize, usize),
-) -> Result<Vec<f32>> {
-    let k = if config.ratio.is_some() { 2 } else { 1 };
-    if query.is_empty() || train.len() < k {
-        return Err(Error::InvalidK {
-            k,
-            gallery: train.len(),
-        });
-    }
-    let mut job = MatchJob::prepare(dev, dev.new_stream()?, query, train, config, kernel)?;
-    let stream = job.stream.clone();
-    time_launches(dev, &stream, warmup, repeats, || job.launch(dev))
-}
-
-/// The device's multiprocessor count and its maximum SM clock in kHz (driver attributes), for the
-/// bench's POPC bound.
-#[doc(hidden)]
-pub fn multiprocessors_and_clock_khz(dev: &GpuDevice) -> Result<(usize, usize)> {
-    let attribute = |a| {
-        dev.ctx
-            .attribute(a)
-            .map_err(driver_error("reading device attributes"))
-    };
-    let sms = attribute(sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_MULTIPROCESSOR_COUNT)?;
-    let clock = attribute(sys::CUdevice_attribute::CU_DEVICE_ATTRIBUTE_CLOCK_RATE)?;
-    Ok((sms.max(0) as usize, clock.max(0) as usize))
-}
-
-/// Kernel times in milliseconds of `repeats` kNN runs (the kNN kernel and, when the gallery is split,
-/// the merge) after `warmup` runs, measured with CUDA events (uploads and downloads excluded).
-#[doc(hidden)]
-pub fn time_knn_kernel(
-    dev: &GpuDevice,
-    query: &DescriptorSet,
-    train: &DescriptorSet,
-    k: usize,
-    kernel: Option<MatchKernel>,
-    (warmup, repeats): (usize, usize),
-) -> Result<Vec<f32>> {
-    check_k(k)?;
-    if query.is_empty() || k == 0 || k > train.len() {
-        return Err(Error::InvalidK {
-            k,
-            gallery: train.len(),
-        });
-    }
-    let stream = dev.new_stream()?;
-    let q = upload(&stream, query, "query descriptor upload")?;
-    let t = upload(&stream, train, "gallery descriptor upload")?;
-    let shape = (query.len(), train.len(), query.width().words());
-    let mut run = KnnRun::new(dev, &stream, shape, (k, false), kernel, None)?;
-    let mut out = alloc_zeros::<Match>(&stream, query.len() * k, "kNN matches")?;
-    time_launches(dev, &stream, warmup, repeats, || {
-        run.launch(dev, &stream, &q, &t, &mut out)
-    })
-}
-
-/// Times every kernel of `kernels/match_variants.cu` (512-bit sets, k = 2) as [`time_knn_kernel`]
-/// does, after checking that each returns exactly the production kernel's matches. Returns
-/// `(kernel name, times in ms)`.
-#[doc(hidden)]
-pub fn time_knn_variants(
-    dev: &GpuDevice,
-    query: &DescriptorSet,
-    train: &DescriptorSet,
-    warmup: usize,
-    repeats: usize,
-) -> Result<Vec<(&'static str, Vec<f32>)>> {
-    const K: usize = 2;
-    if query.width().words() != 8 || train.len() < K {
-        return Err(Error::InvalidConfig {
-            field: "variant sets",
-            value: format!(
-                "{} bits, {} gallery rows",
-                query.width().bits(),
-                train.len()
-            ),
-            reason: "the kNN variants are compiled for 512-bit descriptors and k = 2",
-        });
-    }
-    let expected = knn_on(dev, query, train, K, None, MatchKernel::Popcount)?.matches;
-    let stream = dev.new_stream()?;
-    let q = upload(&stream, query, "query descriptor upload")?;
-    let t = upload(&stream, train, "gallery descriptor upload")?;
-    let mut results = Vec::new();
-    for &kernel in VARIANT_KERNELS {
-        let qpt = if kernel.contains("_q2_") { 2 } else { 1 };
-        let mut run = KnnRun::with_kernel(
-            dev,
-            &stream,
-            kernel,
-            qpt,
-            (query.len(), train.len()),
-            K,
-            None,
-        )?;
-        let mut out = alloc_zeros::<Match>(&stream, query.len() * K, "kNN matches")?;
-        run.launch(dev, &stream, &q, &t, &mut out)?;
-        let got = stream
-            .clone_dtoh(&out)
-            .map_err(driver_error("copying variant matches back"))?;
-        if got != expected {
-            let first = got.iter().zip(&expected).position(|(a, b)| a != b);
-            return Err(Error::Cuda {
-                operation: kernel.to_string(),
-                message: format!("differs from the production kernel (first at {first:?})"),
-            });
-        }
-        let times = time_launches(dev, &stream, warmup, repeats, || {
-            run.launch(dev, &stream, &q, &t, &mut out)
-        })?;
-        results.push((kernel, times));
-    }
-    Ok(results)
-}
+#[cfg(feature = "internals")]
+pub mod hooks;
 
 #[cfg(test)]
 mod tests {

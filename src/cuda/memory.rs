@@ -116,16 +116,5 @@ pub(crate) fn upload_staged(
     Ok(device)
 }
 
-/// Asks for `bytes` of device memory and frees them again: lets tests check that exhaustion is a
-/// typed error and that the context stays usable afterwards.
-#[doc(hidden)]
-pub fn probe_allocation(ordinal: usize, bytes: usize) -> Result<()> {
-    let dev = super::device(ordinal)?;
-    let stream = dev.new_stream()?;
-    let buffer = alloc_zeros::<u8>(&stream, bytes, "probe allocation")?;
-    stream
-        .synchronize()
-        .map_err(driver_error("probe allocation"))?;
-    drop(buffer);
-    Ok(())
-}
+#[cfg(feature = "internals")]
+pub mod hooks;

@@ -19,8 +19,8 @@ use crate::describe::DescriptorConfig;
 use crate::descriptor::DescriptorSet;
 use crate::detect::DetectorConfig;
 use crate::error::Result;
-use crate::extractor::Features;
-use crate::image::GrayView;
+use crate::features::Features;
+use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
 use crate::pyramid::{self, LevelKeypoint, Plan, Pyramid};
 
@@ -139,31 +139,11 @@ impl QueuedPyramid {
                 }
             })
             .collect::<Result<Vec<_>>>()?;
-        Ok(Features {
-            keypoints: self.report(&selected),
-            descriptors: pyramid::assemble(&selected, &per_level, width)?,
-        })
+        Ok(Features::all(
+            self.report(&selected),
+            pyramid::assemble(&selected, &per_level, width)?,
+        ))
     }
-}
-
-/// The pyramid levels of `image` for a detector margin of `margin` as the GPU builds them, level 0
-/// first, each row-major with stride = width: for comparing with [`crate::pyramid::cpu::build_levels`].
-#[doc(hidden)]
-pub fn debug_pyramid_levels(
-    dev: &GpuDevice,
-    image: &GrayView,
-    p: &Pyramid,
-    margin: usize,
-) -> Result<Vec<Vec<u8>>> {
-    let stream = dev.new_stream()?;
-    let plan = Plan::new(p, image.width(), image.height(), margin);
-    let mut level = DeviceImage::upload(dev, &stream, image)?;
-    let mut out = vec![level.download(&stream)?];
-    for &size in &plan.sizes[1..] {
-        level = level.downscale(dev, &stream, plan.step, size)?;
-        out.push(level.download(&stream)?);
-    }
-    Ok(out)
 }
 
 /// Multi-scale detection on the GPU: the same list as [`crate::pyramid::cpu::detect`].
@@ -187,3 +167,6 @@ pub(crate) fn pyramid_detect_and_describe(
 ) -> Result<Features> {
     queue(dev, &dev.new_stream()?, image, detector, p)?.features(dev, descriptor)
 }
+
+#[cfg(feature = "internals")]
+pub mod hooks;

@@ -22,8 +22,8 @@ use crate::describe::DescriptorConfig;
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::detect::DetectorConfig;
 use crate::error::{Error, Result};
-use crate::extractor::Features;
-use crate::image::GrayView;
+use crate::features::Features;
+use crate::gray_view::GrayView;
 use crate::matching::{Match, MatchConfig};
 use crate::pyramid::Pyramid;
 
@@ -138,10 +138,10 @@ impl PendingFeatures {
                 .clone_dtoh(&descriptors.slice(..keypoints.len() * width.words()))
                 .map_err(driver_error("copying descriptors back"))?
         };
-        Ok(Features {
+        Ok(Features::all(
             keypoints,
-            descriptors: DescriptorSet::from_words(width, words)?,
-        })
+            DescriptorSet::from_words(width, words)?,
+        ))
     }
 }
 

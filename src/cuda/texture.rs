@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use rayon::prelude::*;
+use crate::parallel::*;
 
 use cudarc::driver::{CudaSlice, CudaStream, DevicePtr, LaunchConfig, PushKernelArg, sys};
 
@@ -10,7 +10,7 @@ use super::device::{GpuDevice, driver_error};
 use super::header::{CLATCH_PYRAMID_TILE_X, CLATCH_PYRAMID_TILE_Y};
 use super::memory::{alloc_zeros, upload_staged};
 use crate::error::Result;
-use crate::image::GrayView;
+use crate::gray_view::GrayView;
 
 /// A texture object; destroyed on drop.
 #[derive(Debug)]
@@ -200,6 +200,7 @@ impl DeviceImage {
     }
 
     /// The pixels read back, row-major with stride = width (waits for the stream).
+    #[cfg(feature = "internals")]
     pub(crate) fn download(&self, stream: &Arc<CudaStream>) -> Result<Vec<u8>> {
         let pitched = stream
             .clone_dtoh(&self.pixels)

@@ -1,21 +1,21 @@
 //! The reference descriptor (see the parent module for the numeric contract).
 //!
 //! [`sample_window`] and [`window_bits`] are the contract written out plainly. [`describe`] computes
-//! the same integers faster (`cpu/fast.rs`): AVX2 kernels when the CPU has them (`cpu/avx2.rs`,
+//! the same integers faster (`cpu/optimized.rs`): AVX2 kernels when the CPU has them (`cpu/avx2.rs`,
 //! detected at run time), portable ones otherwise (`cpu/portable.rs`), each tested equal to the two
 //! reference functions. `BENCHMARKS.md` has the figures.
 
-#[cfg(target_arch = "x86_64")]
+#[cfg(all(target_arch = "x86_64", feature = "cpu"))]
 mod avx2;
-mod fast;
+mod optimized;
 mod portable;
 
-use rayon::prelude::*;
+use crate::parallel::*;
 
 use super::triplets::TRIPLETS;
 use super::{Described, DescriptorConfig, PATCH, SamplingFrame, SkipReason, Skipped, WINDOW};
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
-use crate::image::GrayView;
+use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
 
 /// A sampled window, row-major `WINDOW x WINDOW` (values 0..=255, widened to `i16` so the patch sums
@@ -83,15 +83,15 @@ pub fn window_bits(
 
 /// Describes validated keypoints on the CPU, in parallel over keypoints.
 ///
-/// Each keypoint goes through the fast kernels of `cpu/fast.rs` (the same integers as
+/// Each keypoint goes through the fast kernels of `cpu/optimized.rs` (the same integers as
 /// [`sample_window`] and [`window_bits`], tested equal), into one window buffer per worker; weights
 /// other than 0/1 use [`window_bits`] itself.
 pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfig) -> Described {
     let width = config.width;
     let per = width.words();
     let weights = config.weights.as_array().map(|w| w as i32);
-    let kernels = fast::Kernels::detect();
-    let mask = fast::pixel_mask(&weights);
+    let kernels = optimized::Kernels::detect();
+    let mask = optimized::pixel_mask(&weights);
     let frames: Vec<Option<SamplingFrame>> = keypoints
         .iter()
         .map(|kp| Some(SamplingFrame::of(kp)).filter(|f| f.fits(img.width(), img.height())))

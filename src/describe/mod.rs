@@ -11,7 +11,7 @@
 //!    `P = o + (u - 32)·eu + (v - 32)·ev` (16.16), then `P8 = (P + 128) >> 8` (24.8, `>>` is a floor).
 //! 3. **Fit.** The keypoint is described iff the four corner samples (`u, v` in {0, 63}) satisfy
 //!    `0 <= P8 <= 256·(W - 1)` and likewise for y (the samples are affine in `u, v`, so then all do).
-//!    Otherwise it is reported in [`Described::skipped`].
+//!    Otherwise it is reported in [`crate::Features::skipped`].
 //! 4. **Bilinear**: `i = P8 >> 8`, `f = P8 & 255` per axis; neighbours past the last row or column are
 //!    clamped (the texture unit's clamp mode); the sample is
 //!    `((p00·(256-fx) + p01·fx)·(256-fy) + (p10·(256-fx) + p11·fx)·fy + 2^15) >> 16`, a `u8`.
@@ -98,7 +98,9 @@ impl Default for PatchWeights {
     }
 }
 
-/// Descriptor settings.
+/// CLATCH descriptor settings: a rotated, scaled 64x64 window sampled around each keypoint, 512 learned
+/// patch triplets compared by weighted sums of squared differences (every rule: [`crate::numerics`],
+/// section 4).
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct DescriptorConfig {
     /// Number of bits (the first `bits` triplets). Default 512.
@@ -130,7 +132,8 @@ pub struct Skipped {
     pub reason: SkipReason,
 }
 
-/// The result of describing a list of keypoints.
+/// What a backend's description of a list of keypoints gives, before the façade pairs it with the
+/// keypoints as [`crate::Features`].
 ///
 /// Row `i` of `descriptors` belongs to input keypoint `keypoint_index[i]`; every input keypoint appears
 /// exactly once, either in `keypoint_index` or in `skipped`. Both lists are in input order.

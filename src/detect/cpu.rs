@@ -1,10 +1,10 @@
 //! The reference detector (see the parent module for the numeric contract).
 
-use rayon::prelude::*;
+use crate::parallel::*;
 
 use super::{DetectorConfig, FAST_ARC, FAST_CIRCLE, ORIENTATION_RADIUS};
 use crate::angle::{bin_degrees, direction_bin};
-use crate::image::GrayView;
+use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
 
 /// FAST-9 score of the pixel at `(x, y)`, which must be at least 3 pixels from every border.

@@ -23,6 +23,7 @@
 pub mod cpu;
 
 use crate::error::{Error, Result};
+use crate::gray_view::GrayView;
 use crate::keypoint::DEFAULT_KEYPOINT_SIZE;
 
 /// The 16 offsets of the FAST circle of radius 3, clockwise from the top (x right, y down).
@@ -51,7 +52,8 @@ pub const FAST_ARC: usize = 9;
 /// Radius of the disc the orientation moments are summed over.
 pub const ORIENTATION_RADIUS: i32 = 15;
 
-/// Detector settings.
+/// FAST-9 detector settings: score, non-maximum suppression, top-N, orientation by intensity centroid
+/// (every rule: [`crate::numerics`], section 3).
 #[derive(Clone, Debug, PartialEq)]
 pub struct DetectorConfig {
     /// FAST threshold: a corner needs nine contiguous circle pixels more than this above or below the
@@ -101,6 +103,30 @@ impl DetectorConfig {
     /// for bilinear interpolation and one for fixed-point rounding; never less than the orientation disc.
     pub fn margin(&self) -> usize {
         let half_diagonal = self.keypoint_size as f64 * std::f64::consts::FRAC_1_SQRT_2;
-        (half_diagonal.ceil() as usize + 2).max(ORIENTATION_RADIUS as usize + 1)
+        // `as` saturates, so an absurd (unvalidated) size gives a huge margin, never an overflow.
+        (half_diagonal.ceil() as usize)
+            .saturating_add(2)
+            .max(ORIENTATION_RADIUS as usize + 1)
     }
 }
+
+/// The FAST-9 score of pixel `(x, y)`: over the 16 arcs of nine contiguous pixels of the circle of
+/// radius 3, the largest of the smallest brightness difference to the centre, on the brighter or the
+/// darker side (a pixel is a FAST corner at threshold `t` iff its score exceeds `t`). `None` when the circle leaves the
+/// image (`x` or `y` within 3 pixels of a border). Detected keypoints carry it as `response`.
+///
+/// ```
+/// use clatch::{GrayView, fast_score};
+///
+/// let mut pixels = vec![0u8; 16 * 16];
+/// pixels[8 * 16 + 8] = 200; // one bright pixel: every circle pixel is 200 darker
+/// let image = GrayView::new(&pixels, 16, 16, 16)?;
+/// assert_eq!(fast_score(&image, 8, 8), Some(200));
+/// assert_eq!(fast_score(&image, 2, 8), None);
+/// # Ok::<(), clatch::Error>(())
+/// ```
+pub fn fast_score(image: &GrayView, x: usize, y: usize) -> Option<i32> {
+    let inside = x >= 3 && y >= 3 && x + 3 < image.width() && y + 3 < image.height();
+    inside.then(|| cpu::fast_score(image, x, y))
+}
+

@@ -1,6 +1,6 @@
 //! The reference matcher (see the parent module for the contract).
 
-use rayon::prelude::*;
+use crate::parallel::*;
 
 use super::{KnnMatches, Match, MatchConfig};
 use crate::descriptor::{DescriptorSet, hamming};
@@ -30,21 +30,21 @@ pub fn knn(query: &DescriptorSet, train: &DescriptorSet, k: usize) -> KnnMatches
         .flat_map_iter(|(q, qd)| {
             if popcnt {
                 // SAFETY: the CPU has the POPCNT instruction (checked at run time just above).
-                #[cfg(target_arch = "x86_64")]
+                #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
                 return unsafe { neighbours_popcnt(q as u32, qd, train, k) };
             }
             neighbours(q as u32, qd, train, k)
         })
         .collect();
-    KnnMatches { k, matches }
+    KnnMatches::from_parts(k, matches)
 }
 
 /// Whether `count_ones` can be the POPCNT instruction: the baseline x86-64 target lacks it, and its
 /// bit-twiddling replacement made this loop about twice as slow.
 fn has_popcnt() -> bool {
-    #[cfg(target_arch = "x86_64")]
+    #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
     return std::arch::is_x86_feature_detected!("popcnt");
-    #[cfg(not(target_arch = "x86_64"))]
+    #[cfg(not(all(target_arch = "x86_64", feature = "cpu")))]
     false
 }
 
@@ -64,7 +64,7 @@ fn neighbours(q: u32, qd: &[u64], train: &DescriptorSet, k: usize) -> Vec<Match>
 }
 
 /// [`neighbours`] compiled with POPCNT (the same integers, so the same result).
-#[cfg(target_arch = "x86_64")]
+#[cfg(all(target_arch = "x86_64", feature = "cpu"))]
 #[target_feature(enable = "popcnt")]
 fn neighbours_popcnt(q: u32, qd: &[u64], train: &DescriptorSet, k: usize) -> Vec<Match> {
     neighbours(q, qd, train, k)

@@ -12,6 +12,10 @@
 
 pub mod cpu;
 
+/// Most neighbours per query the CUDA backend returns (`crate::cuda::MAX_K`; equal to
+/// `CLATCH_MATCH_MAX_K` of `kernels/clatch.h`, checked in the layout tests).
+pub const GPU_MAX_K: usize = 8;
+
 /// A correspondence between query descriptor `query` and gallery descriptor `train`, as in OpenCV's
 /// `DMatch` (without the image index).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -25,7 +29,8 @@ pub struct Match {
     pub distance: u32,
 }
 
-/// Which matches [`crate::Matcher::match_descriptors`] keeps.
+/// Which matches [`crate::Matcher::match_descriptors`] keeps (every rule, ties included:
+/// [`crate::numerics`], section 5).
 #[derive(Clone, Debug, PartialEq)]
 pub struct MatchConfig {
     /// Lowe's ratio test: keep the best match only if `d1 < ratio · d2`. `None` turns it off; otherwise
@@ -48,16 +53,25 @@ impl Default for MatchConfig {
 }
 
 /// The k nearest neighbours of every query, query-major: neighbours of query `q` are
-/// `matches[q * k .. (q + 1) * k]`, nearest first.
+/// `as_slice()[q * k .. (q + 1) * k]`, nearest first.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct KnnMatches {
-    /// Neighbours per query.
-    pub k: usize,
-    /// All neighbours, `k` per query.
-    pub matches: Vec<Match>,
+    k: usize,
+    matches: Vec<Match>,
 }
 
 impl KnnMatches {
+    /// `k` neighbours per query, query-major. `None` when `k` is 0 or `matches` is not a whole number
+    /// of queries.
+    pub fn new(k: usize, matches: Vec<Match>) -> Option<Self> {
+        (k > 0 && matches.len().is_multiple_of(k)).then_some(Self { k, matches })
+    }
+
+    /// Neighbours per query.
+    pub fn k(&self) -> usize {
+        self.k
+    }
+
     /// Number of queries.
     pub fn len(&self) -> usize {
         self.matches.len() / self.k
@@ -68,13 +82,31 @@ impl KnnMatches {
         self.matches.is_empty()
     }
 
-    /// The neighbours of query `q`, nearest first.
-    pub fn neighbours(&self, q: usize) -> &[Match] {
-        &self.matches[q * self.k..(q + 1) * self.k]
+    /// The neighbours of query `q`, nearest first; `None` past the last query.
+    pub fn neighbours(&self, q: usize) -> Option<&[Match]> {
+        self.matches.get(q * self.k..(q + 1) * self.k)
     }
 
     /// Iterates over the queries' neighbour lists.
     pub fn iter(&self) -> std::slice::ChunksExact<'_, Match> {
         self.matches.chunks_exact(self.k)
+    }
+
+    /// All neighbours, `k` per query.
+    pub fn as_slice(&self) -> &[Match] {
+        &self.matches
+    }
+
+    /// All neighbours, `k` per query.
+    pub fn into_vec(self) -> Vec<Match> {
+        self.matches
+    }
+}
+
+impl KnnMatches {
+    /// Built by a backend: `k > 0` and whole queries by construction.
+    pub(crate) fn from_parts(k: usize, matches: Vec<Match>) -> Self {
+        debug_assert!(k > 0 && matches.len().is_multiple_of(k));
+        Self { k, matches }
     }
 }

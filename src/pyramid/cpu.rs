@@ -1,13 +1,13 @@
 //! The reference pyramid (see the parent module for the numeric contract).
 
-use rayon::prelude::*;
+use crate::parallel::*;
 
 use super::{LevelKeypoint, Plan, Pyramid, STEP_FRAC_BITS, downscaled, source_position};
 use crate::describe::{self, DescriptorConfig};
 use crate::detect::{self, DetectorConfig};
 use crate::error::Result;
-use crate::extractor::Features;
-use crate::image::GrayView;
+use crate::features::Features;
+use crate::gray_view::GrayView;
 
 /// Where one output coordinate reads: the lower neighbour, the upper one (clamped to the last pixel)
 /// and the 8-bit weight of the upper one.
@@ -140,13 +140,13 @@ pub fn detect_and_describe(
             described.descriptors
         })
         .collect();
-    Ok(Features {
-        keypoints: selected
+    Ok(Features::all(
+        selected
             .iter()
             .map(|k| super::report(k, pyramid, plan.step))
             .collect(),
-        descriptors: super::assemble(&selected, &per_level, descriptor.width)?,
-    })
+        super::assemble(&selected, &per_level, descriptor.width)?,
+    ))
 }
 
 #[cfg(test)]

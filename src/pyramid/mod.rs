@@ -33,10 +33,19 @@ pub const STEP_FRAC_BITS: u32 = 16;
 /// Most levels a pyramid may have.
 pub const MAX_LEVELS: usize = 32;
 
-/// Pyramid settings.
+/// Multi-scale detection: FAST over an image pyramid, each keypoint described on its own level.
+///
+/// FAST and the 64x64 window alone give no scale invariance. With a `Pyramid` in
+/// [`crate::ExtractorConfig::pyramid`] the extractor builds levels `1..levels`, each a downscale of the
+/// one before by `scale_factor`, detects on every level with the usual detector, keeps the strongest
+/// `max_keypoints` over all levels, and describes each keypoint **on its own level** with the level's
+/// window (so a level-`l` keypoint's descriptor sees `scale_factor^l` times more of the scene, from an
+/// image that was averaged down rather than sampled sparsely). Keypoints are reported in level-0
+/// coordinates with `octave = level` and `size = keypoint_size · scale_factor^level`. Every rule is
+/// integer arithmetic: [`crate::numerics`], section 6.
 ///
 /// ```
-/// use clatch::{Backend, Extractor, ExtractorConfig, GrayView, pyramid::Pyramid};
+/// use clatch::{Backend, Extractor, ExtractorConfig, GrayView, Pyramid};
 ///
 /// let pixels = clatch::synthetic::rectangles(640, 480, 1);
 /// let image = GrayView::new(&pixels, 640, 480, 640)?;
@@ -53,20 +62,20 @@ pub struct Pyramid {
     /// Levels including the full-resolution image (1 = no downscaling). 1..=32, and the top level's
     /// keypoint size must stay within 1024 pixels.
     pub levels: usize,
-    /// Ratio of the sizes of consecutive levels, in (1, 2] (stored as 16.16 fixed point, see
-    /// [`Pyramid::step`]).
+    /// Ratio of the sizes of consecutive levels, in (1, 2] (used as 16.16 fixed point,
+    /// `round_half_even(scale_factor · 2^16)`).
     pub scale_factor: f32,
 }
 
 impl Pyramid {
     /// The scale factor in 16.16 fixed point: `round_half_even(scale_factor · 2^16)`.
-    pub fn step(&self) -> i64 {
+    pub(crate) fn step(&self) -> i64 {
         (self.scale_factor as f64 * (1u64 << STEP_FRAC_BITS) as f64).round_ties_even() as i64
     }
 
     /// `keypoint_size · (step / 2^16)^level`: `level` successive `f64` products, rounded to `f32`
     /// (computed on the host for every backend).
-    pub fn level_size(&self, keypoint_size: f32, level: usize) -> f32 {
+    pub(crate) fn level_size(&self, keypoint_size: f32, level: usize) -> f32 {
         let factor = self.step() as f64 / (1u64 << STEP_FRAC_BITS) as f64;
         (0..level).fold(keypoint_size as f64, |s, _| s * factor) as f32
     }

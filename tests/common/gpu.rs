@@ -24,7 +24,7 @@ pub fn run(trials: Vec<Trial>) -> ! {
 
 #[cfg(feature = "cuda")]
 fn device_name() -> Result<String, String> {
-    clatch::cuda::device(0)
+    clatch::cuda::hooks::device(0)
         .map(|dev| dev.name().to_string())
         .map_err(|e| e.to_string())
 }

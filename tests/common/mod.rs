@@ -63,7 +63,7 @@ pub fn rotate90_point(x: usize, y: usize, height: usize) -> (usize, usize) {
 pub fn astronaut() -> Gray {
     let decoded = image::load_from_memory(include_bytes!("../../assets/astronaut.png"))
         .expect("the embedded PNG decodes");
-    let gray = clatch::image::gray_from_dynamic(&decoded);
+    let gray = clatch::decode::gray_from_dynamic(&decoded);
     let (w, h) = (gray.width() as usize, gray.height() as usize);
     Gray::new(gray.into_raw(), w, h)
 }

@@ -9,10 +9,10 @@
 use std::arch::x86_64::*;
 
 use super::Window;
-use super::fast::{OFFSETS, PatchOffsets, PixelMask, SamplePlan};
+use super::optimized::{OFFSETS, PatchOffsets, PixelMask, SamplePlan};
 use crate::describe::{PATCH, WINDOW};
 use crate::descriptor::DescriptorWidth;
-use crate::image::GrayView;
+use crate::gray_view::GrayView;
 
 /// Proof that the CPU runs AVX2 (only [`Avx2::detect`] makes one).
 #[derive(Clone, Copy, Debug)]

@@ -2,9 +2,9 @@
 //! loops and the compiler vectorises the patch sums (any target; the fallback where AVX2 is absent).
 
 use super::Window;
-use super::fast::{PatchOffsets, PixelMask, SamplePlan};
+use super::optimized::{PatchOffsets, PixelMask, SamplePlan};
 use crate::describe::{PATCH, WINDOW};
-use crate::image::GrayView;
+use crate::gray_view::GrayView;
 
 /// Exactly [`super::sample_window`] for a window with a plan, in three passes per window row: the
 /// positions (vectorised), the pixel pairs (scalar loads, one bounds check per pair) and the

@@ -12,7 +12,7 @@
 //! - the border is `BORDER_REFLECT_101` (`-1 → 1`, `n → n - 2`).
 
 use crate::error::{Error, Result};
-use crate::image::GrayView;
+use crate::gray_view::GrayView;
 
 /// Fraction bits of the kernel weights (OpenCV's `ufixedpoint16`).
 const KERNEL_FRACTION_BITS: u32 = 8;

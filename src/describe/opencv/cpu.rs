@@ -1,11 +1,11 @@
 //! The reference OpenCV-compatible LATCH on the CPU (see the parent module for the numeric contract).
 
-use rayon::prelude::*;
+use crate::parallel::*;
 
-use super::{OPENCV_CENTRES, OpencvLatch, Placement};
-use crate::describe::{Described, Skipped};
+use super::{OPENCV_CENTRES, OpencvLatch, Placed, Placement};
+use crate::describe::Described;
 use crate::descriptor::DescriptorSet;
-use crate::image::GrayView;
+use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
 
 /// `SSD(a, b)` and `SSD(c, b)` of one triplet over `(2h + 1)²` patches around absolute centres.
@@ -49,14 +49,17 @@ pub fn keypoint_bits(
 }
 
 /// Describes the placed keypoints (in parallel over keypoints) on the blurred image.
-pub(super) fn describe(
+pub fn describe(
     image: &GrayView,
     keypoints: &[KeyPoint],
     latch: &OpencvLatch,
-    keypoint_index: Vec<usize>,
-    skipped: Vec<Skipped>,
-    placements: &[Placement],
+    placed: Placed,
 ) -> Described {
+    let Placed {
+        keypoint_index,
+        skipped,
+        placements,
+    } = placed;
     debug_assert_eq!(keypoint_index.len(), placements.len());
     debug_assert!(keypoint_index.iter().all(|&i| i < keypoints.len()));
     let width = latch.width();
@@ -86,9 +89,21 @@ pub(super) fn describe(
 }
 
 #[cfg(test)]
+impl OpencvLatch {
+    /// Placement and description on the CPU, as the façade runs them.
+    fn describe_cpu(
+        &self,
+        image: &GrayView,
+        keypoints: &[KeyPoint],
+    ) -> crate::error::Result<Described> {
+        let placed = self.place(image, keypoints)?;
+        Ok(describe(image, keypoints, self, placed))
+    }
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Backend;
     use crate::describe::SkipReason;
 
     /// The bit of triplet `t` recomputed from scratch with `i64` sums, OpenCV's loop as written.
@@ -138,13 +153,13 @@ mod tests {
             .collect();
         for (rotate, half) in [(true, 3usize), (false, 3), (true, 0), (true, 5)] {
             let latch = OpencvLatch::new(64, rotate, half, 0.0).unwrap();
-            let described = latch.describe(Backend::Cpu, &image, &keypoints).unwrap();
+            let described = latch.describe_cpu(&image, &keypoints).unwrap();
             assert!(described.descriptors.len() > 10, "enough keypoints inside");
             for (row, &i) in described.keypoint_index.iter().enumerate() {
                 let d = described.descriptors.descriptor(row).unwrap();
                 for t in 0..512 {
                     assert_eq!(
-                        d.bit(t),
+                        d.bit(t).expect("t < 512"),
                         naive_bit(&image, &keypoints[i], t, rotate, half as i32),
                         "keypoint {i}, triplet {t}, rotate {rotate}, h {half}"
                     );
@@ -174,7 +189,7 @@ mod tests {
         );
         let opencv = OpencvLatch::new(64, false, 3, 0.0)
             .unwrap()
-            .describe(Backend::Cpu, &image, &keypoints)
+            .describe_cpu(&image, &keypoints)
             .unwrap();
         assert_eq!(clatch.keypoint_index.len(), keypoints.len());
         assert_eq!(clatch, opencv);
@@ -188,14 +203,14 @@ mod tests {
         let kps = [KeyPoint::new(50.0, 50.0).with_angle(-1.0)];
         let full = OpencvLatch::new(64, true, 3, 2.0)
             .unwrap()
-            .describe(Backend::Cpu, &image, &kps)
+            .describe_cpu(&image, &kps)
             .unwrap()
             .descriptors
             .to_opencv_bytes();
         for bytes in [1, 2, 4, 8, 16, 32] {
             let short = OpencvLatch::new(bytes, true, 3, 2.0)
                 .unwrap()
-                .describe(Backend::Cpu, &image, &kps)
+                .describe_cpu(&image, &kps)
                 .unwrap()
                 .descriptors
                 .to_opencv_bytes();
@@ -209,13 +224,13 @@ mod tests {
         let image = GrayView::new(&pixels, 40, 40, 40).unwrap();
         let latch = OpencvLatch::default();
         let described = latch
-            .describe(Backend::Cpu, &image, &[KeyPoint::new(20.0, 20.0)])
+            .describe_cpu(&image, &[KeyPoint::new(20.0, 20.0)])
             .unwrap();
         assert!(described.descriptors.is_empty());
         assert_eq!(described.skipped[0].reason, SkipReason::OpencvBorder);
         let nan = KeyPoint::new(20.0, 20.0).with_angle(f32::NAN);
         assert!(matches!(
-            latch.describe(Backend::Cpu, &image, &[nan]),
+            latch.describe_cpu(&image, &[nan]),
             Err(crate::Error::InvalidKeyPoint { field: "angle", .. })
         ));
     }

@@ -26,11 +26,10 @@ pub mod blur;
 pub mod cpu;
 
 use super::triplets::TRIPLETS;
-use super::{Described, SkipReason, Skipped, TRIPLET_COUNT};
-use crate::backend::Backend;
+use super::{SkipReason, Skipped, TRIPLET_COUNT};
 use crate::descriptor::DescriptorWidth;
 use crate::error::{Error, Result};
-use crate::image::GrayView;
+use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
 
 /// OpenCV's `PATCH_SIZE / 2`: the largest centre offset.
@@ -62,20 +61,13 @@ pub const OPENCV_CENTRES: [[i8; 6]; TRIPLET_COUNT] = {
 };
 
 /// Settings of OpenCV's LATCH, `cv::xfeatures2d::LATCH::create(bytes, rotationInvariance,
-/// half_ssd_size, sigma)`, validated.
+/// half_ssd_size, sigma)`, validated. [`crate::Extractor::describe_opencv`] describes with them.
 ///
 /// ```
-/// use clatch::{Backend, GrayView, KeyPoint, OpencvLatch};
+/// use clatch::OpencvLatch;
 ///
-/// let pixels = clatch::synthetic::noise(120, 100, 1);
-/// let image = GrayView::new(&pixels, 120, 100, 120)?;
-/// // OpenCV's defaults: 32 bytes, rotation invariance, 7x7 patches, sigma 2.
-/// let latch = OpencvLatch::new(32, true, 3, 2.0)?;
-/// let keypoints = [KeyPoint::new(60.0, 50.0).with_angle(30.0), KeyPoint::new(5.0, 5.0)];
-/// let described = latch.describe(Backend::Cpu, &image, &keypoints)?;
-/// assert_eq!(described.keypoint_index, [0]); // the second is too close to the border
-/// let rows: Vec<u8> = described.descriptors.to_opencv_bytes(); // what cv2's compute returns
-/// assert_eq!(rows.len(), 32);
+/// let latch = OpencvLatch::new(32, true, 3, 2.0)?; // OpenCV's defaults
+/// assert_eq!(latch.width().bits(), 256);
 /// assert!(OpencvLatch::new(3, true, 3, 2.0).is_err()); // OpenCV accepts 1, 2, 4, ..., 64 bytes
 /// # Ok::<(), clatch::Error>(())
 /// ```
@@ -159,49 +151,12 @@ impl OpencvLatch {
 
     /// The image the patches are read from: blurred by OpenCV's fixed-point kernel, or `None` when
     /// `sigma = 0` (the input is used as it is).
-    pub fn blurred(&self, image: &GrayView) -> Option<Vec<u8>> {
+    pub(crate) fn blurred(&self, image: &GrayView) -> Option<Vec<u8>> {
         self.blur_weight.map(|k| blur::blur3x3(image, k))
     }
 
-    /// Describes `keypoints` as `cv2.xfeatures2d.LATCH_create(...).compute` does; the keypoint `size`,
-    /// `response` and `octave` are ignored (as by OpenCV). Keypoints OpenCV drops at the border, and
-    /// those it would read outside the image for, are listed in [`Described::skipped`].
-    /// [`crate::DescriptorSet::to_opencv_bytes`] of the result equals cv2's descriptor rows.
-    pub fn describe(
-        &self,
-        backend: Backend,
-        image: &GrayView,
-        keypoints: &[KeyPoint],
-    ) -> Result<Described> {
-        backend.ensure_available()?;
-        let (keypoint_index, skipped, placements) = self.place(image, keypoints)?;
-        match backend {
-            Backend::Cpu => Ok(cpu::describe(
-                image,
-                keypoints,
-                self,
-                keypoint_index,
-                skipped,
-                &placements,
-            )),
-            #[cfg(feature = "cuda")]
-            Backend::Cuda { device } => crate::cuda::describe_opencv(
-                &*crate::cuda::device(device)?,
-                image,
-                self,
-                keypoint_index,
-                skipped,
-                &placements,
-            ),
-        }
-    }
-
     /// Validates the keypoints and splits them into described (with their placement) and skipped.
-    fn place(
-        &self,
-        image: &GrayView,
-        keypoints: &[KeyPoint],
-    ) -> Result<(Vec<usize>, Vec<Skipped>, Vec<Placement>)> {
+    pub(crate) fn place(&self, image: &GrayView, keypoints: &[KeyPoint]) -> Result<Placed> {
         let (mut index, mut skipped, mut placements) = (Vec::new(), Vec::new(), Vec::new());
         for (i, kp) in keypoints.iter().enumerate() {
             for (field, value) in [("x", kp.x), ("y", kp.y), ("angle", kp.angle)] {
@@ -225,11 +180,15 @@ impl OpencvLatch {
                 }),
             }
         }
-        Ok((index, skipped, placements))
+        Ok(Placed {
+            keypoint_index: index,
+            skipped,
+            placements,
+        })
     }
 
     /// OpenCV's border test, made safe (module docs, step 2).
-    pub fn border_rule(
+    pub(crate) fn border_rule(
         &self,
         kp: &KeyPoint,
         width: usize,
@@ -251,10 +210,16 @@ impl OpencvLatch {
     }
 }
 
-// docs/opencv_compat.md's examples run as doctests.
-#[doc = include_str!("../../../docs/opencv_compat.md")]
-#[cfg(doctest)]
-pub struct OpencvCompatDoc;
+/// Keypoints split by OpenCV's border rule: those described, with their placement, and the skipped.
+#[derive(Debug)]
+pub struct Placed {
+    /// Input index of each described keypoint.
+    pub keypoint_index: Vec<usize>,
+    /// Keypoints OpenCV would not describe.
+    pub skipped: Vec<Skipped>,
+    /// Where each described keypoint's patches lie.
+    pub placements: Vec<Placement>,
+}
 
 impl Default for OpencvLatch {
     /// OpenCV's defaults: `LATCH::create(32, true, 3, 2.0)`.

@@ -1,0 +1,145 @@
+//! Draws BENCHMARKS.md's chart: throughput against problem size for clatch and its peers, from the
+//! `panel,series,x,y` CSV that `tools/collect.py` writes from one benchmark run.
+//!
+//! ```sh
+//! cargo run --release --example bench_chart -- docs/bench/RUN/figures.csv docs/bench/RUN/throughput.png
+//! ```
+//!
+//! Two log-log panels: matching (G pairs/s against N for N x N, k = 2, 512 bits) and extraction
+//! (M descriptors/s against keypoints). Drawn with plotters' bitmap backend and the embedded DejaVu
+//! font, so no system library is needed.
+
+use std::collections::BTreeMap;
+use std::error::Error;
+use std::ops::Range;
+
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+
+type Series = BTreeMap<String, Vec<(f64, f64)>>;
+
+/// Rows of the CSV by panel, then series, in file order.
+fn read(path: &str) -> Result<BTreeMap<String, Series>, Box<dyn Error>> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
+    let mut panels: BTreeMap<String, Series> = BTreeMap::new();
+    for (number, line) in text.lines().enumerate().skip(1) {
+        let fields: Vec<&str> = line.split(',').collect();
+        let [panel, series, x, y] = fields[..] else {
+            return Err(format!("{path}:{}: expected panel,series,x,y", number + 1).into());
+        };
+        let parse = |v: &str| {
+            v.parse::<f64>()
+                .map_err(|e| format!("{path}:{}: {v:?}: {e}", number + 1))
+        };
+        panels
+            .entry(panel.to_string())
+            .or_default()
+            .entry(series.to_string())
+            .or_default()
+            .push((parse(x)?, parse(y)?));
+    }
+    Ok(panels)
+}
+
+/// A log range with some head room around the values.
+fn log_range(values: impl Iterator<Item = f64>) -> Range<f64> {
+    let (lo, hi) = values
+        .filter(|v| *v > 0.0)
+        .fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    if lo > hi {
+        return 1.0..10.0;
+    }
+    lo / 2.0..hi * 3.0
+}
+
+fn colour(i: usize) -> RGBColor {
+    const COLOURS: [RGBColor; 8] = [
+        RGBColor(200, 30, 30),
+        RGBColor(230, 140, 0),
+        RGBColor(30, 90, 200),
+        RGBColor(20, 150, 60),
+        RGBColor(150, 60, 180),
+        RGBColor(90, 90, 90),
+        RGBColor(0, 160, 170),
+        RGBColor(160, 110, 60),
+    ];
+    COLOURS[i % COLOURS.len()]
+}
+
+fn panel(
+    area: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
+    title: &str,
+    (x_label, y_label): (&str, &str),
+    series: &Series,
+) -> Result<(), Box<dyn Error>> {
+    let xs = log_range(series.values().flatten().map(|p| p.0));
+    let ys = log_range(series.values().flatten().map(|p| p.1));
+    let mut chart = ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(xs.log_scale(), ys.log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc(x_label)
+        .y_desc(y_label)
+        .label_style(("sans-serif", 13))
+        .draw()?;
+    for (i, (name, points)) in series.iter().enumerate() {
+        let c = colour(i);
+        chart
+            .draw_series(LineSeries::new(points.iter().copied(), c.stroke_width(2)))?
+            .label(name)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], c.stroke_width(2)));
+        chart.draw_series(points.iter().map(|&p| Circle::new(p, 4, c.filled())))?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 13))
+        .draw()?;
+    Ok(())
+}
+
+fn main() -> Result<(), Box<dyn Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let [_, input, output] = &args[..] else {
+        return Err("usage: bench_chart FIGURES.csv OUT.png".into());
+    };
+    plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
+        .map_err(|_| "the embedded DejaVu Sans font did not load")?;
+    let panels = read(input)?;
+    let empty = Series::new();
+    let (width, height) = (1280u32, 560u32);
+    let mut pixels = vec![0u8; (width * height * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, (width, height)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (left, right) = root.split_horizontally(640);
+        panel(
+            &left,
+            "Hamming kNN, k = 2, 512 bits, N x N",
+            ("N", "G pairs/s"),
+            panels.get("matching").unwrap_or(&empty),
+        )?;
+        panel(
+            &right,
+            "Descriptor extraction, 512 bits",
+            ("keypoints", "M descriptors/s"),
+            panels.get("extraction").unwrap_or(&empty),
+        )?;
+        root.present()?;
+    }
+    image::save_buffer(
+        output,
+        &pixels,
+        width,
+        height,
+        image::ExtendedColorType::Rgb8,
+    )?;
+    println!("wrote {output}");
+    Ok(())
+}

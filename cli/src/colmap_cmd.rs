@@ -1,0 +1,505 @@
+//! `clatch colmap`: features and exhaustive matches of a folder of photos, handed to COLMAP 3.8 for
+//! structure from motion (see [`clatch::colmap`] for the conventions).
+
+use std::ffi::OsString;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use clatch::colmap::{Database, MatchList, PinholeCamera};
+use clatch::{Backend, Extractor, Features, GrayView, Match, Matcher};
+use rayon::prelude::*;
+
+use crate::ColmapArgs;
+use crate::colmap_program::{ColmapProgram, ModelStats, parse_model_analyzer};
+use crate::cpu_time::{StageTime, Stopwatch};
+use crate::error::CliError;
+use crate::exif;
+use crate::image_dir::{colmap_name, list_images};
+use crate::input::load_gray_with_exif;
+use crate::progress::Progress;
+use crate::settings;
+use crate::spread::spread;
+use crate::subpixel;
+
+/// One photo's features.
+struct Photo {
+    path: PathBuf,
+    /// EXIF `FocalLengthIn35mmFilm`, if the file has it.
+    focal_35mm: Option<u16>,
+    name: String,
+    width: u32,
+    height: u32,
+    features: Features,
+}
+
+/// Wall and CPU time of each stage.
+#[derive(Default)]
+struct Times {
+    extract: StageTime,
+    matching: StageTime,
+    write: StageTime,
+    verify: StageTime,
+    map: StageTime,
+    analyze: StageTime,
+}
+
+/// Runs `clatch colmap`.
+pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
+    let settings = settings(&args.backend, &args.detect, Some(&args.matching))?;
+    let images = list_images(&args.images)?;
+    let names = images
+        .iter()
+        .map(|p| colmap_name(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let k_text = args
+        .camera_k
+        .as_deref()
+        .map(|path| {
+            std::fs::read_to_string(path).map_err(|source| CliError::Read {
+                path: path.to_path_buf(),
+                source,
+            })
+        })
+        .transpose()?;
+    let workspace = args
+        .workspace
+        .clone()
+        .unwrap_or_else(|| default_workspace(&args.database));
+    std::fs::create_dir_all(&workspace).map_err(CliError::write(&workspace))?;
+    // Refuse to overwrite before any work, not after it.
+    let sparse = workspace.join("sparse");
+    if !args.force {
+        if args.database.exists() {
+            return Err(clatch::colmap::ColmapError::DatabaseExists {
+                path: args.database.display().to_string(),
+            }
+            .into());
+        }
+        if !args.no_colmap && !model_dirs_if_any(&sparse)?.is_empty() {
+            return Err(CliError::ModelsExist { path: sparse });
+        }
+    } else if args.database.exists() {
+        std::fs::remove_file(&args.database).map_err(CliError::write(&args.database))?;
+    }
+    let mut times = Times::default();
+
+    // Detect and describe every photo.
+    let extractor = Extractor::new(settings.backend, extraction_config(&settings, args.grid))?;
+    let progress = Progress::counter(images.len() as u64, "extracting features");
+    let watch = Stopwatch::start();
+    let extract_one = |(path, name): (&PathBuf, &String)| {
+        let photo = extract(
+            &extractor,
+            path,
+            name,
+            settings.extractor.detector.max_keypoints,
+            (args.grid, args.subpixel, args.subpixel_radius),
+        );
+        progress.done();
+        photo
+    };
+    // The CPU extractor is parallel inside; decoding a JPEG is not, so on the CPU photos go two by two
+    // through rayon too. A GPU extractor is fed one photo at a time.
+    let photos: Vec<Photo> = if settings.backend == Backend::Cpu {
+        images
+            .par_iter()
+            .zip(names.par_iter())
+            .map(extract_one)
+            .collect::<Result<_, _>>()?
+    } else {
+        images
+            .iter()
+            .zip(names.iter())
+            .map(extract_one)
+            .collect::<Result<_, _>>()?
+    };
+    times.extract = watch.stop();
+    progress.finish();
+
+    // Match every pair.
+    let matcher = Matcher::new(settings.backend, settings.matching.clone())?;
+    let pairs: Vec<(usize, usize)> = (0..photos.len())
+        .flat_map(|i| (i + 1..photos.len()).map(move |j| (i, j)))
+        .collect();
+    let progress = Progress::counter(pairs.len() as u64, "matching pairs");
+    let watch = Stopwatch::start();
+    let needed = if settings.matching.ratio.is_some() {
+        2
+    } else {
+        1
+    };
+    let mut matches: Vec<Vec<Match>> = Vec::with_capacity(pairs.len());
+    for &(i, j) in &pairs {
+        let (a, b) = (
+            &photos[i].features.descriptors,
+            &photos[j].features.descriptors,
+        );
+        // The ratio test needs two gallery descriptors; a featureless photo simply matches nothing.
+        matches.push(if a.is_empty() || b.len() < needed {
+            Vec::new()
+        } else {
+            matcher.match_descriptors(a, b)?
+        });
+        progress.done();
+    }
+    times.matching = watch.stop();
+    progress.finish();
+
+    // Write the database and the match list.
+    let watch = Stopwatch::start();
+    let match_list = workspace.join("matches.txt");
+    write_database(
+        &args.database,
+        k_text.as_deref(),
+        args.camera_k.as_deref(),
+        &photos,
+    )?;
+    write_match_list(&match_list, &photos, &pairs, &matches)?;
+    times.write = watch.stop();
+
+    print_extraction_report(args, &settings.backend, &photos, &pairs, &matches, &times);
+
+    let colmap = if args.no_colmap {
+        None
+    } else {
+        let explicit = args.colmap.is_some();
+        let program = args.colmap.clone().unwrap_or_else(|| "colmap".into());
+        let found = ColmapProgram::find(&program, &workspace)?;
+        if found.is_none() {
+            if explicit {
+                return Err(CliError::ColmapStart {
+                    program,
+                    step: "help",
+                    source: std::io::Error::from(std::io::ErrorKind::NotFound),
+                });
+            }
+            println!("  colmap      not found on PATH: database written, COLMAP not run. Run:");
+        }
+        found
+    };
+    let steps = colmap_steps(args, &match_list, &sparse);
+    let Some(colmap) = colmap else {
+        if !args.no_colmap {
+            for (step, step_args) in &steps {
+                println!("    colmap {step} {}", shell_words(step_args));
+            }
+        }
+        return Ok(());
+    };
+
+    let [(_, import_args), (_, mapper_args)] = &steps;
+    let watch = Stopwatch::start();
+    colmap.run("matches_importer", import_args)?;
+    times.verify = watch.stop();
+    let (verified, inliers) = verified_pairs(&args.database)?;
+
+    if args.force && sparse.exists() {
+        std::fs::remove_dir_all(&sparse).map_err(CliError::write(&sparse))?;
+    }
+    std::fs::create_dir_all(&sparse).map_err(CliError::write(&sparse))?;
+    let watch = Stopwatch::start();
+    colmap.run("mapper", mapper_args)?;
+    times.map = watch.stop();
+
+    let watch = Stopwatch::start();
+    let mut models = Vec::new();
+    for model in model_dirs(&sparse)? {
+        let output = colmap.run(
+            "model_analyzer",
+            &[OsString::from("--path"), model.clone().into()],
+        )?;
+        models.push(parse_model_analyzer(&model, &output)?);
+    }
+    times.analyze = watch.stop();
+    print_colmap_report(&photos, &pairs, verified, inliers, &models, &times);
+    Ok(())
+}
+
+/// `out.db` → `out-colmap/` beside it.
+fn default_workspace(database: &Path) -> PathBuf {
+    let stem = database.file_stem().unwrap_or_default().to_string_lossy();
+    database.with_file_name(format!("{stem}-colmap"))
+}
+
+/// The extractor's settings: with a grid, detection keeps every corner so that the grid can choose.
+fn extraction_config(settings: &crate::pipeline::Settings, grid: u32) -> clatch::ExtractorConfig {
+    let mut config = settings.extractor.clone();
+    if grid > 1 {
+        config.detector.max_keypoints = usize::MAX;
+    }
+    config
+}
+
+/// Reads, detects (spreading over the grid) and describes one photo.
+fn extract(
+    extractor: &Extractor,
+    path: &Path,
+    name: &str,
+    max_keypoints: usize,
+    (grid, method, subpixel_radius): (u32, subpixel::Subpixel, u32),
+) -> Result<Photo, CliError> {
+    let (img, exif_block) = load_gray_with_exif(path)?;
+    let view = GrayView::try_from(&img).map_err(CliError::in_image(path))?;
+    let detected = extractor.detect(&view).map_err(CliError::in_image(path))?;
+    let keypoints = if grid > 1 {
+        spread(&detected, img.width(), img.height(), grid, max_keypoints)
+    } else {
+        detected
+    };
+    let features = extractor
+        .describe(&view, &keypoints)
+        .map_err(CliError::in_image(path))?;
+    Ok(Photo {
+        path: path.to_path_buf(),
+        focal_35mm: exif_block.as_deref().and_then(exif::focal_length_35mm),
+        name: name.to_owned(),
+        width: img.width(),
+        height: img.height(),
+        features: Features {
+            keypoints: subpixel::refine_with(&img, &features.keypoints, method, subpixel_radius),
+            ..features
+        },
+    })
+}
+
+/// Cameras, images and keypoints. With K, one camera shared by every photo (which must then all have
+/// one size); without, one camera per image size and EXIF focal length: the focal length from EXIF's
+/// 35 mm equivalent where the photo has it (as COLMAP does), else COLMAP's guess.
+fn write_database(
+    path: &Path,
+    k_text: Option<&str>,
+    k_path: Option<&Path>,
+    photos: &[Photo],
+) -> Result<(), CliError> {
+    let mut db = Database::create(path)?;
+    type CameraKey = ((u32, u32), Option<u16>);
+    let mut cameras: Vec<(CameraKey, u32)> = Vec::new();
+    for photo in photos {
+        let size = (photo.width, photo.height);
+        let key = (size, photo.focal_35mm.filter(|_| k_text.is_none()));
+        let camera_id = match cameras.iter().find(|(k, _)| *k == key) {
+            Some(&(_, id)) => id,
+            None => {
+                let camera = match (k_text, cameras.first()) {
+                    (Some(_), Some(&(((w, h), _), _))) => {
+                        return Err(CliError::ImageSizeMismatch {
+                            path: photo.path.clone(),
+                            got_w: size.0,
+                            got_h: size.1,
+                            want_w: w,
+                            want_h: h,
+                        });
+                    }
+                    (Some(text), None) => PinholeCamera::from_k_text(text, size.0, size.1)
+                        .map_err(|source| CliError::CameraK {
+                            path: k_path.unwrap_or(Path::new("K")).to_path_buf(),
+                            source,
+                        })?,
+                    (None, _) => guess_camera(size, photo.focal_35mm)?,
+                };
+                let id = db.add_camera(&camera)?;
+                cameras.push((key, id));
+                id
+            }
+        };
+        let image_id = db.add_image(&photo.name, camera_id)?;
+        db.set_keypoints(image_id, &photo.features.keypoints)?;
+    }
+    db.finish()?;
+    Ok(())
+}
+
+/// A camera from EXIF's 35 mm focal length (marked as known, as COLMAP marks EXIF focal lengths), or
+/// COLMAP's guess without one.
+fn guess_camera(
+    (width, height): (u32, u32),
+    focal_35mm: Option<u16>,
+) -> Result<PinholeCamera, CliError> {
+    let guess = PinholeCamera::guess(width, height)?;
+    Ok(match focal_35mm {
+        Some(f) => {
+            let focal = exif::focal_pixels(f, width, height);
+            PinholeCamera {
+                fx: focal,
+                fy: focal,
+                focal_is_known: true,
+                ..guess
+            }
+            .validated()?
+        }
+        None => guess,
+    })
+}
+
+fn write_match_list(
+    path: &Path,
+    photos: &[Photo],
+    pairs: &[(usize, usize)],
+    matches: &[Vec<Match>],
+) -> Result<(), CliError> {
+    let file = std::fs::File::create(path).map_err(CliError::write(path))?;
+    let mut list = MatchList::new(BufWriter::new(file));
+    for (&(i, j), m) in pairs.iter().zip(matches) {
+        if !m.is_empty() {
+            list.add_pair(&photos[i].name, &photos[j].name, m)?;
+        }
+    }
+    list.into_inner()?;
+    Ok(())
+}
+
+/// The two COLMAP steps after the database: import with verification, then the mapper.
+fn colmap_steps(
+    args: &ColmapArgs,
+    match_list: &Path,
+    sparse: &Path,
+) -> [(&'static str, Vec<OsString>); 2] {
+    let os = |s: &str| OsString::from(s);
+    let import = vec![
+        os("--database_path"),
+        args.database.clone().into(),
+        os("--match_list_path"),
+        match_list.into(),
+        os("--match_type"),
+        os("raw"),
+        // Geometric verification needs no GPU; COLMAP 3.8's GPU default fails on a headless machine.
+        os("--SiftMatching.use_gpu"),
+        os("0"),
+    ];
+    let mut mapper = vec![
+        os("--database_path"),
+        args.database.clone().into(),
+        os("--image_path"),
+        args.images.clone().into(),
+        os("--output_path"),
+        sparse.into(),
+    ];
+    for option in &args.mapper_options {
+        let (key, value) = option.split_once('=').unwrap_or((option, ""));
+        mapper.push(format!("--{key}").into());
+        mapper.push(value.into());
+    }
+    [("matches_importer", import), ("mapper", mapper)]
+}
+
+fn shell_words(args: &[OsString]) -> String {
+    args.iter()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// Pairs that COLMAP verified (at least one inlier) and their inliers in all.
+fn verified_pairs(database: &Path) -> Result<(usize, usize), CliError> {
+    let sql = |e| clatch::colmap::ColmapError::Sqlite {
+        operation: "counting verified pairs",
+        source: e,
+    };
+    let db = rusqlite::Connection::open(database).map_err(sql)?;
+    db.query_row(
+        "SELECT COUNT(*), COALESCE(SUM(rows), 0) FROM two_view_geometries WHERE rows > 0",
+        [],
+        |row| {
+            Ok((
+                row.get::<_, i64>(0)? as usize,
+                row.get::<_, i64>(1)? as usize,
+            ))
+        },
+    )
+    .map_err(|e| sql(e).into())
+}
+
+/// [`model_dirs`], or none when `sparse` does not exist yet.
+fn model_dirs_if_any(sparse: &Path) -> Result<Vec<PathBuf>, CliError> {
+    if sparse.exists() {
+        model_dirs(sparse)
+    } else {
+        Ok(Vec::new())
+    }
+}
+
+/// The model folders the mapper wrote (`sparse/0`, `sparse/1`, ...), in order.
+fn model_dirs(sparse: &Path) -> Result<Vec<PathBuf>, CliError> {
+    let mut dirs = Vec::new();
+    let entries = std::fs::read_dir(sparse).map_err(|source| CliError::Read {
+        path: sparse.to_path_buf(),
+        source,
+    })?;
+    for entry in entries.flatten() {
+        if entry.path().join("images.bin").exists() {
+            dirs.push(entry.path());
+        }
+    }
+    dirs.sort();
+    Ok(dirs)
+}
+
+fn print_extraction_report(
+    args: &ColmapArgs,
+    backend: &Backend,
+    photos: &[Photo],
+    pairs: &[(usize, usize)],
+    matches: &[Vec<Match>],
+    times: &Times,
+) {
+    let keypoints: usize = photos.iter().map(|p| p.features.keypoints.len()).sum();
+    let putative: usize = matches.iter().map(Vec::len).sum();
+    println!("clatch colmap (COLMAP 3.8 database)");
+    println!(
+        "  images      {} in {}",
+        photos.len(),
+        args.images.display()
+    );
+    println!("  backend     {backend}");
+    println!(
+        "  keypoints   {keypoints} ({:.0} per image)",
+        keypoints as f64 / photos.len() as f64
+    );
+    println!(
+        "  matches     {putative} putative over {} pairs ({} with none)",
+        pairs.len(),
+        matches.iter().filter(|m| m.is_empty()).count()
+    );
+    println!("  database    {}", args.database.display());
+    println!("  extract     {}", times.extract);
+    println!("  match       {}", times.matching);
+    println!("  write       {}", times.write);
+}
+
+fn print_colmap_report(
+    photos: &[Photo],
+    pairs: &[(usize, usize)],
+    verified: usize,
+    inliers: usize,
+    models: &[ModelStats],
+    times: &Times,
+) {
+    println!(
+        "  verified    {verified} of {} pairs, {inliers} inlier matches (colmap matches_importer)",
+        pairs.len()
+    );
+    println!("  verify      {}", times.verify);
+    println!("  map         {}", times.map);
+    println!("  analyze     {}", times.analyze);
+    match models.iter().max_by_key(|m| m.registered) {
+        None => println!("  model       none: the mapper registered no image"),
+        Some(best) => {
+            println!(
+                "  model       {} ({} in all)",
+                best.path.display(),
+                models.len()
+            );
+            println!(
+                "  registered  {} of {} images",
+                best.registered,
+                photos.len()
+            );
+            println!("  points      {}", best.points);
+            println!(
+                "  track       {:.2} observations per point",
+                best.mean_track_length
+            );
+            println!("  reproj.     {:.3} px mean", best.mean_reprojection_error);
+        }
+    }
+}

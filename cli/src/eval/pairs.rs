@@ -1,0 +1,382 @@
+//! The image pairs of `clatch eval`: Oxford sequences, OpenCV's graf sample, synthetic warps; and the
+//! manifest (`pairs.csv`) that hands the very same files to `tools/eval_opencv.py`.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use image::GrayImage;
+
+use crate::error::CliError;
+use crate::homography::{Homography, about_centre, demo_homography};
+use crate::input::load_gray;
+use crate::warp::warp;
+
+/// One pair: image A, image B and the homography mapping A's pixels to B's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EvalPair {
+    /// Unique name (no commas), e.g. `graf 1-3`, `astronaut rot 30`.
+    pub name: String,
+    /// Which family the pair belongs to, e.g. `oxford-graf`, `synthetic-rotation`.
+    pub group: String,
+    /// The varied parameter of synthetic pairs (degrees or scale factor).
+    pub param: Option<f64>,
+    /// Image A (queries).
+    pub image_a: PathBuf,
+    /// Image B (gallery).
+    pub image_b: PathBuf,
+    /// Ground truth, A to B (Oxford text or OpenCV XML).
+    pub homography: PathBuf,
+}
+
+/// Group names, shared with the script and the charts.
+pub const GROUP_OPENCV_SAMPLE: &str = "opencv-sample";
+/// Synthetic rotations at scale 1.
+pub const GROUP_ROTATION: &str = "synthetic-rotation";
+/// Synthetic scalings without rotation.
+pub const GROUP_SCALE: &str = "synthetic-scale";
+/// Synthetic perspective warps.
+pub const GROUP_PERSPECTIVE: &str = "synthetic-perspective";
+
+/// The Oxford sequences looked for under the data folder.
+pub const OXFORD_SEQUENCES: [&str; 3] = ["graf", "boat", "bikes"];
+
+/// Synthetic rotations, degrees (scale 1).
+pub fn rotations() -> Vec<f64> {
+    (0..=12).map(|i| 15.0 * i as f64).collect()
+}
+
+/// Synthetic scale factors (no rotation): 0.5 to 2.
+pub const SCALES: [f64; 10] = [0.5, 0.6, 0.7, 0.8, 0.9, 1.15, 1.3, 1.5, 1.75, 2.0];
+
+fn missing(path: &Path, what: &str) -> CliError {
+    CliError::EvalInput {
+        path: path.to_path_buf(),
+        reason: format!("{what} not found"),
+    }
+}
+
+/// The first file among `dir/stem.{extensions}` that exists.
+fn find_image(dir: &Path, stem: &str) -> Result<PathBuf, CliError> {
+    ["ppm", "pgm", "png", "jpg"]
+        .iter()
+        .map(|ext| dir.join(format!("{stem}.{ext}")))
+        .find(|p| p.is_file())
+        .ok_or_else(|| missing(dir, &format!("{stem}.ppm/.pgm/.png/.jpg")))
+}
+
+/// img1 against img2..img6 of one Oxford sequence folder (`img1.ppm`..., `H1to2p`...).
+pub fn oxford_pairs(dir: &Path, sequence: &str) -> Result<Vec<EvalPair>, CliError> {
+    let image_a = find_image(dir, "img1")?;
+    (2..=6)
+        .map(|n| {
+            let homography = dir.join(format!("H1to{n}p"));
+            if !homography.is_file() {
+                return Err(missing(&homography, "homography file"));
+            }
+            Ok(EvalPair {
+                name: format!("{sequence} 1-{n}"),
+                group: format!("oxford-{sequence}"),
+                param: None,
+                image_a: image_a.clone(),
+                image_b: find_image(dir, &format!("img{n}"))?,
+                homography,
+            })
+        })
+        .collect()
+}
+
+/// The Oxford sequences present under `data` (folders `oxford_graf`, ...); absent ones are named in
+/// the second list.
+pub fn oxford_under(data: &Path) -> Result<(Vec<EvalPair>, Vec<String>), CliError> {
+    if !data.is_dir() {
+        return Err(missing(data, "data folder"));
+    }
+    let (mut pairs, mut absent) = (Vec::new(), Vec::new());
+    for sequence in OXFORD_SEQUENCES {
+        let dir = data.join(format!("oxford_{sequence}"));
+        if dir.is_dir() {
+            pairs.extend(oxford_pairs(&dir, sequence)?);
+        } else {
+            absent.push(dir.display().to_string());
+        }
+    }
+    Ok((pairs, absent))
+}
+
+/// OpenCV's sample pair in `dir`: `graf1.png`, `graf3.png`, `H1to3p.xml`.
+pub fn opencv_sample_pair(dir: &Path) -> Result<EvalPair, CliError> {
+    let file = |name: &str| {
+        let path = dir.join(name);
+        if path.is_file() {
+            Ok(path)
+        } else {
+            Err(missing(&path, "OpenCV sample file"))
+        }
+    };
+    Ok(EvalPair {
+        name: "opencv graf1-graf3".into(),
+        group: GROUP_OPENCV_SAMPLE.into(),
+        param: None,
+        image_a: file("graf1.png")?,
+        image_b: file("graf3.png")?,
+        homography: file("H1to3p.xml")?,
+    })
+}
+
+/// A photo to warp: a name for the pairs and the gray image.
+pub struct SyntheticSource {
+    /// Short name, used in pair names and file names.
+    pub name: String,
+    /// The photo.
+    pub image: GrayImage,
+}
+
+/// Parses `NAME=PATH` or `PATH` (the name is then the file stem) and loads the image.
+pub fn synthetic_source(arg: &str) -> Result<SyntheticSource, CliError> {
+    let (name, path) = match arg.split_once('=') {
+        Some((name, path)) => (name.to_string(), PathBuf::from(path)),
+        None => {
+            let path = PathBuf::from(arg);
+            let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+            (stem.unwrap_or_default(), path)
+        }
+    };
+    let ok = |c: char| c.is_ascii_alphanumeric() || c == '-' || c == '_';
+    if name.is_empty() || !name.chars().all(ok) {
+        return Err(CliError::EvalInput {
+            path,
+            reason: format!(
+                "synthetic source name `{name}` must be letters, digits, `-` or `_` \
+                 (give one as NAME=PATH)"
+            ),
+        });
+    }
+    Ok(SyntheticSource {
+        image: load_gray(&path)?,
+        name,
+    })
+}
+
+/// The known warps of a `width` x `height` image: (suffix, group, parameter, homography), all about
+/// the image centre.
+pub fn synthetic_warps(width: u32, height: u32) -> Vec<(String, &'static str, f64, Homography)> {
+    let (w, h) = (width as usize, height as usize);
+    let mut warps = Vec::new();
+    for degrees in rotations() {
+        let hom = about_centre(w, h, &Homography::rotation_scale(degrees, 1.0));
+        warps.push((format!("rot {degrees}"), GROUP_ROTATION, degrees, hom));
+    }
+    for scale in SCALES {
+        let hom = about_centre(w, h, &Homography::rotation_scale(0.0, scale));
+        warps.push((format!("scale {scale:.2}"), GROUP_SCALE, scale, hom));
+    }
+    // The demo's view (30 degrees, 0.9, slight tilt) and a strong tilt: w from 0.75 to 1.25 across
+    // the image's width.
+    warps.push((
+        "persp demo".into(),
+        GROUP_PERSPECTIVE,
+        1.0,
+        demo_homography(w, h),
+    ));
+    let strong = Homography::perspective(0.5 / width as f64, 0.0);
+    warps.push((
+        "persp strong".into(),
+        GROUP_PERSPECTIVE,
+        2.0,
+        about_centre(w, h, &strong),
+    ));
+    warps
+}
+
+/// The homography in the Oxford text format, every digit kept (Rust prints the shortest decimal that
+/// reads back to the same `f64`).
+pub fn homography_text(h: &Homography) -> String {
+    let mut s = String::new();
+    for row in &h.0 {
+        let _ = writeln!(s, "{} {} {}", row[0], row[1], row[2]);
+    }
+    s
+}
+
+fn save_png(img: &GrayImage, path: &Path) -> Result<(), CliError> {
+    img.save_with_format(path, image::ImageFormat::Png)
+        .map_err(|source| CliError::Encode {
+            path: path.to_path_buf(),
+            source,
+        })
+}
+
+/// Writes `source` and its warped views into `dir` (PNG images, Oxford-format homographies) and
+/// returns their pairs.
+pub fn write_synthetic(source: &SyntheticSource, dir: &Path) -> Result<Vec<EvalPair>, CliError> {
+    std::fs::create_dir_all(dir).map_err(CliError::write(dir))?;
+    let (width, height) = source.image.dimensions();
+    let image_a = dir.join(format!("{}.png", source.name));
+    save_png(&source.image, &image_a)?;
+    let mut pairs = Vec::new();
+    for (suffix, group, param, hom) in synthetic_warps(width, height) {
+        let file = format!("{}_{}", source.name, suffix.replace(' ', "_"));
+        let warped =
+            warp(&source.image, &hom, width, height).ok_or_else(|| CliError::EvalInput {
+                path: image_a.clone(),
+                reason: format!("warp `{suffix}` is singular"),
+            })?;
+        let image_b = dir.join(format!("{file}.png"));
+        save_png(&warped, &image_b)?;
+        let homography = dir.join(format!("{file}.H"));
+        std::fs::write(&homography, homography_text(&hom)).map_err(CliError::write(&homography))?;
+        pairs.push(EvalPair {
+            name: format!("{} {suffix}", source.name),
+            group: group.into(),
+            param: Some(param),
+            image_a: image_a.clone(),
+            image_b,
+            homography,
+        });
+    }
+    Ok(pairs)
+}
+
+/// The manifest: `pair,group,param,image_a,image_b,homography`, one pair a line, absolute paths.
+pub fn manifest(pairs: &[EvalPair]) -> Result<String, CliError> {
+    let mut s = String::from("pair,group,param,image_a,image_b,homography\n");
+    for p in pairs {
+        let mut fields = vec![p.name.clone(), p.group.clone()];
+        fields.push(p.param.map(|v| v.to_string()).unwrap_or_default());
+        for path in [&p.image_a, &p.image_b, &p.homography] {
+            let absolute = std::path::absolute(path).map_err(|source| CliError::Read {
+                path: path.clone(),
+                source,
+            })?;
+            fields.push(absolute.display().to_string());
+        }
+        if let Some(bad) = fields.iter().find(|f| f.contains([',', '"', '\n'])) {
+            return Err(CliError::EvalInput {
+                path: p.image_a.clone(),
+                reason: format!(
+                    "`{bad}` holds a comma, quote or newline; the manifest is plain CSV"
+                ),
+            });
+        }
+        let _ = writeln!(s, "{}", fields.join(","));
+    }
+    Ok(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp_dir(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("clatch-pairs-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn warps_keep_the_centre_and_do_what_they_say() {
+        let warps = synthetic_warps(101, 81);
+        assert_eq!(warps.len(), 13 + SCALES.len() + 2);
+        for (suffix, _, _, h) in &warps {
+            let (x, y) = h.apply(50.0, 40.0).unwrap();
+            assert!(
+                (x - 50.0).abs() < 1e-9 && (y - 40.0).abs() < 1e-9,
+                "{suffix}"
+            );
+        }
+        let (name, group, param, rot90) = &warps[6];
+        assert_eq!(
+            (name.as_str(), *group, *param),
+            ("rot 90", GROUP_ROTATION, 90.0)
+        );
+        // 10 px right of the centre goes 10 px down.
+        let (x, y) = rot90.apply(60.0, 40.0).unwrap();
+        assert!((x - 50.0).abs() < 1e-9 && (y - 50.0).abs() < 1e-9);
+        let (name, _, _, half) = &warps[13];
+        assert_eq!(name, "scale 0.50");
+        assert_eq!(
+            half.apply(60.0, 40.0).map(|(x, _)| (x * 1e9).round() / 1e9),
+            Some(55.0)
+        );
+    }
+
+    #[test]
+    fn homography_text_reads_back_exactly() {
+        let h = demo_homography(512, 512);
+        assert_eq!(Homography::parse(&homography_text(&h)).unwrap(), h);
+    }
+
+    #[test]
+    fn synthetic_files_and_manifest() {
+        let dir = temp_dir("synthetic");
+        let source = SyntheticSource {
+            name: "ramp".into(),
+            image: GrayImage::from_fn(70, 66, |x, y| image::Luma([(3 * x + y) as u8])),
+        };
+        let pairs = write_synthetic(&source, &dir).unwrap();
+        assert_eq!(pairs.len(), synthetic_warps(70, 66).len());
+        let rot = &pairs[2];
+        assert_eq!(rot.name, "ramp rot 30");
+        assert_eq!(load_gray(&rot.image_a).unwrap(), source.image);
+        assert_eq!(load_gray(&rot.image_b).unwrap().dimensions(), (70, 66));
+        let h = Homography::from_file(&rot.homography).unwrap();
+        assert_eq!(h, synthetic_warps(70, 66)[2].3);
+        let text = manifest(&pairs).unwrap();
+        let second = text.lines().nth(1).unwrap();
+        assert!(
+            second.starts_with("ramp rot 0,synthetic-rotation,0,/"),
+            "{second}"
+        );
+        std::fs::remove_dir_all(&dir).ok();
+
+        let bad = EvalPair {
+            name: "a,b".into(),
+            ..pairs[0].clone()
+        };
+        assert!(matches!(manifest(&[bad]), Err(CliError::EvalInput { .. })));
+    }
+
+    #[test]
+    fn missing_inputs_are_typed_errors() {
+        let dir = temp_dir("oxford");
+        let e = oxford_pairs(&dir, "graf").unwrap_err();
+        assert!(
+            matches!(e, CliError::EvalInput { .. }) && e.to_string().contains("img1"),
+            "{e}"
+        );
+        std::fs::write(dir.join("img1.ppm"), b"P5").unwrap();
+        let e = oxford_pairs(&dir, "graf").unwrap_err();
+        assert!(e.to_string().contains("H1to2p"), "{e}");
+        for n in 2..=6 {
+            std::fs::write(dir.join(format!("H1to{n}p")), b"").unwrap();
+        }
+        let e = oxford_pairs(&dir, "graf").unwrap_err();
+        assert!(e.to_string().contains("img2"), "{e}");
+        for n in 2..=6 {
+            std::fs::write(dir.join(format!("img{n}.pgm")), b"P5").unwrap();
+        }
+        let pairs = oxford_pairs(&dir, "graf").unwrap();
+        assert_eq!(pairs[4].name, "graf 1-6");
+        assert_eq!(pairs[4].homography, dir.join("H1to6p"));
+        assert!(matches!(
+            opencv_sample_pair(&dir),
+            Err(CliError::EvalInput { .. })
+        ));
+        assert!(matches!(
+            oxford_under(&dir.join("nope")),
+            Err(CliError::EvalInput { .. })
+        ));
+        let (pairs, absent) = oxford_under(&dir).unwrap();
+        assert!(pairs.is_empty() && absent.len() == 3);
+        std::fs::remove_dir_all(&dir).ok();
+
+        assert!(matches!(
+            synthetic_source("bad name=x.png"),
+            Err(CliError::EvalInput { .. })
+        ));
+        assert!(matches!(
+            synthetic_source("/nonexistent/clatch.png"),
+            Err(CliError::Read { .. })
+        ));
+    }
+}

@@ -1,0 +1,294 @@
+//! Running clatch on one pair and turning its features and matches into [`PairResult`]s.
+
+use clap::ValueEnum;
+use clatch::{Match, Matcher, OpencvLatch};
+use image::GrayImage;
+
+use crate::error::CliError;
+use crate::eval::metrics::{PairTruth, candidates, ratio_curve};
+use crate::eval::pairs::EvalPair;
+use crate::eval::results::PairResult;
+use crate::homography::Homography;
+use crate::input::load_gray;
+use crate::pipeline::{self, PairRun, Settings};
+use crate::progress::Progress;
+
+/// The clatch configurations evaluated; each is one column of the tables and one curve of the chart.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ClatchMethod {
+    /// clatch as set by the detector, descriptor and matcher flags.
+    Clatch,
+    /// The same keypoints (clatch's detector, with its orientation) described by OpenCV-compatible
+    /// LATCH with `cv2.xfeatures2d.LATCH_create`'s defaults, matched by the same matcher.
+    ClatchOpencv,
+}
+
+/// `cv2.xfeatures2d.LATCH_create(bytes=64, rotationInvariance=True, half_ssd_size=3, sigma=2.0)`,
+/// OpenCV's defaults and the configuration of the OpenCV LATCH column of `tools/eval_opencv.py`.
+pub fn opencv_default_latch() -> Result<OpencvLatch, CliError> {
+    Ok(OpencvLatch::new(64, true, 3, 2.0)?)
+}
+
+impl ClatchMethod {
+    /// The column label.
+    pub fn label(self) -> &'static str {
+        match self {
+            ClatchMethod::Clatch => "clatch",
+            ClatchMethod::ClatchOpencv => "clatch (OpenCV-compatible)",
+        }
+    }
+
+    /// The settings this configuration runs with, given the ones from the command line.
+    pub fn settings(self, from_flags: &Settings) -> Result<Settings, CliError> {
+        Ok(match self {
+            ClatchMethod::Clatch => Settings {
+                opencv_latch: None,
+                ..from_flags.clone()
+            },
+            ClatchMethod::ClatchOpencv => Settings {
+                opencv_latch: Some(opencv_default_latch()?),
+                ..from_flags.clone()
+            },
+        })
+    }
+}
+
+/// A pair with its images and ground truth read.
+pub struct LoadedPair {
+    /// What was read.
+    pub pair: EvalPair,
+    /// Image A.
+    pub a: GrayImage,
+    /// Image B.
+    pub b: GrayImage,
+    /// Ground truth.
+    pub truth: PairTruth,
+}
+
+/// Reads a pair's images and homography.
+pub fn load_pair(pair: &EvalPair, tolerance: f64) -> Result<LoadedPair, CliError> {
+    let h = Homography::from_file(&pair.homography)?;
+    let (a, b) = (load_gray(&pair.image_a)?, load_gray(&pair.image_b)?);
+    let truth = PairTruth::new(h, a.dimensions(), b.dimensions(), tolerance).ok_or_else(|| {
+        CliError::Homography {
+            path: pair.homography.clone(),
+            reason: "the matrix is singular".into(),
+        }
+    })?;
+    Ok(LoadedPair {
+        pair: pair.clone(),
+        a,
+        b,
+        truth,
+    })
+}
+
+/// The configured matches of a run (from the library) and its ratio-test curve (from 2-NN lists).
+pub fn evaluate_run(
+    method: &str,
+    loaded: &LoadedPair,
+    run: &PairRun,
+    settings: &Settings,
+    ratios: &[f32],
+) -> Result<PairResult, CliError> {
+    let (kps_a, kps_b) = (&run.a.features.keypoints, &run.b.features.keypoints);
+    let truth = &loaded.truth;
+    let correct = |m: &Match| truth.is_correct(&kps_a[m.query as usize], &kps_b[m.train as usize]);
+    let config = &settings.matching;
+    let (qa, tb) = (&run.a.features.descriptors, &run.b.features.descriptors);
+
+    let curve_candidates = if qa.is_empty() || tb.len() < 2 {
+        Vec::new()
+    } else {
+        let matcher = Matcher::new(settings.backend, config.clone())?;
+        let knn = matcher.knn(qa, tb, 2)?;
+        // Cross-check: the query must be the nearest query of its train descriptor.
+        let reverse = if config.cross_check {
+            Some(matcher.knn(tb, qa, 1)?)
+        } else {
+            None
+        };
+        let keep = |m: &Match| {
+            reverse
+                .as_ref()
+                .is_none_or(|r| r.as_slice()[m.train as usize].train == m.query)
+                && config.max_distance.is_none_or(|max| m.distance <= max)
+        };
+        candidates(&knn, keep, correct)
+    };
+
+    Ok(PairResult {
+        method: method.to_string(),
+        pair: loaded.pair.name.clone(),
+        group: loaded.pair.group.clone(),
+        param: loaded.pair.param,
+        size_a: loaded.a.dimensions(),
+        size_b: loaded.b.dimensions(),
+        keypoints: (kps_a.len(), kps_b.len()),
+        overlap: truth.overlap(kps_a, kps_b),
+        matches: run.matches.len(),
+        correct: run.matches.iter().filter(|m| correct(m)).count(),
+        curve: ratio_curve(&curve_candidates, ratios),
+    })
+}
+
+/// Detects, describes and matches one loaded pair with `method`.
+pub fn evaluate_pair(
+    method: ClatchMethod,
+    from_flags: &Settings,
+    loaded: &LoadedPair,
+    ratios: &[f32],
+) -> Result<PairResult, CliError> {
+    let settings = method.settings(from_flags)?;
+    let run = pipeline::match_pair(
+        &settings,
+        (&loaded.a, loaded.pair.image_a.as_path()),
+        (&loaded.b, loaded.pair.image_b.as_path()),
+        &Progress::hidden(),
+    )?;
+    evaluate_run(method.label(), loaded, &run, &settings, ratios)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::metrics::ratio_grid;
+    use crate::eval::pairs::{SyntheticSource, write_synthetic};
+    use clatch::{Backend, DescriptorWidth, Extractor, ExtractorConfig, GrayView, MatchConfig};
+
+    fn settings(matching: MatchConfig) -> Settings {
+        Settings {
+            backend: Backend::Cpu,
+            extractor: ExtractorConfig::default(),
+            matching,
+            opencv_latch: None,
+        }
+    }
+
+    /// The embedded photo and its synthetic views, written to a temporary folder.
+    fn astronaut_pairs(tag: &str) -> (std::path::PathBuf, Vec<EvalPair>) {
+        let dir =
+            std::env::temp_dir().join(format!("clatch-eval-run-{}-{tag}", std::process::id()));
+        let source = SyntheticSource {
+            name: "astronaut".into(),
+            image: crate::demo::embedded_image().unwrap(),
+        };
+        let pairs = write_synthetic(&source, &dir).unwrap();
+        (dir, pairs)
+    }
+
+    #[test]
+    fn identity_pair_is_all_correct_and_rotation_pair_mostly() {
+        let (dir, pairs) = astronaut_pairs("identity");
+        let s = settings(MatchConfig::default());
+        let grid = ratio_grid();
+
+        let same = load_pair(&pairs[0], 3.0).unwrap();
+        assert_eq!(same.pair.name, "astronaut rot 0");
+        let r = evaluate_pair(ClatchMethod::Clatch, &s, &same, &grid).unwrap();
+        // The same image twice: every keypoint matches itself at distance 0 and sits in the overlap.
+        assert_eq!(r.keypoints.0, r.keypoints.1);
+        assert_eq!(r.overlap, r.keypoints);
+        assert!(r.matches > 0);
+        assert_eq!(r.correct, r.matches);
+        assert_eq!(
+            r.matching_score(),
+            Some(r.matches as f64 / r.keypoints.0 as f64)
+        );
+
+        let rot = load_pair(&pairs[2], 3.0).unwrap();
+        assert_eq!(rot.pair.name, "astronaut rot 30");
+        let r = evaluate_pair(ClatchMethod::Clatch, &s, &rot, &grid).unwrap();
+        assert!(r.precision().unwrap() > 0.8, "{r:?}");
+        // More permissive thresholds keep at least as much, and at 0.8 the curve agrees with the
+        // library's matcher (ratio 0.8 with cross-check).
+        for w in r.curve.windows(2) {
+            assert!(w[0].kept <= w[1].kept && w[0].correct_kept <= w[1].correct_kept);
+        }
+        let at_08 = r.curve.iter().find(|p| p.ratio == 0.8).unwrap();
+        assert_eq!((at_08.kept, at_08.correct_kept), (r.matches, r.correct));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn opencv_column_describes_clatch_keypoints_with_opencv_latch() {
+        let (dir, pairs) = astronaut_pairs("opencv");
+        let s = settings(MatchConfig::default());
+        let grid = ratio_grid();
+        let method = ClatchMethod::ClatchOpencv;
+        assert_eq!(method.label(), "clatch (OpenCV-compatible)");
+        let opencv = method.settings(&s).unwrap();
+        assert_eq!(
+            opencv.opencv_latch,
+            Some(OpencvLatch::new(64, true, 3, 2.0).unwrap())
+        );
+        assert_eq!(
+            ClatchMethod::Clatch.settings(&opencv).unwrap().opencv_latch,
+            None
+        );
+
+        let rot = load_pair(&pairs[2], 3.0).unwrap();
+        assert_eq!(rot.pair.name, "astronaut rot 30");
+        let run = pipeline::match_pair(
+            &opencv,
+            (&rot.a, rot.pair.image_a.as_path()),
+            (&rot.b, rot.pair.image_b.as_path()),
+            &Progress::hidden(),
+        )
+        .unwrap();
+        // The keypoints are the detector's (with its angles); the descriptors are the library's
+        // OpenCV-compatible ones for them, not CLATCH's.
+        let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
+        for (img, got) in [(&rot.a, &run.a), (&rot.b, &run.b)] {
+            let view = GrayView::try_from(img).unwrap();
+            let detected = extractor.detect(&view).unwrap();
+            assert!(detected.iter().any(|k| k.angle != 0.0));
+            let latch = opencv.opencv_latch.as_ref().unwrap();
+            let expected = extractor.describe_opencv(latch, &view, &detected).unwrap();
+            assert!(!expected.keypoints.is_empty());
+            assert_eq!(got.features, expected);
+            assert_eq!(got.features.descriptors.width(), DescriptorWidth::FULL);
+            let clatch = extractor.describe(&view, &detected).unwrap();
+            assert_ne!(got.features, clatch, "CLATCH descriptors");
+        }
+
+        // Its figures: labelled, matched by the configured matcher, judged by the homography.
+        let r = evaluate_run(method.label(), &rot, &run, &opencv, &grid).unwrap();
+        assert_eq!(r.method, "clatch (OpenCV-compatible)");
+        assert_eq!(
+            r.keypoints,
+            (
+                run.a.features.keypoints.len(),
+                run.b.features.keypoints.len()
+            )
+        );
+        assert!(r.matches > 0 && r.correct > 0, "{r:?}");
+        let at_08 = r.curve.iter().find(|p| p.ratio == 0.8).unwrap();
+        assert_eq!((at_08.kept, at_08.correct_kept), (r.matches, r.correct));
+        assert_eq!(evaluate_pair(method, &s, &rot, &grid).unwrap(), r);
+
+        // The same image twice: every match is correct.
+        let same = load_pair(&pairs[0], 3.0).unwrap();
+        let r = evaluate_pair(method, &s, &same, &grid).unwrap();
+        assert!(r.matches > 0);
+        assert_eq!(r.correct, r.matches);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn without_cross_check_the_curve_still_agrees_with_the_matcher() {
+        let (dir, pairs) = astronaut_pairs("nocross");
+        let config = MatchConfig {
+            ratio: Some(0.9),
+            cross_check: false,
+            max_distance: Some(120),
+        };
+        let loaded = load_pair(&pairs[15], 3.0).unwrap();
+        let r = evaluate_pair(ClatchMethod::Clatch, &settings(config), &loaded, &[0.9]).unwrap();
+        assert_eq!(
+            (r.curve[0].kept, r.curve[0].correct_kept),
+            (r.matches, r.correct)
+        );
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

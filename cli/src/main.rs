@@ -1,0 +1,626 @@
+//! `clatch`: FAST keypoints, CLATCH descriptors and Hamming matching from the command line.
+//!
+//! This file holds the command-line definitions and the dispatch; each subcommand lives in its own
+//! module.
+
+mod colmap_cmd;
+mod colmap_program;
+mod cpu_time;
+mod demo;
+mod draw;
+mod error;
+mod eval;
+mod exif;
+mod extract;
+mod homography;
+mod image_dir;
+mod input;
+mod match_cmd;
+mod npy;
+mod pipeline;
+mod progress;
+mod report;
+mod spread;
+mod subpixel;
+mod warp;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use clatch::{Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, ExtractorConfig};
+use clatch::{MatchConfig, OpencvLatch, PatchWeights, Pyramid};
+
+use crate::error::CliError;
+use crate::pipeline::Settings;
+
+/// FAST keypoints, CLATCH binary descriptors and brute-force Hamming matching.
+///
+/// Every command reads 8-bit images (PNG, JPEG, PGM/PPM; colour is converted to gray), runs on the
+/// backend chosen with --backend, and reports the time of each stage. `clatch demo` needs no files:
+/// it runs on a public-domain NASA photograph (astronaut Eileen Collins) embedded in the binary.
+#[derive(Debug, Parser)]
+#[command(name = "clatch", version, about, long_about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Match a photo against a warped copy of itself and check the matches against the known warp.
+    ///
+    /// The photo is embedded in the binary: `astronaut` from scikit-image (`skimage.data.astronaut()`),
+    /// a photograph of NASA astronaut Eileen Collins from the NASA Great Images database, in the public
+    /// domain, converted to 512x512 gray. The second view is the same photo warped by a fixed
+    /// homography (rotation 30 degrees about the centre, scale 0.9, slight perspective). The command
+    /// prints keypoints, matches, how many matches agree with the true homography, and the time of
+    /// each stage, and draws the matches side by side (inliers green, outliers red).
+    Demo(DemoArgs),
+    /// Match two images and draw the matches side by side.
+    ///
+    /// With --homography (a 3x3 matrix mapping pixels of A to pixels of B, as the Oxford affine
+    /// data set's `H1to2p` files) the matches are checked against it: inliers green, outliers red.
+    Match(MatchArgs),
+    /// Detect and describe one image; write keypoints (CSV, JSON) and descriptors (.npy).
+    ///
+    /// Writes PREFIX.keypoints.csv, PREFIX.keypoints.json and PREFIX.descriptors.npy. The .npy holds
+    /// one uint8 row per keypoint in OpenCV LATCH's byte layout, so it can go straight into
+    /// `cv2.BFMatcher(cv2.NORM_HAMMING)`.
+    Extract(ExtractArgs),
+    /// Structure from motion with COLMAP 3.8: features of a folder of photos, matched exhaustively.
+    ///
+    /// Detects and describes every image in DIR, matches every pair (ratio test and cross-check), and
+    /// writes a COLMAP 3.8 database (cameras, images, keypoints) plus the putative matches as a text
+    /// file in the workspace. If the `colmap` program is installed it then runs `colmap
+    /// matches_importer --match_type raw` (COLMAP's geometric verification), `colmap mapper` and
+    /// `colmap model_analyzer`, and reports registered images, 3D points, reprojection error and the
+    /// time of each stage. The model is in WORKSPACE/sparse/N.
+    Colmap(ColmapArgs),
+    /// Descriptor quality on image pairs with ground-truth homographies, optionally beside OpenCV.
+    ///
+    /// Pairs: OpenCV's graf1/graf3 sample (--opencv-samples), the Oxford graf, boat and bikes
+    /// sequences, img1 against img2..img6 (--data), and synthetic warps (rotations 0-180 degrees,
+    /// scales 0.5-2, two perspective tilts) of the embedded photo and of --synthetic-image photos.
+    /// Per pair and method: keypoints in the overlap, matches, correct matches (within --inlier-px
+    /// of the true homography), matching score, and precision and recall of the ratio test at
+    /// thresholds 0.50..1.00. Writes OUT/pairs.csv (the pairs, for tools/eval_opencv.py),
+    /// OUT/clatch.summary.csv and OUT/clatch.pr.csv, OUT/results.json, OUT/tables.md, and the charts
+    /// OUT/pr.png and OUT/synthetic.png. EVALUATION.md defines every figure.
+    Eval(EvalArgs),
+}
+
+/// Arguments of `clatch eval`.
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// Folder holding oxford_graf/, oxford_boat/, oxford_bikes/ (img1..img6, H1to2p..H1to6p each).
+    #[arg(long, value_name = "DIR")]
+    pub data: Option<PathBuf>,
+    /// Folder holding OpenCV's graf1.png, graf3.png and H1to3p.xml (Debian's opencv-doc package
+    /// installs them in /usr/share/doc/opencv-doc/examples/data).
+    #[arg(long, value_name = "DIR")]
+    pub opencv_samples: Option<PathBuf>,
+    /// A photo to warp synthetically besides the embedded one: PATH, or NAME=PATH (repeatable).
+    #[arg(long = "synthetic-image", value_name = "[NAME=]PATH")]
+    pub synthetic_images: Vec<String>,
+    /// No synthetic pairs at all.
+    #[arg(long, conflicts_with = "synthetic_images")]
+    pub no_synthetic: bool,
+    /// Output folder.
+    #[arg(short, long, default_value = "clatch-eval", value_name = "DIR")]
+    pub out: PathBuf,
+    /// clatch configurations to evaluate (repeatable): `clatch` (CLATCH descriptors) and
+    /// `clatch-opencv` (the same keypoints, OpenCV-compatible LATCH with cv2's defaults).
+    #[arg(
+        long = "method",
+        value_enum,
+        default_values_t = [
+            eval::run::ClatchMethod::Clatch,
+            eval::run::ClatchMethod::ClatchOpencv
+        ]
+    )]
+    pub methods: Vec<eval::run::ClatchMethod>,
+    /// Run the OpenCV script with this Python (which needs opencv-contrib-python-headless) and merge
+    /// its results.
+    #[arg(long, value_name = "PYTHON")]
+    pub opencv_python: Option<PathBuf>,
+    /// The OpenCV script.
+    #[arg(long, default_value = "tools/eval_opencv.py", value_name = "FILE")]
+    pub opencv_script: PathBuf,
+    /// Merge results written earlier for the same pairs: PREFIX.summary.csv and PREFIX.pr.csv
+    /// (repeatable).
+    #[arg(long, value_name = "PREFIX")]
+    pub merge: Vec<PathBuf>,
+    #[command(flatten)]
+    pub backend: BackendArgs,
+    #[command(flatten)]
+    pub detect: DetectArgs,
+    #[command(flatten)]
+    pub matching: MatchingArgs,
+    #[command(flatten)]
+    pub check: CheckArgs,
+}
+
+/// Arguments of `clatch demo`.
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Where to write the picture of the matches (.png, .jpg, .ppm: by extension).
+    #[arg(short, long, default_value = "clatch-demo.png")]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub backend: BackendArgs,
+    #[command(flatten)]
+    pub detect: DetectArgs,
+    #[command(flatten)]
+    pub matching: MatchingArgs,
+    #[command(flatten)]
+    pub check: CheckArgs,
+    #[command(flatten)]
+    pub draw: DrawArgs,
+}
+
+/// Arguments of `clatch match`.
+#[derive(Debug, Args)]
+pub struct MatchArgs {
+    /// First image (the query side).
+    pub image_a: PathBuf,
+    /// Second image (the train side).
+    pub image_b: PathBuf,
+    /// Where to write the picture of the matches (.png, .jpg, .ppm: by extension).
+    #[arg(short, long, default_value = "clatch-matches.png")]
+    pub output: PathBuf,
+    /// Ground-truth homography: 9 whitespace-separated numbers, row-major, mapping pixels of A to B.
+    #[arg(long, value_name = "FILE")]
+    pub homography: Option<PathBuf>,
+    /// Also write the matches as CSV: query,train,distance,xq,yq,xt,yt.
+    #[arg(long, value_name = "FILE")]
+    pub matches_csv: Option<PathBuf>,
+    #[command(flatten)]
+    pub backend: BackendArgs,
+    #[command(flatten)]
+    pub detect: DetectArgs,
+    #[command(flatten)]
+    pub matching: MatchingArgs,
+    #[command(flatten)]
+    pub check: CheckArgs,
+    #[command(flatten)]
+    pub draw: DrawArgs,
+}
+
+/// Arguments of `clatch extract`.
+#[derive(Debug, Args)]
+pub struct ExtractArgs {
+    /// The image to describe.
+    pub image: PathBuf,
+    /// Output prefix: writes PREFIX.keypoints.csv, PREFIX.keypoints.json, PREFIX.descriptors.npy.
+    #[arg(short, long, value_name = "PREFIX")]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub backend: BackendArgs,
+    #[command(flatten)]
+    pub detect: DetectArgs,
+    #[command(flatten)]
+    pub opencv: OpencvLatchArgs,
+}
+
+/// OpenCV-compatible LATCH instead of CLATCH (`clatch extract --opencv-latch`).
+#[derive(Debug, Args)]
+pub struct OpencvLatchArgs {
+    /// Describe with OpenCV's LATCH: the descriptors equal
+    /// `cv2.xfeatures2d.LATCH_create(BYTES, rotation, HALF, SIGMA).compute` on the same keypoints.
+    #[arg(long, conflicts_with = "bits")]
+    pub opencv_latch: bool,
+    /// OpenCV LATCH descriptor bytes: 1, 2, 4, 8, 16, 32 or 64.
+    #[arg(
+        long,
+        default_value_t = 32,
+        value_name = "BYTES",
+        requires = "opencv_latch"
+    )]
+    pub latch_bytes: usize,
+    /// OpenCV LATCH without rotation invariance (patch centres not rotated by the keypoint angle).
+    #[arg(long, requires = "opencv_latch")]
+    pub latch_no_rotation: bool,
+    /// OpenCV LATCH patch half size: patches are (2 HALF + 1)² pixels.
+    #[arg(
+        long,
+        default_value_t = 3,
+        value_name = "HALF",
+        requires = "opencv_latch"
+    )]
+    pub latch_half_ssd_size: usize,
+    /// OpenCV LATCH pre-blur sigma (3x3 Gaussian; 0: none).
+    #[arg(
+        long,
+        default_value_t = 2.0,
+        value_name = "SIGMA",
+        requires = "opencv_latch"
+    )]
+    pub latch_sigma: f64,
+}
+
+impl OpencvLatchArgs {
+    /// The validated settings, or `None` without `--opencv-latch`.
+    pub fn latch(&self) -> Result<Option<OpencvLatch>, CliError> {
+        if !self.opencv_latch {
+            return Ok(None);
+        }
+        Ok(Some(OpencvLatch::new(
+            self.latch_bytes,
+            !self.latch_no_rotation,
+            self.latch_half_ssd_size,
+            self.latch_sigma,
+        )?))
+    }
+}
+
+/// Arguments of `clatch colmap`.
+#[derive(Debug, Args)]
+pub struct ColmapArgs {
+    /// Folder of photos (JPEG, PNG, PGM/PPM; not its subfolders), read in name order.
+    #[arg(long, value_name = "DIR")]
+    pub images: PathBuf,
+    /// The COLMAP database to create (an existing file is an error unless --force).
+    #[arg(long, value_name = "FILE")]
+    pub database: PathBuf,
+    /// Camera matrix K (9 numbers, row-major) shared by every photo. Without it: the focal length from
+    /// EXIF's 35 mm equivalent where a photo has one, else COLMAP's guess (1.2 x the larger side),
+    /// principal point at the centre, one camera per image size and focal, refined by the mapper.
+    #[arg(long, value_name = "FILE")]
+    pub camera_k: Option<PathBuf>,
+    /// Folder for the match list, COLMAP's logs and its model (default: DATABASE's name + `-colmap`).
+    #[arg(long, value_name = "DIR")]
+    pub workspace: Option<PathBuf>,
+    /// Spread keypoints over a GRID x GRID division of each image (1: the strongest anywhere). The
+    /// default 8 keeps textured corners of a photo (foliage, gravel) from taking every keypoint.
+    #[arg(long, default_value_t = 8, value_name = "GRID", value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub grid: u32,
+    /// How the keypoint positions written to COLMAP are refined below a pixel (descriptors and
+    /// matches do not change).
+    #[arg(long, value_enum, default_value_t = subpixel::Subpixel::Score)]
+    pub subpixel: subpixel::Subpixel,
+    /// Half side of the window of --subpixel corner.
+    #[arg(long, default_value_t = 3, value_name = "R", value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub subpixel_radius: u32,
+    /// Replace an existing database and model.
+    #[arg(long)]
+    pub force: bool,
+    /// Only write the database and match list; do not run COLMAP.
+    #[arg(long)]
+    pub no_colmap: bool,
+    /// The COLMAP 3.8 executable (default: `colmap` on PATH, skipped with a note if absent).
+    #[arg(long, value_name = "PROGRAM", conflicts_with = "no_colmap")]
+    pub colmap: Option<PathBuf>,
+    /// An option for `colmap mapper`, as KEY=VALUE (for example Mapper.init_min_num_inliers=50);
+    /// repeatable.
+    #[arg(long = "mapper-option", value_name = "KEY=VALUE")]
+    pub mapper_options: Vec<String>,
+    #[command(flatten)]
+    pub backend: BackendArgs,
+    #[command(flatten)]
+    pub detect: DetectArgs,
+    #[command(flatten)]
+    pub matching: MatchingArgs,
+}
+
+/// Which backend runs detection, description and matching.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BackendChoice {
+    /// CUDA when compiled in and a device is usable, else the CPU.
+    Auto,
+    /// The rayon CPU backend.
+    Cpu,
+    /// The CUDA backend (an error if it cannot run here).
+    Cuda,
+}
+
+/// Backend selection.
+#[derive(Debug, Args)]
+pub struct BackendArgs {
+    /// Compute backend.
+    #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
+    pub backend: BackendChoice,
+    /// CUDA device ordinal (with --backend cuda).
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub device: usize,
+}
+
+/// Detector and descriptor settings.
+#[derive(Debug, Args)]
+pub struct DetectArgs {
+    /// FAST threshold (1..=254): nine contiguous circle pixels must differ from the centre by more.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u8).range(1..=254))]
+    pub threshold: u8,
+    /// Keep at most this many keypoints per image, strongest first.
+    #[arg(long, default_value_t = 5000, value_name = "N", value_parser = parse_positive)]
+    pub max_keypoints: usize,
+    /// Descriptor width in bits: a multiple of 8 from 8 to 512.
+    #[arg(long, default_value_t = 512, value_parser = parse_bits)]
+    pub bits: usize,
+    /// Detect on a scale pyramid of LEVELS levels (full resolution included), each FACTOR (in (1, 2],
+    /// default 2) smaller than the one before; each keypoint is described on its own level.
+    #[arg(long, value_name = "LEVELS[:FACTOR]", value_parser = parse_pyramid)]
+    pub pyramid: Option<Pyramid>,
+}
+
+/// Which matches are kept.
+#[derive(Debug, Args)]
+pub struct MatchingArgs {
+    /// Lowe's ratio test: keep a match only if best < RATIO x second best (0 < RATIO <= 1).
+    #[arg(long, default_value_t = 0.8, value_parser = parse_ratio)]
+    pub ratio: f32,
+    /// Turn the ratio test off.
+    #[arg(long, conflicts_with = "ratio")]
+    pub no_ratio: bool,
+    /// Keep matches that are not mutual nearest neighbours.
+    #[arg(long)]
+    pub no_cross_check: bool,
+    /// Drop matches farther than this many bits.
+    #[arg(long, value_name = "BITS")]
+    pub max_distance: Option<u32>,
+}
+
+/// How matches are checked against a ground-truth homography.
+#[derive(Debug, Args)]
+pub struct CheckArgs {
+    /// A match is an inlier if its reprojection error is at most this many pixels.
+    #[arg(long, default_value_t = 3.0, value_name = "PIXELS", value_parser = parse_tolerance)]
+    pub inlier_px: f64,
+}
+
+/// How the picture of the matches is drawn.
+#[derive(Debug, Args)]
+pub struct DrawArgs {
+    /// Draw lines for at most this many matches, spread evenly (every match still gets its circles).
+    #[arg(long, default_value_t = 150, value_name = "N")]
+    pub max_lines: usize,
+}
+
+fn parse_positive(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(0) => Err("must be at least 1".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
+fn parse_bits(s: &str) -> Result<usize, String> {
+    let bits = s.parse::<usize>().map_err(|e| e.to_string())?;
+    DescriptorWidth::from_bits(bits)
+        .map(DescriptorWidth::bits)
+        .map_err(|_| "must be a multiple of 8 between 8 and 512".into())
+}
+
+/// `LEVELS` or `LEVELS:FACTOR`; the ranges are checked with the keypoint size by the library.
+fn parse_pyramid(s: &str) -> Result<Pyramid, String> {
+    let (levels, factor) = s.split_once(':').unwrap_or((s, "2"));
+    let levels = levels
+        .parse::<usize>()
+        .map_err(|e| format!("LEVELS: {e}"))?;
+    let scale_factor = factor.parse::<f32>().map_err(|e| format!("FACTOR: {e}"))?;
+    let pyramid = Pyramid {
+        levels,
+        scale_factor,
+    };
+    pyramid
+        .validate(clatch::KeyPoint::DEFAULT_SIZE)
+        .map_err(|e| e.to_string())?;
+    Ok(pyramid)
+}
+
+fn parse_ratio(s: &str) -> Result<f32, String> {
+    let ratio = s.parse::<f32>().map_err(|e| e.to_string())?;
+    if ratio.is_finite() && ratio > 0.0 && ratio <= 1.0 {
+        Ok(ratio)
+    } else {
+        Err("must be a number in (0, 1]".into())
+    }
+}
+
+fn parse_tolerance(s: &str) -> Result<f64, String> {
+    let px = s.parse::<f64>().map_err(|e| e.to_string())?;
+    if px.is_finite() && px >= 0.0 {
+        Ok(px)
+    } else {
+        Err("must be a finite number of pixels, at least 0".into())
+    }
+}
+
+impl BackendArgs {
+    /// The backend asked for; `cuda` gives the library's typed error when it cannot exist here.
+    pub fn resolve(&self) -> Result<Backend, CliError> {
+        match self.backend {
+            BackendChoice::Auto => Ok(Backend::auto()),
+            BackendChoice::Cpu => Ok(Backend::Cpu),
+            BackendChoice::Cuda => {
+                let backend = Backend::Cuda {
+                    device: self.device,
+                };
+                backend.ensure_available()?;
+                Ok(backend)
+            }
+        }
+    }
+}
+
+impl DetectArgs {
+    /// Detector and descriptor configuration.
+    pub fn config(&self) -> Result<ExtractorConfig, CliError> {
+        Ok(ExtractorConfig {
+            detector: DetectorConfig {
+                threshold: self.threshold,
+                max_keypoints: self.max_keypoints,
+                ..DetectorConfig::default()
+            },
+            descriptor: DescriptorConfig {
+                width: DescriptorWidth::from_bits(self.bits)?,
+                weights: PatchWeights::default(),
+            },
+            pyramid: self.pyramid,
+        })
+    }
+}
+
+impl MatchingArgs {
+    /// Matcher configuration.
+    pub fn config(&self) -> MatchConfig {
+        MatchConfig {
+            ratio: (!self.no_ratio).then_some(self.ratio),
+            cross_check: !self.no_cross_check,
+            max_distance: self.max_distance,
+        }
+    }
+}
+
+/// Everything the pipeline needs, from the shared flags.
+pub fn settings(
+    backend: &BackendArgs,
+    detect: &DetectArgs,
+    matching: Option<&MatchingArgs>,
+) -> Result<Settings, CliError> {
+    Ok(Settings {
+        backend: backend.resolve()?,
+        extractor: detect.config()?,
+        matching: matching.map(MatchingArgs::config).unwrap_or_default(),
+        opencv_latch: None,
+    })
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Demo(args) => demo::main(&args),
+        Command::Match(args) => match_cmd::main(&args),
+        Command::Extract(args) => extract::main(&args),
+        Command::Colmap(args) => colmap_cmd::main(&args),
+        Command::Eval(args) => eval::main(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("clatch: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn cli_definition_is_consistent() {
+        Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn bad_flag_values_are_rejected_by_the_parser() {
+        for args in [
+            &["clatch", "demo", "--ratio", "1.5"][..],
+            &["clatch", "demo", "--ratio", "nan"],
+            &["clatch", "demo", "--threshold", "0"],
+            &["clatch", "demo", "--threshold", "300"],
+            &["clatch", "demo", "--bits", "100"],
+            &["clatch", "demo", "--max-keypoints", "0"],
+            &["clatch", "demo", "--backend", "tpu"],
+            &["clatch", "demo", "--pyramid", "0"],
+            &["clatch", "demo", "--pyramid", "6"],
+            &["clatch", "demo", "--pyramid", "3:1"],
+            &["clatch", "demo", "--pyramid", "3:2.5"],
+            &["clatch", "demo", "--pyramid", "3:x"],
+            &["clatch", "demo", "--pyramid", "3:"],
+            &["clatch", "match", "only-one.png"],
+            &["clatch", "extract", "img.png"],
+            &["clatch", "demo", "--ratio", "0.7", "--no-ratio"],
+            &[
+                "clatch",
+                "extract",
+                "a.png",
+                "-o",
+                "a",
+                "--latch-bytes",
+                "64",
+            ],
+            &[
+                "clatch",
+                "extract",
+                "a.png",
+                "-o",
+                "a",
+                "--opencv-latch",
+                "--bits",
+                "256",
+            ],
+        ] {
+            assert!(Cli::try_parse_from(args).is_err(), "{args:?} should fail");
+        }
+        let ok = Cli::try_parse_from(["clatch", "demo", "--bits", "256", "--no-ratio"]).unwrap();
+        let Command::Demo(demo) = ok.command else {
+            panic!("parsed the wrong subcommand")
+        };
+        assert_eq!(demo.detect.bits, 256);
+        assert_eq!(demo.detect.pyramid, None);
+        let parse = |arg: &str| {
+            let Command::Demo(demo) = Cli::try_parse_from(["clatch", "demo", "--pyramid", arg])
+                .unwrap()
+                .command
+            else {
+                panic!("parsed the wrong subcommand")
+            };
+            demo.detect.config().unwrap().pyramid.unwrap()
+        };
+        assert_eq!(
+            (parse("3"), parse("8:1.2")),
+            (
+                Pyramid {
+                    levels: 3,
+                    scale_factor: 2.0
+                },
+                Pyramid {
+                    levels: 8,
+                    scale_factor: 1.2
+                }
+            )
+        );
+        assert_eq!(demo.matching.config().ratio, None);
+        let parse = |extra: &[&str]| {
+            let args = [&["clatch", "extract", "a.png", "-o", "a"][..], extra].concat();
+            let Command::Extract(extract) = Cli::try_parse_from(args).unwrap().command else {
+                panic!("parsed the wrong subcommand")
+            };
+            extract.opencv.latch()
+        };
+        assert_eq!(parse(&[]).unwrap(), None);
+        assert_eq!(
+            parse(&["--opencv-latch"]).unwrap(),
+            Some(OpencvLatch::default())
+        );
+        assert_eq!(
+            parse(&[
+                "--opencv-latch",
+                "--latch-bytes",
+                "64",
+                "--latch-no-rotation",
+                "--latch-sigma",
+                "0"
+            ])
+            .unwrap(),
+            Some(OpencvLatch::new(64, false, 3, 0.0).unwrap())
+        );
+        assert!(parse(&["--opencv-latch", "--latch-bytes", "3"]).is_err());
+    }
+
+    #[cfg(not(feature = "cuda"))]
+    #[test]
+    fn cuda_without_the_feature_is_a_typed_error() {
+        let args = BackendArgs {
+            backend: BackendChoice::Cuda,
+            device: 0,
+        };
+        assert!(matches!(
+            args.resolve(),
+            Err(CliError::Clatch(clatch::Error::BackendUnavailable { .. }))
+        ));
+    }
+}

@@ -1,0 +1,173 @@
+//! The CUDA backend's stand-in when clatch is built without its `cuda` feature.
+//!
+//! It has the same public types as the real `cuda` module, so code that uses streams compiles in every
+//! build; [`GpuStream::new`] (like `Backend::Cuda` itself) then fails with
+//! [`crate::Error::BackendUnavailable`]. None of these types has a value, so none of their methods can
+//! run, and the crate-internal entry points below take a device that cannot exist.
+
+use std::convert::Infallible;
+use std::sync::Arc;
+
+use crate::backend::{CUDA_NOT_BUILT as NOT_BUILT, cuda_unavailable};
+use crate::describe::opencv::{OpencvLatch, Placed};
+use crate::describe::{Described, DescriptorConfig};
+use crate::descriptor::DescriptorSet;
+use crate::detect::DetectorConfig;
+use crate::error::Result;
+use crate::features::Features;
+use crate::gray_view::GrayView;
+use crate::keypoint::KeyPoint;
+use crate::matching::{KnnMatches, Match, MatchConfig};
+use crate::pyramid::Pyramid;
+
+pub use crate::matching::GPU_MAX_K as MAX_K;
+
+/// A CUDA stream owned by clatch, on one device. Without the `cuda` feature none can be created.
+#[derive(Debug, Clone)]
+pub struct GpuStream {
+    never: Infallible,
+}
+
+impl GpuStream {
+    /// A new stream on CUDA device `ordinal`: always [`crate::Error::BackendUnavailable`] in this
+    /// build.
+    pub fn new(ordinal: usize) -> Result<Self> {
+        Err(cuda_unavailable(ordinal, NOT_BUILT))
+    }
+
+    /// The device ordinal.
+    pub fn ordinal(&self) -> usize {
+        match self.never {}
+    }
+
+    /// Blocks until everything queued so far has run.
+    pub fn synchronize(&self) -> Result<()> {
+        match self.never {}
+    }
+
+    pub(crate) fn check_device(&self, _device: usize) -> Result<()> {
+        match self.never {}
+    }
+}
+
+/// Features being computed on a stream (none in this build).
+#[derive(Debug)]
+pub struct PendingFeatures {
+    never: Infallible,
+}
+
+impl PendingFeatures {
+    /// True once the device has finished what was queued.
+    pub fn is_ready(&self) -> bool {
+        match self.never {}
+    }
+
+    /// Waits for the device and copies the features back.
+    pub fn wait(self) -> Result<Features> {
+        match self.never {}
+    }
+}
+
+/// Matches being computed on a stream (none in this build).
+#[derive(Debug)]
+pub struct PendingMatches {
+    never: Infallible,
+}
+
+impl PendingMatches {
+    /// True once the device has finished matching.
+    pub fn is_ready(&self) -> bool {
+        match self.never {}
+    }
+
+    /// Waits for the device and copies the kept matches back (in query order).
+    pub fn wait(self) -> Result<Vec<Match>> {
+        match self.never {}
+    }
+}
+
+/// A loaded device: none exists in this build.
+#[derive(Debug)]
+pub(crate) enum GpuDevice {}
+
+pub(crate) fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
+    Err(cuda_unavailable(ordinal, NOT_BUILT))
+}
+
+pub(crate) fn detect(dev: &GpuDevice, _: &GrayView, _: &DetectorConfig) -> Result<Vec<KeyPoint>> {
+    match *dev {}
+}
+
+pub(crate) fn describe(
+    dev: &GpuDevice,
+    _: &GrayView,
+    _: &[KeyPoint],
+    _: &DescriptorConfig,
+) -> Result<Described> {
+    match *dev {}
+}
+
+pub(crate) fn describe_opencv(
+    dev: &GpuDevice,
+    _: &GrayView,
+    _: &OpencvLatch,
+    _: Placed,
+) -> Result<Described> {
+    match *dev {}
+}
+
+pub(crate) fn pyramid_detect(
+    dev: &GpuDevice,
+    _: &GrayView,
+    _: &DetectorConfig,
+    _: &Pyramid,
+) -> Result<Vec<KeyPoint>> {
+    match *dev {}
+}
+
+pub(crate) fn pyramid_detect_and_describe(
+    dev: &GpuDevice,
+    _: &GrayView,
+    _: &DetectorConfig,
+    _: &DescriptorConfig,
+    _: &Pyramid,
+) -> Result<Features> {
+    match *dev {}
+}
+
+pub(crate) fn knn(
+    dev: &GpuDevice,
+    _: &DescriptorSet,
+    _: &DescriptorSet,
+    _: usize,
+) -> Result<KnnMatches> {
+    match *dev {}
+}
+
+pub(crate) fn match_descriptors(
+    dev: &GpuDevice,
+    _: &DescriptorSet,
+    _: &DescriptorSet,
+    _: &MatchConfig,
+) -> Result<Vec<Match>> {
+    match *dev {}
+}
+
+pub(crate) fn detect_and_describe_async(
+    stream: &GpuStream,
+    _: &GrayView,
+    _: &DetectorConfig,
+    _: &DescriptorConfig,
+    _: Option<&Pyramid>,
+) -> Result<PendingFeatures> {
+    match stream.never {}
+}
+
+pub(crate) fn match_async(
+    stream: &GpuStream,
+    _: &DescriptorSet,
+    _: &DescriptorSet,
+    _: &MatchConfig,
+) -> Result<PendingMatches> {
+    match stream.never {}
+}

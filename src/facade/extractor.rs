@@ -1,0 +1,242 @@
+//! Detection and description behind one backend-independent interface.
+
+use crate::backend::Backend;
+use crate::cuda::{self, GpuStream, PendingFeatures};
+use crate::describe::opencv::{self, OpencvLatch};
+use crate::describe::{self, DescriptorConfig, WINDOW};
+use crate::detect::{self, DetectorConfig};
+use crate::error::{Error, Result};
+use crate::features::Features;
+use crate::gray_view::GrayView;
+use crate::keypoint::KeyPoint;
+use crate::pyramid::{self, Pyramid};
+
+/// Settings of an [`Extractor`].
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct ExtractorConfig {
+    /// FAST detector settings.
+    pub detector: DetectorConfig,
+    /// CLATCH descriptor settings.
+    pub descriptor: DescriptorConfig,
+    /// Multi-scale detection over an image pyramid (see [`Pyramid`]); `None` (the default) detects on
+    /// the full-resolution image only.
+    pub pyramid: Option<Pyramid>,
+}
+
+/// Finds keypoints and computes their CLATCH descriptors.
+///
+/// An `Extractor` is cheap to clone, `Send` and `Sync`: share one across threads.
+///
+/// ```
+/// use clatch::{Backend, Extractor, ExtractorConfig, GrayView};
+///
+/// let pixels = clatch::synthetic::rectangles(320, 240, 1);
+/// let image = GrayView::new(&pixels, 320, 240, 320)?;
+/// let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+/// let features = extractor.detect_and_describe(&image)?;
+/// assert_eq!(features.keypoints.len(), features.descriptors.len());
+/// # Ok::<(), clatch::Error>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Extractor {
+    backend: Backend,
+    config: ExtractorConfig,
+}
+
+impl Extractor {
+    /// Validates the configuration and the backend.
+    pub fn new(backend: Backend, config: ExtractorConfig) -> Result<Self> {
+        config.detector.validate()?;
+        if let Some(p) = &config.pyramid {
+            p.validate(config.detector.keypoint_size)?;
+        }
+        backend.ensure_available()?;
+        Ok(Self { backend, config })
+    }
+
+    /// The backend this extractor runs on.
+    pub fn backend(&self) -> Backend {
+        self.backend
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ExtractorConfig {
+        &self.config
+    }
+
+    fn check_image(image: &GrayView) -> Result<()> {
+        if image.width() < WINDOW || image.height() < WINDOW {
+            return Err(Error::ImageTooSmall {
+                width: image.width(),
+                height: image.height(),
+                min: WINDOW,
+            });
+        }
+        Ok(())
+    }
+
+    /// FAST keypoints with orientation, strongest first (the exact rules: [`crate::numerics`],
+    /// section 3). Every keypoint returned has a window that fits, so [`Extractor::describe`] skips
+    /// none of them.
+    ///
+    /// With a [`Pyramid`], keypoints of every level in level-0 coordinates.
+    pub fn detect(&self, image: &GrayView) -> Result<Vec<KeyPoint>> {
+        Self::check_image(image)?;
+        if let Some(p) = &self.config.pyramid {
+            return self.detect_pyramid(image, p);
+        }
+        match self.backend {
+            Backend::Cpu => Ok(detect::cpu::detect(image, &self.config.detector)),
+            Backend::Cuda { device } => {
+                cuda::detect(&*cuda::device(device)?, image, &self.config.detector)
+            }
+        }
+    }
+
+    /// Descriptors of caller-supplied keypoints. Keypoints whose window leaves the image are not
+    /// described and are listed in [`Features::skipped`]; [`Features::keypoint_index`] maps each
+    /// descriptor row to its input keypoint. An empty keypoint list gives an empty result.
+    pub fn describe(&self, image: &GrayView, keypoints: &[KeyPoint]) -> Result<Features> {
+        Self::check_image(image)?;
+        describe::validate_keypoints(keypoints, image.width(), image.height())?;
+        let described = match self.backend {
+            Backend::Cpu => describe::cpu::describe(image, keypoints, &self.config.descriptor),
+            Backend::Cuda { device } => cuda::describe(
+                &*cuda::device(device)?,
+                image,
+                keypoints,
+                &self.config.descriptor,
+            )?,
+        };
+        Ok(Features::of_input(keypoints, described))
+    }
+
+    /// Describes `keypoints` as OpenCV's LATCH does (`cv2.xfeatures2d.LATCH_create(...).compute`,
+    /// settings in `latch`; this extractor's descriptor settings are not used). The keypoint `size`,
+    /// `response` and `octave` are ignored (as by OpenCV). Keypoints OpenCV drops at the border, and
+    /// those it would read outside the image for, are listed in [`Features::skipped`].
+    /// [`crate::DescriptorSet::to_opencv_bytes`] of the result equals cv2's descriptor rows.
+    ///
+    /// ```
+    /// use clatch::{Backend, Extractor, ExtractorConfig, GrayView, KeyPoint, OpencvLatch};
+    ///
+    /// let pixels = clatch::synthetic::noise(120, 100, 1);
+    /// let image = GrayView::new(&pixels, 120, 100, 120)?;
+    /// let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+    /// // OpenCV's defaults: 32 bytes, rotation invariance, 7x7 patches, sigma 2.
+    /// let latch = OpencvLatch::new(32, true, 3, 2.0)?;
+    /// let keypoints = [KeyPoint::new(60.0, 50.0).with_angle(30.0), KeyPoint::new(5.0, 5.0)];
+    /// let described = extractor.describe_opencv(&latch, &image, &keypoints)?;
+    /// assert_eq!(described.keypoint_index, [0]); // the second is too close to the border
+    /// let rows: Vec<u8> = described.descriptors.to_opencv_bytes(); // what cv2's compute returns
+    /// assert_eq!(rows.len(), 32);
+    /// # Ok::<(), clatch::Error>(())
+    /// ```
+    pub fn describe_opencv(
+        &self,
+        latch: &OpencvLatch,
+        image: &GrayView,
+        keypoints: &[KeyPoint],
+    ) -> Result<Features> {
+        let placed = latch.place(image, keypoints)?;
+        let described = match self.backend {
+            Backend::Cpu => opencv::cpu::describe(image, keypoints, latch, placed),
+            Backend::Cuda { device } => {
+                cuda::describe_opencv(&*cuda::device(device)?, image, latch, placed)?
+            }
+        };
+        Ok(Features::of_input(keypoints, described))
+    }
+
+    fn detect_pyramid(&self, image: &GrayView, p: &Pyramid) -> Result<Vec<KeyPoint>> {
+        match self.backend {
+            Backend::Cpu => Ok(pyramid::cpu::detect(image, &self.config.detector, p)),
+            Backend::Cuda { device } => {
+                cuda::pyramid_detect(&*cuda::device(device)?, image, &self.config.detector, p)
+            }
+        }
+    }
+
+    /// Detects keypoints and describes them. On the GPU the image is uploaded once and description
+    /// follows detection on the device with no host round trip.
+    ///
+    /// With a [`Pyramid`], each keypoint is described on its own level (its window `size` pixels of
+    /// level 0, sampled from the downscaled level), so [`Extractor::describe`] of the returned
+    /// keypoints, which samples level 0, gives the same descriptors only for level-0 keypoints.
+    pub fn detect_and_describe(&self, image: &GrayView) -> Result<Features> {
+        if let Some(p) = &self.config.pyramid {
+            Self::check_image(image)?;
+            return match self.backend {
+                Backend::Cpu => pyramid::cpu::detect_and_describe(
+                    image,
+                    &self.config.detector,
+                    &self.config.descriptor,
+                    p,
+                ),
+                Backend::Cuda { device } => cuda::pyramid_detect_and_describe(
+                    &*cuda::device(device)?,
+                    image,
+                    &self.config.detector,
+                    &self.config.descriptor,
+                    p,
+                ),
+            };
+        }
+        match self.backend {
+            Backend::Cpu => {
+                let keypoints = self.detect(image)?;
+                self.describe(image, &keypoints)
+            }
+            Backend::Cuda { device } => self
+                .detect_and_describe_async(&GpuStream::new(device)?, image)?
+                .wait(),
+        }
+    }
+
+    /// Queues detection and description of `image` on `stream` and returns at once; the result's
+    /// `wait` gives exactly what [`Extractor::detect_and_describe`] gives. With one stream per image,
+    /// several images are in flight at once (see [`GpuStream`]). The backend must be
+    /// `Backend::Cuda` on the stream's device ([`Error::InvalidConfig`] otherwise). With a [`Pyramid`], the levels and their detection are
+    /// queued; the top-N over the levels and the description on each level run in `wait`.
+    ///
+    /// ```no_run
+    /// # fn main() -> clatch::Result<()> {
+    /// use clatch::{Backend, Extractor, ExtractorConfig, GrayView, cuda::GpuStream};
+    /// let frames: Vec<Vec<u8>> = vec![vec![0; 640 * 480]; 8];
+    /// let extractor = Extractor::new(Backend::Cuda { device: 0 }, ExtractorConfig::default())?;
+    /// let streams: Vec<GpuStream> = (0..4).map(|_| GpuStream::new(0)).collect::<Result<_, _>>()?;
+    /// let pending: Vec<_> = frames
+    ///     .iter()
+    ///     .zip(streams.iter().cycle())
+    ///     .map(|(f, s)| extractor.detect_and_describe_async(s, &GrayView::new(f, 640, 480, 640)?))
+    ///     .collect::<Result<_, _>>()?;
+    /// for p in pending {
+    ///     let features = p.wait()?;
+    /// }
+    /// # Ok(()) }
+    /// ```
+    pub fn detect_and_describe_async(
+        &self,
+        stream: &GpuStream,
+        image: &GrayView,
+    ) -> Result<PendingFeatures> {
+        Self::check_image(image)?;
+        match self.backend {
+            Backend::Cuda { device } => {
+                stream.check_device(device)?;
+                cuda::detect_and_describe_async(
+                    stream,
+                    image,
+                    &self.config.detector,
+                    &self.config.descriptor,
+                    self.config.pyramid.as_ref(),
+                )
+            }
+            Backend::Cpu => Err(Error::InvalidConfig {
+                field: "backend",
+                value: "cpu".into(),
+                reason: "asynchronous extraction runs on a CUDA backend",
+            }),
+        }
+    }
+}

@@ -1,0 +1,88 @@
+//! Data parallelism for the CPU backend: rayon with the `cpu` feature, plain iterators without it.
+//!
+//! Every parallel loop in the crate writes disjoint outputs or collects in input order, so both give
+//! the same results; only the speed differs. Without `cpu` the stand-ins below give the few rayon
+//! methods the crate uses to ordinary iterators, so the loops read the same either way.
+
+#[cfg(feature = "cpu")]
+pub(crate) use rayon::prelude::*;
+
+#[cfg(not(feature = "cpu"))]
+pub(crate) use sequential::*;
+
+/// How many threads a CPU call uses.
+pub(crate) fn threads() -> usize {
+    #[cfg(feature = "cpu")]
+    return rayon::current_num_threads();
+    #[cfg(not(feature = "cpu"))]
+    1
+}
+
+#[cfg(not(feature = "cpu"))]
+mod sequential {
+    use std::ops::Range;
+    use std::slice::{ChunksExactMut, ChunksMut, Iter};
+
+    pub(crate) trait ParallelSlice<T> {
+        fn par_iter(&self) -> Iter<'_, T>;
+    }
+
+    impl<T> ParallelSlice<T> for [T] {
+        fn par_iter(&self) -> Iter<'_, T> {
+            self.iter()
+        }
+    }
+
+    pub(crate) trait ParallelSliceMut<T> {
+        fn par_chunks_mut(&mut self, size: usize) -> ChunksMut<'_, T>;
+        // Used by the CUDA backend's upload (`cuda` without `cpu`).
+        #[allow(dead_code)]
+        fn par_chunks_exact_mut(&mut self, size: usize) -> ChunksExactMut<'_, T>;
+    }
+
+    impl<T> ParallelSliceMut<T> for [T] {
+        fn par_chunks_mut(&mut self, size: usize) -> ChunksMut<'_, T> {
+            self.chunks_mut(size)
+        }
+        fn par_chunks_exact_mut(&mut self, size: usize) -> ChunksExactMut<'_, T> {
+            self.chunks_exact_mut(size)
+        }
+    }
+
+    pub(crate) trait IntoParallelIterator {
+        fn into_par_iter(self) -> Self;
+    }
+
+    impl IntoParallelIterator for Range<usize> {
+        fn into_par_iter(self) -> Self {
+            self
+        }
+    }
+
+    /// rayon's iterator methods that std spells differently.
+    pub(crate) trait ParallelIterator: Iterator + Sized {
+        fn flat_map_iter<U: IntoIterator, F: FnMut(Self::Item) -> U>(
+            self,
+            f: F,
+        ) -> std::iter::FlatMap<Self, U, F> {
+            self.flat_map(f)
+        }
+
+        fn for_each_init<S, I: FnMut() -> S, F: FnMut(&mut S, Self::Item)>(
+            self,
+            mut init: I,
+            mut op: F,
+        ) {
+            let mut state = init();
+            self.for_each(|item| op(&mut state, item));
+        }
+
+        // Used by the CUDA backend's upload (`cuda` without `cpu`).
+        #[allow(dead_code)]
+        fn with_min_len(self, _len: usize) -> Self {
+            self
+        }
+    }
+
+    impl<I: Iterator> ParallelIterator for I {}
+}

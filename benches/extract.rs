@@ -30,7 +30,7 @@ fn keypoints(n: usize) -> Vec<KeyPoint> {
 }
 
 fn extraction(c: &mut Criterion) {
-    let pixels = clatch::synthetic::rectangles(WIDTH, HEIGHT, 1);
+    let pixels = clatch::synthetic::rectangles(WIDTH, HEIGHT, 1).expect("synthetic image");
     let image = GrayView::new(&pixels, WIDTH, HEIGHT, WIDTH).unwrap();
     let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
 

@@ -41,7 +41,7 @@ fn main() {
         v[v.len() / 2] as f64
     };
     for (name, w, h) in [("1080p", 1920usize, 1080usize), ("5616x3744", 5616, 3744)] {
-        let pixels = clatch::synthetic::rectangles(w, h, 9);
+        let pixels = clatch::synthetic::rectangles(w, h, 9).expect("synthetic image");
         let image = GrayView::new(&pixels, w, h, w).unwrap();
         let dump = std::env::var_os("CLATCH_BENCH_DUMP").map(std::path::PathBuf::from);
         if let Some(dir) = &dump {

@@ -49,7 +49,7 @@ fn main() {
         )
     };
     for (name, w, h) in [("1080p", 1920usize, 1080usize), ("5616x3744", 5616, 3744)] {
-        let pixels = clatch::synthetic::rectangles(w, h, 9);
+        let pixels = clatch::synthetic::rectangles(w, h, 9).expect("synthetic image");
         let image = GrayView::new(&pixels, w, h, w).unwrap();
         // The default threshold (20) finds ~1.7k (1080p) and ~2.3k (5616x3744) corners on this image;
         // threshold 2 also fires on its +-2 noise: 11.5k and 54k survivors, cut to 20k on the large one.
@@ -117,7 +117,7 @@ fn main() {
     // The pyramid option: whole calls (levels, detection per level, the host's top-N, description per
     // level, read-backs), default detector.
     let (w, h) = (1920usize, 1080usize);
-    let pixels = clatch::synthetic::rectangles(w, h, 9);
+    let pixels = clatch::synthetic::rectangles(w, h, 9).expect("synthetic image");
     let image = GrayView::new(&pixels, w, h, w).unwrap();
     for (levels, scale_factor) in [(1usize, 2.0f32), (3, 2.0), (8, 1.2)] {
         let config = ExtractorConfig {

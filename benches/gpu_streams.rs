@@ -24,7 +24,7 @@ fn main() {
     println!("device: {}", dev.name());
     let (w, h, n) = (1920usize, 1080usize, 8usize);
     let frames: Vec<Vec<u8>> = (0..n)
-        .map(|i| clatch::synthetic::rectangles(w, h, 70 + i as u64))
+        .map(|i| clatch::synthetic::rectangles(w, h, 70 + i as u64).expect("synthetic image"))
         .collect();
     let views: Vec<GrayView> = frames
         .iter()

@@ -27,7 +27,7 @@ fn backends() -> Vec<Backend> {
 }
 
 fn opencv_latch(c: &mut Criterion) {
-    let pixels = clatch::synthetic::rectangles(WIDTH, HEIGHT, 1);
+    let pixels = clatch::synthetic::rectangles(WIDTH, HEIGHT, 1).expect("synthetic image");
     let image = GrayView::new(&pixels, WIDTH, HEIGHT, WIDTH).unwrap();
     let mut rng = SplitMix64::new(2);
     // Inside OpenCV's 27-pixel border: every keypoint is described.

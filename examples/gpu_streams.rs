@@ -18,9 +18,9 @@ fn main() -> clatch::Result<()> {
         return Ok(());
     }
     let (w, h) = (1920, 1080);
-    let frames: Vec<Vec<u8>> = (0..8)
+    let frames = (0..8)
         .map(|i| clatch::synthetic::rectangles(w, h, i))
-        .collect();
+        .collect::<clatch::Result<Vec<Vec<u8>>>>()?;
     let extractor = Extractor::new(gpu, ExtractorConfig::default())?;
     let matcher = Matcher::new(gpu, MatchConfig::default())?;
     let streams = [GpuStream::new(0)?, GpuStream::new(0)?];

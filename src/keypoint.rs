@@ -13,7 +13,7 @@ pub struct KeyPoint {
     pub x: f32,
     /// Row of the keypoint centre, in pixels.
     pub y: f32,
-    /// Side of the descriptor window, in pixels (default [`DEFAULT_KEYPOINT_SIZE`]).
+    /// Side of the descriptor window, in pixels (default [`KeyPoint::DEFAULT_SIZE`]).
     pub size: f32,
     /// Orientation in degrees; the descriptor window is rotated by it.
     pub angle: f32,

@@ -1,4 +1,26 @@
 //! Deterministic synthetic images for tests, benches and examples (no files, no randomness crate).
+//!
+//! ```
+//! let pixels = clatch::synthetic::rectangles(320, 240, 7)?;
+//! let image = clatch::GrayView::new(&pixels, 320, 240, 320)?;
+//! assert!(clatch::synthetic::noise(40_000, 1, 0).is_err()); // wider than clatch::MAX_IMAGE_SIDE
+//! # Ok::<(), clatch::Error>(())
+//! ```
+
+use crate::error::{Error, Result};
+use crate::gray_view::MAX_IMAGE_SIDE;
+
+/// Refuses sides a [`crate::GrayView`] could not hold, so no size can overflow or exhaust memory.
+fn check_size(width: usize, height: usize) -> Result<()> {
+    if width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+        return Err(Error::ImageTooLarge {
+            width,
+            height,
+            max: MAX_IMAGE_SIDE,
+        });
+    }
+    Ok(())
+}
 
 /// A small, fast, reproducible generator (SplitMix64).
 #[derive(Clone, Debug)]
@@ -25,15 +47,19 @@ impl SplitMix64 {
     }
 }
 
-/// Uniform random pixels, row-major `width * height`.
-pub fn noise(width: usize, height: usize, seed: u64) -> Vec<u8> {
+/// Uniform random pixels, row-major `width * height`. Sides above [`crate::MAX_IMAGE_SIDE`] are
+/// [`Error::ImageTooLarge`].
+pub fn noise(width: usize, height: usize, seed: u64) -> Result<Vec<u8>> {
+    check_size(width, height)?;
     let mut rng = SplitMix64::new(seed);
-    (0..width * height).map(|_| rng.next_u64() as u8).collect()
+    Ok((0..width * height).map(|_| rng.next_u64() as u8).collect())
 }
 
 /// Overlapping axis-aligned rectangles of random gray levels on a mid-gray background, with a little
-/// noise: many FAST corners of varied strength, and textured enough for descriptors to differ.
-pub fn rectangles(width: usize, height: usize, seed: u64) -> Vec<u8> {
+/// noise: many FAST corners of varied strength, and textured enough for descriptors to differ. Sides
+/// above [`crate::MAX_IMAGE_SIDE`] are [`Error::ImageTooLarge`].
+pub fn rectangles(width: usize, height: usize, seed: u64) -> Result<Vec<u8>> {
+    check_size(width, height)?;
     let mut rng = SplitMix64::new(seed);
     let mut img = vec![128u8; width * height];
     let count = (width * height / 900).max(4);
@@ -52,5 +78,5 @@ pub fn rectangles(width: usize, height: usize, seed: u64) -> Vec<u8> {
             .saturating_add((rng.next_u64() % 5) as u8)
             .saturating_sub(2);
     }
-    img
+    Ok(img)
 }

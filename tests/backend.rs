@@ -50,7 +50,10 @@ fn asynchronous_calls_on_the_cpu_are_refused() {
         let image = clatch::GrayView::new(&pixels, 128, 128, 128).unwrap();
         assert!(matches!(
             cpu.detect_and_describe_async(&stream, &image),
-            Err(Error::InvalidConfig { field: "backend", .. })
+            Err(Error::InvalidConfig {
+                field: "backend",
+                ..
+            })
         ));
     }
 }

@@ -233,6 +233,10 @@ mod gpu {
     }
 
     fn noise_image(width: usize, height: usize, seed: u64) -> Gray {
-        Gray::new(clatch::synthetic::noise(width, height, seed), width, height)
+        Gray::new(
+            clatch::synthetic::noise(width, height, seed).expect("synthetic image"),
+            width,
+            height,
+        )
     }
 }

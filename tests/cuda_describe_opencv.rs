@@ -94,7 +94,11 @@ mod gpu {
     pub fn every_configuration() -> Result<(), Failed> {
         let images = [
             astronaut(),
-            Gray::new(clatch::synthetic::noise(640, 480, 1), 640, 480),
+            Gray::new(
+                clatch::synthetic::noise(640, 480, 1).expect("synthetic image"),
+                640,
+                480,
+            ),
             rectangles(800, 600, 2),
         ];
         let mut total = 0;
@@ -143,7 +147,11 @@ mod gpu {
     pub fn borders_and_patch_sizes() -> Result<(), Failed> {
         let mut total = 0;
         for (w, h) in [(200usize, 150usize), (201, 151), (49, 49), (60, 300)] {
-            let image = Gray::new(clatch::synthetic::noise(w, h, (w * h) as u64), w, h);
+            let image = Gray::new(
+                clatch::synthetic::noise(w, h, (w * h) as u64).expect("synthetic image"),
+                w,
+                h,
+            );
             for half in [0usize, 1, 3, 6, 24] {
                 // A quarter-pixel grid over both border zones of both axes, half pixels included.
                 let b = 24.0 + half as f32;

@@ -114,7 +114,11 @@ mod gpu {
     }
 
     fn noise(width: usize, height: usize, seed: u64) -> Gray {
-        Gray::new(clatch::synthetic::noise(width, height, seed), width, height)
+        Gray::new(
+            clatch::synthetic::noise(width, height, seed).expect("synthetic image"),
+            width,
+            height,
+        )
     }
 
     fn from_fn(width: usize, height: usize, f: impl Fn(usize, usize) -> u8) -> Gray {
@@ -141,7 +145,7 @@ mod gpu {
     /// A random 16x16 noise tile repeated: every score recurs every 16 pixels along a row and down a
     /// column, so equal scores must be ranked within rows and across rows.
     fn tiled(width: usize, height: usize, seed: u64) -> Gray {
-        let tile = clatch::synthetic::noise(16, 16, seed);
+        let tile = clatch::synthetic::noise(16, 16, seed).expect("synthetic image");
         from_fn(width, height, |x, y| tile[(y % 16) * 16 + x % 16])
     }
 

@@ -62,7 +62,8 @@ mod gpu {
     pub fn extreme_shapes() -> Result<(), Failed> {
         let max = clatch::MAX_IMAGE_SIDE;
         for (w, h) in [(max, 64), (64, max), (max, 300)] {
-            let pixels = clatch::synthetic::noise(w, h, (w * 7 + h) as u64);
+            let pixels =
+                clatch::synthetic::noise(w, h, (w * 7 + h) as u64).expect("synthetic image");
             let image = GrayView::new(&pixels, w, h, w)?;
             let mut rng = SplitMix64::new(3);
             let keypoints: Vec<KeyPoint> = (0..2000)

@@ -50,7 +50,11 @@ mod gpu {
             ("rectangles 333x517", rectangles(333, 517, 2)),
             (
                 "noise 1023x769",
-                Gray::new(clatch::synthetic::noise(1023, 769, 6), 1023, 769),
+                Gray::new(
+                    clatch::synthetic::noise(1023, 769, 6).expect("synthetic image"),
+                    1023,
+                    769,
+                ),
             ),
         ]
     }

@@ -11,7 +11,7 @@ fn extractor() -> Extractor {
 }
 
 fn image(width: usize, height: usize) -> Vec<u8> {
-    clatch::synthetic::noise(width, height, 5)
+    clatch::synthetic::noise(width, height, 5).expect("synthetic image")
 }
 
 fn width(bits: usize) -> DescriptorWidth {

@@ -324,7 +324,11 @@ fn astronaut_every_configuration() -> Result<(), Failed> {
 }
 
 fn random_images() -> Result<(), Failed> {
-    let noise = Gray::new(clatch::synthetic::noise(640, 480, 3), 640, 480);
+    let noise = Gray::new(
+        clatch::synthetic::noise(640, 480, 3).expect("synthetic image"),
+        640,
+        480,
+    );
     let blocks = rectangles(800, 600, 4);
     let keypoints_noise = random_keypoints(&noise, 6000, 5);
     let mut keypoints_blocks = fast_keypoints(&blocks);
@@ -368,7 +372,11 @@ fn rules_differ(angle: f32) -> bool {
 }
 
 fn angles() -> Result<(), Failed> {
-    let image = Gray::new(clatch::synthetic::noise(300, 300, 8), 300, 300);
+    let image = Gray::new(
+        clatch::synthetic::noise(300, 300, 8).expect("synthetic image"),
+        300,
+        300,
+    );
     // Every 0.01 degree in [-360, 360], then angles where a float cosf/sinf would give other bits.
     let mut angles: Vec<f32> = (-36_000..=36_000).map(|i| i as f32 / 100.0).collect();
     let mut telling = 0;
@@ -461,7 +469,11 @@ fn borders() -> Result<(), Failed> {
     // with even and odd sizes (the out-of-bounds case needs W - 28 even).
     let mut total = Tally::default();
     for (w, h, seed) in [(200usize, 150usize, 14u64), (201, 151, 15)] {
-        let image = Gray::new(clatch::synthetic::noise(w, h, seed), w, h);
+        let image = Gray::new(
+            clatch::synthetic::noise(w, h, seed).expect("synthetic image"),
+            w,
+            h,
+        );
         let mut keypoints = Vec::new();
         for half in [0usize, 3, 6] {
             let b = 24.0 + half as f32;

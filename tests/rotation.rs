@@ -124,7 +124,11 @@ fn images() -> Vec<(&'static str, Gray)> {
         ("rectangles", rectangles(300, 220, 11)),
         (
             "noise",
-            Gray::new(clatch::synthetic::noise(160, 200, 4), 160, 200),
+            Gray::new(
+                clatch::synthetic::noise(160, 200, 4).expect("synthetic image"),
+                160,
+                200,
+            ),
         ),
     ]
 }

@@ -222,7 +222,7 @@ mod tests {
     #[test]
     fn a_pyramid_extracts_in_one_stage_and_refuses_opencv_latch() {
         let (w, h) = (400, 300);
-        let pixels = clatch::synthetic::rectangles(w, h, 4);
+        let pixels = clatch::synthetic::rectangles(w, h, 4).expect("synthetic image");
         let img = GrayImage::from_raw(w as u32, h as u32, pixels.clone()).unwrap();
         let config = ExtractorConfig {
             pyramid: Some(clatch::Pyramid {
@@ -256,7 +256,7 @@ mod tests {
     #[test]
     fn an_image_matches_itself() {
         let (w, h) = (200, 160);
-        let pixels = clatch::synthetic::rectangles(w, h, 3);
+        let pixels = clatch::synthetic::rectangles(w, h, 3).expect("synthetic image");
         let img = GrayImage::from_raw(w as u32, h as u32, pixels).unwrap();
         let run = match_pair(
             &settings(),

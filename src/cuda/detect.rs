@@ -348,7 +348,7 @@ mod tests {
     #[test]
     fn capacity_covers_every_survivor_of_noise() {
         for (w, h) in [(64usize, 64usize), (97, 99), (120, 101), (200, 150)] {
-            let pixels = noise(w, h, (w * h) as u64);
+            let pixels = noise(w, h, (w * h) as u64).expect("synthetic image");
             let image = GrayView::new(&pixels, w, h, w).unwrap();
             let config = DetectorConfig {
                 threshold: 1,

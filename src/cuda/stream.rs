@@ -27,7 +27,8 @@ use crate::gray_view::GrayView;
 use crate::matching::{Match, MatchConfig};
 use crate::pyramid::Pyramid;
 
-/// A CUDA stream owned by clatch, on one device.
+/// A CUDA stream owned by clatch, on one device. `Send` and `Sync`: streams can be handed to worker
+/// threads; clones share the stream.
 #[derive(Debug, Clone)]
 pub struct GpuStream {
     dev: Arc<GpuDevice>,

@@ -139,7 +139,7 @@ mod tests {
     fn unit_frame_samples_pixels_exactly() {
         // size 64, angle 0, integer position: window pixel (u, v) is image pixel (x + u - 32, y + v - 32).
         let (w, h) = (100, 90);
-        let buf = crate::synthetic::noise(w, h, 3);
+        let buf = crate::synthetic::noise(w, h, 3).expect("synthetic image");
         let img = GrayView::new(&buf, w, h, w).unwrap();
         let frame = SamplingFrame::of(&KeyPoint::new(40.0, 45.0));
         assert!(frame.fits(w, h));

@@ -116,10 +116,10 @@ pub enum SkipReason {
     /// Part of its rotated, scaled window lies outside the image.
     WindowOutsideImage,
     /// OpenCV-compatible LATCH: OpenCV drops it too (its rounded position is within
-    /// `24 + half_ssd_size` pixels of an edge; see [`opencv`]).
+    /// `24 + half_ssd_size` pixels of an edge; see [`crate::opencv_compat`]).
     OpencvBorder,
     /// OpenCV-compatible LATCH: OpenCV keeps it but reads pixels outside the image for it (`x` or `y`
-    /// exactly `k + 0.5` next to the border; see [`opencv`]), so its OpenCV descriptor is undefined.
+    /// exactly `k + 0.5` next to the border; see [`crate::opencv_compat`]), so its OpenCV descriptor is undefined.
     OpencvReadsOutsideImage,
 }
 

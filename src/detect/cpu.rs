@@ -245,7 +245,7 @@ mod tests {
 
     #[test]
     fn top_n_is_by_score_then_raster_order() {
-        let buf = crate::synthetic::rectangles(200, 200, 7);
+        let buf = crate::synthetic::rectangles(200, 200, 7).expect("synthetic image");
         let img = GrayView::new(&buf, 200, 200, 200).unwrap();
         let all = detect(
             &img,

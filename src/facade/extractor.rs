@@ -30,7 +30,7 @@ pub struct ExtractorConfig {
 /// ```
 /// use clatch::{Backend, Extractor, ExtractorConfig, GrayView};
 ///
-/// let pixels = clatch::synthetic::rectangles(320, 240, 1);
+/// let pixels = clatch::synthetic::rectangles(320, 240, 1)?;
 /// let image = GrayView::new(&pixels, 320, 240, 320)?;
 /// let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
 /// let features = extractor.detect_and_describe(&image)?;
@@ -120,7 +120,7 @@ impl Extractor {
     /// ```
     /// use clatch::{Backend, Extractor, ExtractorConfig, GrayView, KeyPoint, OpencvLatch};
     ///
-    /// let pixels = clatch::synthetic::noise(120, 100, 1);
+    /// let pixels = clatch::synthetic::noise(120, 100, 1)?;
     /// let image = GrayView::new(&pixels, 120, 100, 120)?;
     /// let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
     /// // OpenCV's defaults: 32 bytes, rotation invariance, 7x7 patches, sigma 2.

@@ -47,7 +47,7 @@ pub const MAX_LEVELS: usize = 32;
 /// ```
 /// use clatch::{Backend, Extractor, ExtractorConfig, GrayView, Pyramid};
 ///
-/// let pixels = clatch::synthetic::rectangles(640, 480, 1);
+/// let pixels = clatch::synthetic::rectangles(640, 480, 1)?;
 /// let image = GrayView::new(&pixels, 640, 480, 640)?;
 /// let config = ExtractorConfig {
 ///     pyramid: Some(Pyramid { levels: 3, scale_factor: 2.0 }),

@@ -71,7 +71,7 @@ pub fn astronaut() -> Gray {
 /// `clatch::synthetic::rectangles` as a [`Gray`].
 pub fn rectangles(width: usize, height: usize, seed: u64) -> Gray {
     Gray::new(
-        clatch::synthetic::rectangles(width, height, seed),
+        clatch::synthetic::rectangles(width, height, seed).expect("synthetic image"),
         width,
         height,
     )

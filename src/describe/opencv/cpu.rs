@@ -139,7 +139,7 @@ mod tests {
     #[test]
     fn bits_equal_a_naive_recomputation() {
         let (w, h) = (160, 120);
-        let pixels = crate::synthetic::noise(w, h, 7);
+        let pixels = crate::synthetic::noise(w, h, 7).expect("synthetic image");
         let image = GrayView::new(&pixels, w, h, w).unwrap();
         let mut rng = crate::synthetic::SplitMix64::new(3);
         let keypoints: Vec<KeyPoint> = (0..60)
@@ -177,7 +177,7 @@ mod tests {
         // docs/opencv_compat.md: with size 64, angle 0, integer positions, the default 7x7 weights, and
         // OpenCV's rotation and blur off, CLATCH's window patches are OpenCV's 7x7 patches.
         let (w, h) = (200, 160);
-        let pixels = crate::synthetic::noise(w, h, 4);
+        let pixels = crate::synthetic::noise(w, h, 4).expect("synthetic image");
         let image = GrayView::new(&pixels, w, h, w).unwrap();
         let keypoints: Vec<KeyPoint> = (0..100)
             .map(|i| KeyPoint::new((40 + i % 120) as f32, (40 + i / 2 % 80) as f32))
@@ -198,7 +198,7 @@ mod tests {
     #[test]
     fn narrower_widths_are_prefixes() {
         let (w, h) = (100, 100);
-        let pixels = crate::synthetic::noise(w, h, 2);
+        let pixels = crate::synthetic::noise(w, h, 2).expect("synthetic image");
         let image = GrayView::new(&pixels, w, h, w).unwrap();
         let kps = [KeyPoint::new(50.0, 50.0).with_angle(-1.0)];
         let full = OpencvLatch::new(64, true, 3, 2.0)

@@ -83,7 +83,7 @@ pub struct OpencvLatch {
 
 impl OpencvLatch {
     /// Checks the settings: `bytes` in {1, 2, 4, 8, 16, 32, 64}, `half_ssd_size` at most
-    /// [`MAX_HALF_SSD_SIZE`], `sigma` finite (0: no blur; negative: OpenCV's binomial blur) and not one of
+    /// 24 (`MAX_HALF_SSD_SIZE`), `sigma` finite (0: no blur; negative: OpenCV's binomial blur) and not one of
     /// the (never seen) values whose fixed-point kernel lies at a rounding tie.
     pub fn new(
         bytes: usize,

@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# The GPU suite on the device machine (see tools/pack_gpu_suite.sh, which builds what it runs): every
+# GPU test binary, the library's unit tests, the sanitizers, the bench-only kernels, the stream example
+# and the command-line tool on the GPU. Logs go to $OUT: suite.txt (tests), sanitize.txt (summaries),
+# tools.txt (example, benches, CLI). The last lines printed are the summary.
+#     bash tools/gpu_suite.sh [tests|sanitize|all]     (default all; each part fits one 10-minute call)
+set -uo pipefail
+cd "$(dirname "$0")/.."
+O=${OUT:-/tmp/out}; mkdir -p "$O" .gpu/bin
+tar -xJf .gpu/suite.tar.xz -C .gpu/bin
+B=.gpu/bin
+part=${1:-all}
+summary=()
+if [ "$part" = tests ] || [ "$part" = all ]; then
+nvidia-smi --query-gpu=name,driver_version,clocks.max.sm,memory.total --format=csv > "$O/suite.txt" 2>&1
+for t in clatch_unit backend cuda_describe cuda_describe_opencv cuda_detect cuda_match cuda_pyramid cuda_faults cuda_async; do
+    echo "== $t" >> "$O/suite.txt"
+    start=$(date +%s)
+    timeout 400 "$B/$t" >> "$O/suite.txt" 2>&1; rc=$?
+    line=$(grep -E "^test result|passed.*failed" "$O/suite.txt" | tail -1)
+    summary+=("$t rc=$rc $(( $(date +%s) - start ))s: $line")
+done
+# The match kernels once more on the portable popcount path, and on PTX JIT instead of the fatbin.
+echo "== cuda_match popcount" >> "$O/suite.txt"
+CLATCH_MATCH_KERNEL=popcount timeout 300 "$B/cuda_match" small_ >> "$O/suite.txt" 2>&1
+summary+=("cuda_match small_ (popcount) rc=$?: $(grep -E '^test result' "$O/suite.txt" | tail -1)")
+echo "== cuda_describe PTX" >> "$O/suite.txt"
+CLATCH_FORCE_PTX=1 timeout 300 "$B/cuda_describe" describe_every_width >> "$O/suite.txt" 2>&1
+summary+=("cuda_describe every_width (PTX JIT) rc=$?: $(grep -E '^test result' "$O/suite.txt" | tail -1)")
+fi
+
+san() { # tool binary filter
+    echo "== $1 $2 $3" >> "$O/sanitize.txt"
+    timeout 240 compute-sanitizer --tool "$1" "$B/$2" "$3" > /tmp/san.txt 2>&1; local rc=$?
+    tail -4 /tmp/san.txt >> "$O/sanitize.txt"
+    summary+=("sanitizer $1 $2 $3 rc=$rc: $(grep -E 'ERROR SUMMARY|RACECHECK SUMMARY' /tmp/san.txt | tail -1)")
+}
+if [ "$part" = sanitize ] || [ "$part" = all ]; then
+for tool in memcheck racecheck initcheck synccheck; do san $tool cuda_match sanitizer_subset; done
+for tool in memcheck initcheck; do san $tool cuda_async eight_images_in_flight; done
+for tool in memcheck initcheck racecheck; do
+    san $tool cuda_describe describe_sizes_subpixel_and_borders
+    san $tool cuda_describe_opencv opencv_borders_and_patch_sizes
+done
+san memcheck cuda_detect detect_stage_by_stage
+
+{
+    echo "== gpu_streams example"; timeout 60 "$B/gpu_streams"; echo "rc $?"
+    echo "== clatch demo --backend cuda"; timeout 60 "$B/clatch" demo --backend cuda -o /tmp/demo.png; echo "rc $?"
+    echo "== bench gpu_detect"; timeout 120 "$B/bench_gpu_detect"; echo "rc $?"
+    echo "== bench gpu_match"; timeout 200 "$B/bench_gpu_match"; echo "rc $?"
+} > "$O/tools.txt" 2>&1
+summary+=("tools: $(grep -c '^rc 0' "$O/tools.txt") of 4 exited 0")
+fi
+printf '%s\n' "${summary[@]}" | tee "$O/summary.txt"

@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# Builds, here (no GPU needed), everything the GPU suite runs on the device machine and packs it into
+# .gpu/suite.tar.xz (git-ignored): the GPU test binaries (tests/cuda_*.rs), the library's unit tests and
+# tests/backend.rs with the `cuda` feature, the command-line tool, the gpu_streams example and the
+# gpu_detect and gpu_match benches (they load the bench-only kernels). Then, with the device tool:
+#     run: bash tools/gpu_suite.sh      carry: [".gpu"]
+# Needs NVCC (see the README's CUDA section) and libclang.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+mkdir -p .gpu && rm -rf .gpu/bin && mkdir -p .gpu/bin
+grep -qx '/.gpu/' .git/info/exclude 2>/dev/null || echo '/.gpu/' >> .git/info/exclude
+
+# Test binaries: their paths from cargo's JSON messages.
+cargo test -p clatch --features cuda --no-run --message-format=json 2>/dev/null \
+    | python3 -c '
+import json, sys, shutil
+for line in sys.stdin:
+    m = json.loads(line)
+    if m.get("reason") != "compiler-artifact" or not m.get("executable"):
+        continue
+    t = m["target"]
+    name = t["name"]
+    if t["kind"] == ["lib"]:
+        name = "clatch_unit"
+    elif not (name.startswith("cuda_") or name == "backend"):
+        continue
+    shutil.copy(m["executable"], ".gpu/bin/" + name)
+    print("packed", name)
+'
+cargo bench -p clatch --features cuda --no-run --message-format=json 2>/dev/null \
+    | python3 -c '
+import json, sys, shutil
+for line in sys.stdin:
+    m = json.loads(line)
+    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] in ("gpu_detect", "gpu_match"):
+        shutil.copy(m["executable"], ".gpu/bin/bench_" + m["target"]["name"])
+        print("packed bench", m["target"]["name"])
+'
+cargo build --release -p clatch-cli --features cuda
+cargo build --release -p clatch --features cuda --example gpu_streams
+cp target/release/clatch .gpu/bin/clatch
+cp target/release/examples/gpu_streams .gpu/bin/gpu_streams
+strip .gpu/bin/*
+tar -C .gpu/bin -cJf .gpu/suite.tar.xz .
+rm -rf .gpu/bin
+ls -la .gpu/suite.tar.xz

@@ -400,6 +400,31 @@ mod tests {
 
     use super::*;
 
+    /// Every entry point a file lists is in that file's PTX, and every kernel of the PTX is listed, so
+    /// a moved or renamed kernel fails here, on any machine, not at device start.
+    #[test]
+    fn kernel_lists_match_the_ptx() {
+        if ptx::STUB {
+            return;
+        }
+        #[cfg(feature = "internals")]
+        let files = KERNELS.iter().chain(BENCH_KERNELS);
+        #[cfg(not(feature = "internals"))]
+        let files = KERNELS.iter();
+        for file in files {
+            let mut entries: Vec<&str> = file
+                .ptx
+                .lines()
+                .filter_map(|l| l.trim().strip_prefix(".visible .entry "))
+                .map(|l| l.trim_end_matches('(').trim())
+                .collect();
+            let mut listed = file.names.to_vec();
+            entries.sort_unstable();
+            listed.sort_unstable();
+            assert_eq!(entries, listed, "{}", file.path);
+        }
+    }
+
     #[test]
     fn driver_errors_keep_the_driver_code_as_their_source() {
         let invalid = DriverError(sys::cudaError_enum::CUDA_ERROR_INVALID_VALUE);

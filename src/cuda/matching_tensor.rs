@@ -65,7 +65,6 @@ pub(crate) const KERNELS: &[&str] = &[
     "clatch_knn_tensor_b512_k2",
     "clatch_knn_tensor_mutual_b512_k1",
     "clatch_knn_tensor_mutual_b512_k2",
-    "clatch_mma_s8_rate",
 ];
 
 const THREADS: u32 = CLATCH_TENSOR_WARPS * 32;

@@ -81,13 +81,13 @@ pub(crate) fn quadrant_boundaries() -> &'static [[i64; 2]; BINS_PER_QUADRANT] {
 ///    (`b.x * dy - b.y * dx > 0`, a monotone test, so a binary search);
 /// 3. bin = `(quadrant * 720 + count) mod 2880`. A direction exactly on a half-bin edge rounds down.
 ///
-/// The zero vector has bin 0. `|dx|, |dy|` must stay below 2^31 (the products use `i64`... plus 2.30
-/// directions: below 2^33 in magnitude).
+/// The zero vector has bin 0. Every `i64` vector is accepted: the rotation and the products are
+/// computed in `i128`, so `-i64::MIN` cannot wrap (which made the rotation loop spin forever).
 pub fn direction_bin(dx: i64, dy: i64) -> usize {
     if dx == 0 && dy == 0 {
         return 0;
     }
-    let (mut x, mut y, mut quadrant) = (dx, dy, 0usize);
+    let (mut x, mut y, mut quadrant) = (dx as i128, dy as i128, 0usize);
     while !(x > 0 && y >= 0) {
         // Rotate by -90 degrees: (x, y) -> (y, -x).
         (x, y) = (y, -x);
@@ -98,7 +98,7 @@ pub fn direction_bin(dx: i64, dy: i64) -> usize {
     while lo < hi {
         let mid = (lo + hi) / 2;
         let [bx, by] = bounds[mid];
-        if (bx as i128) * (y as i128) - (by as i128) * (x as i128) > 0 {
+        if (bx as i128) * y - (by as i128) * x > 0 {
             lo = mid + 1;
         } else {
             hi = mid;
@@ -169,6 +169,15 @@ mod tests {
             }
         }
         assert!(checked > 3000);
+    }
+
+    #[test]
+    fn direction_bins_of_the_extreme_vectors_terminate() {
+        assert_eq!(direction_bin(i64::MIN, 0), 1440);
+        assert_eq!(direction_bin(0, i64::MIN), 2160);
+        assert_eq!(direction_bin(i64::MAX, i64::MAX), 360);
+        assert_eq!(direction_bin(i64::MIN, i64::MIN), 1800);
+        assert_eq!(direction_bin(i64::MAX, 0), 0);
     }
 
     #[test]

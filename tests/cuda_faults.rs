@@ -21,6 +21,10 @@ fn trials() -> Vec<Trial> {
         Trial::test("out_of_memory_is_typed_and_recoverable", gpu::out_of_memory),
         Trial::test("widest_and_tallest_images", gpu::extreme_shapes),
         Trial::test("many_threads_many_streams", gpu::many_threads),
+        Trial::test(
+            "every_allocation_site_fails_cleanly",
+            gpu::every_allocation_site,
+        ),
     ]
 }
 
@@ -56,6 +60,185 @@ mod gpu {
             return Err("describe after an out-of-memory error differs from the CPU".into());
         }
         println!("4 TiB request: DeviceOutOfMemory; context usable afterwards");
+        Ok(())
+    }
+
+    /// One call of the public API on the GPU, and the CPU's answer it must equal when it succeeds.
+    type Call<'a> = Box<dyn Fn(Backend) -> Result<String, Error> + 'a>;
+
+    /// Every public GPU path, each as a call whose result is summarised for comparison.
+    fn calls<'a>(
+        view: &'a GrayView<'a>,
+        keypoints: &'a [KeyPoint],
+    ) -> Vec<(&'static str, Call<'a>)> {
+        use clatch::{MatchConfig, Matcher, OpencvLatch, Pyramid, cuda::GpuStream};
+        let pyramid = ExtractorConfig {
+            pyramid: Some(Pyramid {
+                levels: 3,
+                scale_factor: 2.0,
+            }),
+            ..ExtractorConfig::default()
+        };
+        let features = Extractor::new(Backend::Cpu, ExtractorConfig::default())
+            .and_then(|e| e.detect_and_describe(view))
+            .expect("CPU features");
+        let d = features.descriptors;
+        let (q, t) = (d.clone(), d);
+        let q2 = q.clone();
+        let t2 = t.clone();
+        let q3 = q.clone();
+        let t3 = t.clone();
+        vec![
+            (
+                "detect_and_describe",
+                Box::new(move |b| {
+                    Ok(format!(
+                        "{:?}",
+                        Extractor::new(b, ExtractorConfig::default())?.detect_and_describe(view)?
+                    ))
+                }) as Call,
+            ),
+            (
+                "detect_and_describe (pyramid)",
+                Box::new(move |b| {
+                    Ok(format!(
+                        "{:?}",
+                        Extractor::new(b, pyramid.clone())?.detect_and_describe(view)?
+                    ))
+                }),
+            ),
+            (
+                "describe",
+                Box::new(move |b| {
+                    Ok(format!(
+                        "{:?}",
+                        Extractor::new(b, ExtractorConfig::default())?.describe(view, keypoints)?
+                    ))
+                }),
+            ),
+            (
+                "describe_opencv",
+                Box::new(move |b| {
+                    let e = Extractor::new(b, ExtractorConfig::default())?;
+                    Ok(format!(
+                        "{:?}",
+                        e.describe_opencv(&OpencvLatch::default(), view, keypoints)?
+                    ))
+                }),
+            ),
+            (
+                "knn",
+                Box::new(move |b| {
+                    Ok(format!(
+                        "{:?}",
+                        Matcher::new(b, MatchConfig::default())?.knn(&q, &t, 2)?
+                    ))
+                }),
+            ),
+            (
+                "match_descriptors",
+                Box::new(move |b| {
+                    Ok(format!(
+                        "{:?}",
+                        Matcher::new(b, MatchConfig::default())?.match_descriptors(&q2, &t2)?
+                    ))
+                }),
+            ),
+            (
+                "async extraction and matching",
+                Box::new(move |b| {
+                    let e = Extractor::new(b, ExtractorConfig::default())?;
+                    let m = Matcher::new(b, MatchConfig::default())?;
+                    if b == Backend::Cpu {
+                        return Ok(format!(
+                            "{:?} {:?}",
+                            e.detect_and_describe(view)?,
+                            m.match_descriptors(&q3, &t3)?
+                        ));
+                    }
+                    let stream = GpuStream::new(0)?;
+                    let f = e.detect_and_describe_async(&stream, view)?;
+                    let p = m.match_descriptors_async(&stream, &q3, &t3)?;
+                    Ok(format!("{:?} {:?}", f.wait()?, p.wait()?))
+                }),
+            ),
+        ]
+    }
+
+    /// Makes each device allocation of each public GPU path fail in turn: every failure is a typed
+    /// `DeviceOutOfMemory` naming its operation, the next call gives the CPU's answer, and after 1000
+    /// failed calls the device's free memory is back where it was.
+    pub fn every_allocation_site() -> Result<(), Failed> {
+        use clatch::cuda::hooks::{device_memory, fail_allocation};
+        let image = rectangles(640, 480, 9);
+        let view = image.view();
+        let keypoints: Vec<KeyPoint> = (0..300)
+            .map(|i| {
+                KeyPoint::new(
+                    40.0 + (i % 30) as f32 * 18.5,
+                    40.0 + (i / 30) as f32 * 40.25,
+                )
+                .with_angle(i as f32 * 7.0)
+            })
+            .collect();
+        let calls = calls(&view, &keypoints);
+        let mut sites_per_call = Vec::new();
+        for (name, call) in &calls {
+            let expected = call(Backend::Cpu)?;
+            let mut sites = Vec::new();
+            for n in 0.. {
+                fail_allocation(Some(n));
+                let result = call(GPU);
+                let injected = fail_allocation(None);
+                match (injected, result) {
+                    (true, Err(Error::DeviceOutOfMemory { operation, .. })) => {
+                        sites.push(operation)
+                    }
+                    (false, Ok(got)) if got == expected => break,
+                    (injected, other) => {
+                        return Err(format!(
+                            "{name}, allocation {n} (failure injected: {injected}): {:?}",
+                            other.map(|_| "a result that differs from the CPU's")
+                        )
+                        .into());
+                    }
+                }
+                if n > 200 {
+                    return Err(format!("{name}: more than 200 allocations").into());
+                }
+            }
+            println!(
+                "{name}: {} allocation sites fail cleanly: {sites:?}",
+                sites.len()
+            );
+            sites_per_call.push(sites.len());
+        }
+        // Memory: a warm round, then 1000 failed calls spread over every site.
+        for (_, call) in &calls {
+            call(GPU)?;
+        }
+        let (baseline, total) = device_memory(0)?;
+        let mut failed = 0;
+        while failed < 1000 {
+            for ((_, call), &sites) in calls.iter().zip(&sites_per_call) {
+                fail_allocation(Some(failed % sites.max(1)));
+                let result = call(GPU);
+                fail_allocation(None);
+                if result.is_err() {
+                    failed += 1;
+                }
+            }
+        }
+        for (_, call) in &calls {
+            call(GPU)?;
+        }
+        let (after, _) = device_memory(0)?;
+        println!(
+            "{failed} failed calls: free device memory {baseline} bytes before, {after} after (of {total})"
+        );
+        if after < baseline {
+            return Err(format!("device memory leaked: {} bytes", baseline - after).into());
+        }
         Ok(())
     }
 

@@ -4,83 +4,11 @@
 mod common;
 
 use clatch::synthetic::SplitMix64;
-use clatch::{Backend, DescriptorSet, DescriptorWidth, Match, MatchConfig, Matcher};
-use common::{flip_bits, match_configs, naive_hamming, random_set};
+use clatch::{Backend, DescriptorSet, DescriptorWidth, MatchConfig, Matcher};
+use common::reference::{naive_knn, naive_match, naive_match_sorted, naive_sorted};
+use common::{flip_bits, match_configs, random_set};
 
 const WIDTHS: [usize; 5] = [8, 64, 72, 256, 512];
-
-/// All `(distance, train)` pairs of every query, sorted: the reference kNN order.
-fn naive_sorted(query: &DescriptorSet, train: &DescriptorSet) -> Vec<Vec<(u32, u32)>> {
-    let bits = query.width().bits();
-    query
-        .rows()
-        .map(|q| {
-            let mut all: Vec<(u32, u32)> = train
-                .rows()
-                .enumerate()
-                .map(|(t, row)| (naive_hamming(q, row, bits), t as u32))
-                .collect();
-            all.sort();
-            all
-        })
-        .collect()
-}
-
-fn naive_knn(query: &DescriptorSet, train: &DescriptorSet, k: usize) -> Vec<Match> {
-    naive_sorted(query, train)
-        .into_iter()
-        .enumerate()
-        .flat_map(|(q, all)| {
-            all.into_iter().take(k).map(move |(distance, train)| Match {
-                query: q as u32,
-                train,
-                distance,
-            })
-        })
-        .collect()
-}
-
-/// The documented `match_descriptors` contract, written out directly.
-fn naive_match(query: &DescriptorSet, train: &DescriptorSet, config: &MatchConfig) -> Vec<Match> {
-    naive_match_sorted(
-        &naive_sorted(query, train),
-        &naive_sorted(train, query),
-        config,
-    )
-}
-
-/// [`naive_match`] from the sorted pair lists of both directions.
-fn naive_match_sorted(
-    forward: &[Vec<(u32, u32)>],
-    backward: &[Vec<(u32, u32)>],
-    config: &MatchConfig,
-) -> Vec<Match> {
-    let mut out = Vec::new();
-    for (q, all) in forward.iter().enumerate() {
-        let (d1, t) = all[0];
-        if let Some(ratio) = config.ratio {
-            let d2 = all[1].0;
-            let keep = (d1 as f32) < ratio * (d2 as f32);
-            if !keep {
-                continue;
-            }
-        }
-        if config.cross_check && backward[t as usize][0].1 != q as u32 {
-            continue;
-        }
-        if let Some(max) = config.max_distance
-            && d1 > max
-        {
-            continue;
-        }
-        out.push(Match {
-            query: q as u32,
-            train: t,
-            distance: d1,
-        });
-    }
-    out
-}
 
 fn cpu(config: MatchConfig) -> Matcher {
     Matcher::new(Backend::Cpu, config).unwrap()

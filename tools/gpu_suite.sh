@@ -4,6 +4,9 @@
 # and the command-line tool on the GPU. Logs go to $OUT: suite.txt (tests), sanitize.txt (summaries),
 # tools.txt (example, benches, CLI). The last lines printed are the summary.
 #     bash tools/gpu_suite.sh [tests|sanitize|all]     (default all; each part fits one 10-minute call)
+#     bash tools/gpu_suite.sh soak [SECONDS]            (tests/cuda_soak.rs for SECONDS, default 570)
+#     bash tools/gpu_suite.sh sanitize-all [TOOL...]    (every GPU test binary, whole, under each tool;
+#                                                       default memcheck racecheck initcheck synccheck)
 set -uo pipefail
 cd "$(dirname "$0")/.."
 O=${OUT:-/tmp/out}; mkdir -p "$O" .gpu/bin
@@ -13,7 +16,8 @@ part=${1:-all}
 summary=()
 if [ "$part" = tests ] || [ "$part" = all ]; then
 nvidia-smi --query-gpu=name,driver_version,clocks.max.sm,memory.total --format=csv > "$O/suite.txt" 2>&1
-for t in clatch_unit backend cuda_describe cuda_describe_opencv cuda_detect cuda_match cuda_pyramid cuda_faults cuda_async; do
+SUITES="cuda_describe cuda_describe_opencv cuda_detect cuda_match cuda_pyramid cuda_faults cuda_async cuda_soak"
+for t in clatch_unit backend $SUITES; do
     echo "== $t" >> "$O/suite.txt"
     start=$(date +%s)
     timeout 400 "$B/$t" >> "$O/suite.txt" 2>&1; rc=$?
@@ -51,5 +55,23 @@ san memcheck cuda_detect detect_stage_by_stage
     echo "== bench gpu_match"; timeout 200 "$B/bench_gpu_match"; echo "rc $?"
 } > "$O/tools.txt" 2>&1
 summary+=("tools: $(grep -c '^rc 0' "$O/tools.txt") of 4 exited 0")
+fi
+if [ "$part" = soak ]; then
+    echo "== cuda_soak ${2:-570} s" >> "$O/suite.txt"
+    CLATCH_SOAK_SECONDS=${2:-570} timeout 595 "$B/cuda_soak" --nocapture >> "$O/suite.txt" 2>&1
+    summary+=("cuda_soak ${2:-570} s rc=$?: $(grep -E 'extractions and matchings|^test result' "$O/suite.txt" | tail -2 | tr '\n' ' ')")
+fi
+if [ "$part" = sanitize-all ]; then
+    shift
+    tools=${*:-memcheck racecheck initcheck synccheck}
+    for tool in $tools; do
+        for t in ${SUITES/cuda_soak/}; do
+            start=$(date +%s)
+            echo "== $tool $t (whole)" >> "$O/sanitize.txt"
+            timeout 590 compute-sanitizer --tool "$tool" "$B/$t" > /tmp/san.txt 2>&1; rc=$?
+            grep -E "^test result|SUMMARY" /tmp/san.txt >> "$O/sanitize.txt"
+            summary+=("sanitizer $tool $t (whole) rc=$rc $(( $(date +%s) - start ))s: $(grep -E '^test result' /tmp/san.txt | tail -1 | cut -c1-60) $(grep -E 'ERROR SUMMARY|RACECHECK SUMMARY' /tmp/san.txt | tail -1)")
+        done
+    done
 fi
 printf '%s\n' "${summary[@]}" | tee "$O/summary.txt"

@@ -344,6 +344,8 @@ fn knn_with(
     segment_tiles: Option<usize>,
     kernel: Option<MatchKernel>,
 ) -> Result<KnnMatches> {
+    // The test hooks reach this without the façade: the same checks as `Matcher::knn`.
+    crate::matching::check_sets(query, train, k)?;
     check_k(k)?;
     check_rows(query, "query descriptors")?;
     check_rows(train, "gallery descriptors")?;

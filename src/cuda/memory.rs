@@ -11,6 +11,30 @@ use cudarc::driver::{
 use super::device::driver_error;
 use crate::error::{Error, Result};
 
+// With the `internals` feature, tests can make the `n`-th device allocation of a thread fail
+// ([`hooks::fail_allocation`]), so that every allocation site's error path runs on a real device.
+#[cfg(feature = "internals")]
+thread_local! {
+    static FAIL_AFTER: std::cell::Cell<Option<usize>> = const { std::cell::Cell::new(None) };
+}
+
+/// The failure injected at this allocation, if any (always none without the `internals` feature).
+fn injected_failure(operation: &str, bytes: usize) -> Result<()> {
+    #[cfg(feature = "internals")]
+    if let Some(remaining) = FAIL_AFTER.get() {
+        if remaining == 0 {
+            FAIL_AFTER.set(None);
+            return Err(Error::DeviceOutOfMemory {
+                operation: operation.to_string(),
+                bytes,
+            });
+        }
+        FAIL_AFTER.set(Some(remaining - 1));
+    }
+    let _ = (operation, bytes);
+    Ok(())
+}
+
 /// Adds the requested size to an out-of-memory error.
 fn with_bytes(error: Error, bytes: usize) -> Error {
     match error {
@@ -34,6 +58,7 @@ pub(crate) fn alloc_zeros<T: DeviceRepr + ValidAsZeroBits>(
             bytes,
         });
     }
+    injected_failure(operation, bytes)?;
     stream
         .alloc_zeros::<T>(len)
         .map_err(|e| with_bytes(driver_error(operation)(e), bytes))
@@ -45,6 +70,7 @@ pub(crate) fn upload<T: DeviceRepr>(
     data: &[T],
     operation: &str,
 ) -> Result<CudaSlice<T>> {
+    injected_failure(operation, size_of_val(data))?;
     stream
         .clone_htod(data)
         .map_err(|e| with_bytes(driver_error(operation)(e), size_of_val(data)))
@@ -82,6 +108,7 @@ pub(crate) fn upload_staged(
     operation: &str,
     fill: impl FnOnce(&mut [u8]),
 ) -> Result<CudaSlice<u8>> {
+    injected_failure(operation, len)?;
     let ctx = stream.context();
     let key = (ctx.ordinal(), len);
     let reused = pool()

@@ -56,25 +56,6 @@ impl Matcher {
         &self.config
     }
 
-    fn check_sets(query: &DescriptorSet, train: &DescriptorSet, k: usize) -> Result<()> {
-        if query.width() != train.width() {
-            return Err(Error::DescriptorWidthMismatch {
-                query_bits: query.width().bits(),
-                train_bits: train.width().bits(),
-            });
-        }
-        if train.is_empty() {
-            return Err(Error::EmptyGallery);
-        }
-        if k == 0 || k > train.len() {
-            return Err(Error::InvalidK {
-                k,
-                gallery: train.len(),
-            });
-        }
-        Ok(())
-    }
-
     /// The `k` nearest gallery descriptors of every query, nearest first, ties to the lowest index.
     /// An empty query set gives an empty result. The CUDA backend returns at most 8 neighbours per
     /// query ([`crate::cuda::MAX_K`]); a larger `k` is [`Error::KTooLargeForBackend`].
@@ -84,7 +65,7 @@ impl Matcher {
         train: &DescriptorSet,
         k: usize,
     ) -> Result<KnnMatches> {
-        Self::check_sets(query, train, k)?;
+        matching::check_sets(query, train, k)?;
         match self.backend {
             Backend::Cpu => Ok(matching::cpu::knn(query, train, k)),
             Backend::Cuda { device } => cuda::knn(&*cuda::device(device)?, query, train, k),
@@ -99,7 +80,7 @@ impl Matcher {
         train: &DescriptorSet,
     ) -> Result<Vec<Match>> {
         let k = if self.config.ratio.is_some() { 2 } else { 1 };
-        Self::check_sets(query, train, k)?;
+        matching::check_sets(query, train, k)?;
         match self.backend {
             Backend::Cpu => Ok(matching::cpu::match_descriptors(query, train, &self.config)),
             Backend::Cuda { device } => {
@@ -118,7 +99,7 @@ impl Matcher {
         train: &DescriptorSet,
     ) -> Result<PendingMatches> {
         let k = if self.config.ratio.is_some() { 2 } else { 1 };
-        Self::check_sets(query, train, k)?;
+        matching::check_sets(query, train, k)?;
         match self.backend {
             Backend::Cuda { device } => {
                 stream.check_device(device)?;

@@ -12,6 +12,9 @@
 
 pub mod cpu;
 
+use crate::descriptor::DescriptorSet;
+use crate::error::{Error, Result};
+
 /// Most neighbours per query the CUDA backend returns (`crate::cuda::MAX_K`; equal to
 /// `CLATCH_MATCH_MAX_K` of `kernels/clatch.h`, checked in the layout tests).
 pub const GPU_MAX_K: usize = 8;
@@ -109,4 +112,25 @@ impl KnnMatches {
         debug_assert!(k > 0 && matches.len().is_multiple_of(k));
         Self { k, matches }
     }
+}
+
+/// The checks every matching entry point makes before a backend runs: equal widths, a gallery, and
+/// `1 <= k <= gallery`.
+pub fn check_sets(query: &DescriptorSet, train: &DescriptorSet, k: usize) -> Result<()> {
+    if query.width() != train.width() {
+        return Err(Error::DescriptorWidthMismatch {
+            query_bits: query.width().bits(),
+            train_bits: train.width().bits(),
+        });
+    }
+    if train.is_empty() {
+        return Err(Error::EmptyGallery);
+    }
+    if k == 0 || k > train.len() {
+        return Err(Error::InvalidK {
+            k,
+            gallery: train.len(),
+        });
+    }
+    Ok(())
 }

@@ -134,9 +134,13 @@ impl Plan {
     }
 }
 
-/// `floor(n · 2^16 / step)`: a level's side from the previous level's.
+/// `floor(n · 2^16 / step)`: a level's side from the previous level's (0 for a step that is not
+/// positive: validated configurations never have one).
 pub fn downscaled(n: usize, step: i64) -> usize {
-    ((n as i64) << STEP_FRAC_BITS) as usize / step as usize
+    match usize::try_from(step) {
+        Ok(step) if step > 0 => (n << STEP_FRAC_BITS) / step,
+        _ => 0,
+    }
 }
 
 /// Where level pixel `index` samples the previous level, 16.16: `((2 index + 1) · step - 2^16) >> 1`.

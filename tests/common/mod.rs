@@ -3,6 +3,7 @@
 
 pub mod golden;
 pub mod gpu;
+pub mod reference;
 
 use clatch::synthetic::SplitMix64;
 use clatch::{DescriptorSet, DescriptorWidth, GrayView};

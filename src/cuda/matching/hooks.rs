@@ -60,6 +60,8 @@ pub fn match_descriptors_on(
     config: &MatchConfig,
     kernel: MatchKernel,
 ) -> Result<Vec<Match>> {
+    let k = if config.ratio.is_some() { 2 } else { 1 };
+    crate::matching::check_sets(query, train, k)?;
     check_rows(query, "query descriptors")?;
     check_rows(train, "gallery descriptors")?;
     if query.is_empty() {
@@ -82,6 +84,7 @@ pub fn time_match_kernels(
     (warmup, repeats): (usize, usize),
 ) -> Result<Vec<f32>> {
     let k = if config.ratio.is_some() { 2 } else { 1 };
+    crate::matching::check_sets(query, train, k)?;
     if query.is_empty() || train.len() < k {
         return Err(Error::InvalidK {
             k,
@@ -116,6 +119,7 @@ pub fn time_knn_kernel(
     kernel: Option<MatchKernel>,
     (warmup, repeats): (usize, usize),
 ) -> Result<Vec<f32>> {
+    crate::matching::check_sets(query, train, k)?;
     check_k(k)?;
     if query.is_empty() || k == 0 || k > train.len() {
         return Err(Error::InvalidK {
@@ -146,6 +150,7 @@ pub fn time_knn_variants(
 ) -> Result<Vec<(&'static str, Vec<f32>)>> {
     dev.load_bench_kernels()?;
     const K: usize = 2;
+    crate::matching::check_sets(query, train, K)?;
     if query.width().words() != 8 || train.len() < K {
         return Err(Error::InvalidConfig {
             field: "variant sets",

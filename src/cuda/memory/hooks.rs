@@ -14,3 +14,20 @@ pub fn probe_allocation(ordinal: usize, bytes: usize) -> Result<()> {
     drop(buffer);
     Ok(())
 }
+
+/// Makes the allocation after `after` more of this thread's device allocations fail with
+/// `Error::DeviceOutOfMemory` (once; `None` clears it). Returns whether the last injected failure was
+/// used up, i.e. whether the calls since the previous setting reached that allocation.
+pub fn fail_allocation(after: Option<usize>) -> bool {
+    let used = FAIL_AFTER.get().is_none();
+    FAIL_AFTER.set(after);
+    used
+}
+
+/// Free and total device memory of device `ordinal`, in bytes (`cuMemGetInfo`).
+pub fn device_memory(ordinal: usize) -> Result<(usize, usize)> {
+    let dev = crate::cuda::device(ordinal)?;
+    dev.ctx
+        .mem_get_info()
+        .map_err(driver_error("reading free device memory"))
+}

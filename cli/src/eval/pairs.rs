@@ -4,6 +4,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use clatch::decode::DecodeLimits;
 use image::GrayImage;
 
 use crate::error::CliError;
@@ -152,7 +153,7 @@ pub fn synthetic_source(arg: &str) -> Result<SyntheticSource, CliError> {
         });
     }
     Ok(SyntheticSource {
-        image: load_gray(&path)?,
+        image: load_gray(&path, &DecodeLimits::default())?,
         name,
     })
 }
@@ -317,8 +318,16 @@ mod tests {
         assert_eq!(pairs.len(), synthetic_warps(70, 66).len());
         let rot = &pairs[2];
         assert_eq!(rot.name, "ramp rot 30");
-        assert_eq!(load_gray(&rot.image_a).unwrap(), source.image);
-        assert_eq!(load_gray(&rot.image_b).unwrap().dimensions(), (70, 66));
+        assert_eq!(
+            load_gray(&rot.image_a, &DecodeLimits::default()).unwrap(),
+            source.image
+        );
+        assert_eq!(
+            load_gray(&rot.image_b, &DecodeLimits::default())
+                .unwrap()
+                .dimensions(),
+            (70, 66)
+        );
         let h = Homography::from_file(&rot.homography).unwrap();
         assert_eq!(h, synthetic_warps(70, 66)[2].3);
         let text = manifest(&pairs).unwrap();
@@ -376,7 +385,7 @@ mod tests {
         ));
         assert!(matches!(
             synthetic_source("/nonexistent/clatch.png"),
-            Err(CliError::Read { .. })
+            Err(CliError::Decode(clatch::decode::DecodeError::Io { .. }))
         ));
     }
 }

@@ -200,11 +200,10 @@ pub fn homography_text(h: &Homography) -> String {
 }
 
 fn save_png(img: &GrayImage, path: &Path) -> Result<(), CliError> {
-    img.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|source| CliError::Encode {
-            path: path.to_path_buf(),
-            source,
-        })
+    crate::output::write_file(path, |w| {
+        img.write_to(w, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
 }
 
 /// Writes `source` and its warped views into `dir` (PNG images, Oxford-format homographies) and
@@ -225,7 +224,10 @@ pub fn write_synthetic(source: &SyntheticSource, dir: &Path) -> Result<Vec<EvalP
         let image_b = dir.join(format!("{file}.png"));
         save_png(&warped, &image_b)?;
         let homography = dir.join(format!("{file}.H"));
-        std::fs::write(&homography, homography_text(&hom)).map_err(CliError::write(&homography))?;
+        let text = homography_text(&hom);
+        crate::output::write_file(&homography, |w| {
+            std::io::Write::write_all(w, text.as_bytes())
+        })?;
         pairs.push(EvalPair {
             name: format!("{} {suffix}", source.name),
             group: group.into(),

@@ -1,4 +1,9 @@
-//! From decoded images (the `image` crate) to the 8-bit gray images clatch reads (feature `image`).
+//! From image files and decoded images (the `image` crate) to the 8-bit gray images clatch reads
+//! (feature `image`).
+//!
+//! [`open_gray`] reads a file with its size checked from the header against [`DecodeLimits`] before any
+//! pixel buffer is allocated, refuses anything but a regular file, truncated JPEGs and palette PNGs
+//! with indices past their palette; [`gray_from_dynamic`] converts what the `image` crate decoded.
 //!
 //! ```
 //! let rgb = image::RgbImage::from_pixel(80, 60, image::Rgb([255, 0, 0]));
@@ -7,6 +12,12 @@
 //! assert_eq!(view.get(0, 0), Some(76)); // OpenCV's RGB2GRAY of pure red
 //! # Ok::<(), clatch::Error>(())
 //! ```
+
+mod jpeg_end;
+mod open;
+mod palette;
+
+pub use open::{DecodeError, DecodeLimits, ImageInfo, open_gray, open_gray_with_exif, probe};
 
 use crate::error::{Error, Result};
 use crate::gray_view::GrayView;
@@ -37,16 +48,55 @@ pub fn gray_from_rgb(img: &image::RgbImage) -> image::GrayImage {
     out
 }
 
-/// Converts any decoded image to 8-bit gray: gray images keep their values (16-bit ones keep the high
-/// byte), colour images go through [`luma`] (alpha is ignored).
+/// Converts any decoded image to 8-bit gray; alpha is ignored.
+///
+/// - 8-bit gray keeps its values; 8-bit colour goes through [`luma`].
+/// - 16-bit images (gray, or colour through [`luma`]'s weights on 16-bit values) are scaled **full
+///   range**: the image's darkest value becomes 0 and its brightest 255,
+///   `round_half_up((v - min) · 255 / (max - min))`. 16-bit files often hold 10- or 12-bit data (a
+///   12-bit sensor's 0..4095), which keeping the high byte would turn nearly black. A constant image
+///   becomes `round_half_up(v · 255 / 65535)`.
+/// - Anything else is converted to 8-bit RGB by the `image` crate, then through [`luma`].
 pub fn gray_from_dynamic(img: &image::DynamicImage) -> image::GrayImage {
+    use image::DynamicImage as D;
     match img {
-        image::DynamicImage::ImageLuma8(g) => g.clone(),
-        image::DynamicImage::ImageLumaA8(_)
-        | image::DynamicImage::ImageLuma16(_)
-        | image::DynamicImage::ImageLumaA16(_) => img.to_luma8(),
+        D::ImageLuma8(g) => g.clone(),
+        D::ImageLumaA8(_) => img.to_luma8(),
+        D::ImageLuma16(g) => full_range(g.width(), g.height(), g.pixels().map(|p| p.0[0])),
+        D::ImageLumaA16(g) => full_range(g.width(), g.height(), g.pixels().map(|p| p.0[0])),
+        D::ImageRgb16(c) => full_range(c.width(), c.height(), c.pixels().map(|p| luma16(p.0))),
+        D::ImageRgba16(c) => full_range(c.width(), c.height(), c.pixels().map(|p| luma16(p.0))),
         other => gray_from_rgb(&other.to_rgb8()),
     }
+}
+
+/// [`luma`]'s weights on 16-bit samples (the first three of `rgb`).
+fn luma16<const N: usize>(rgb: [u16; N]) -> u16 {
+    let [r, g, b] = [rgb[0], rgb[1], rgb[2]].map(u32::from);
+    ((r * 4899 + g * 9617 + b * 1868 + (1 << 13)) >> 14) as u16
+}
+
+/// 16-bit values, row-major, scaled so that their minimum is 0 and their maximum 255.
+fn full_range(
+    width: u32,
+    height: u32,
+    values: impl Iterator<Item = u16> + Clone,
+) -> image::GrayImage {
+    let (lo, hi) = values
+        .clone()
+        .fold((u16::MAX, 0), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let scale = |v: u16| -> u8 {
+        if hi <= lo {
+            return ((u32::from(v) * 255 + 32767) / 65535) as u8;
+        }
+        let (num, den) = (u32::from(v - lo) * 255, u32::from(hi - lo));
+        ((2 * num + den) / (2 * den)) as u8
+    };
+    let mut out = image::GrayImage::new(width, height);
+    for (dst, v) in out.iter_mut().zip(values) {
+        *dst = scale(v);
+    }
+    out
 }
 
 #[cfg(test)]

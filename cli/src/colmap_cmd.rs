@@ -2,7 +2,6 @@
 //! structure from motion (see [`clatch::colmap`] for the conventions).
 
 use std::ffi::OsString;
-use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use clatch::colmap::{Database, MatchList, PinholeCamera};
@@ -15,15 +14,17 @@ use crate::cpu_time::{StageTime, Stopwatch};
 use crate::error::CliError;
 use crate::exif;
 use crate::image_dir::{colmap_name, list_images};
-use crate::input::load_gray_with_exif;
+use crate::input::{check_detectable, load_gray_with_exif, probe_detectable};
+use crate::output::{Staged, TempDir, check_distinct, check_writable};
 use crate::progress::Progress;
 use crate::settings;
 use crate::spread::spread;
 use crate::subpixel;
+use crate::text_input::read_text;
+use clatch::decode::DecodeLimits;
 
 /// One photo's features.
 struct Photo {
-    path: PathBuf,
     /// EXIF `FocalLengthIn35mmFilm`, if the file has it.
     focal_35mm: Option<u16>,
     name: String,
@@ -43,55 +44,36 @@ struct Times {
     analyze: StageTime,
 }
 
+/// Everything checked before any work: the photos, their names and sizes, the camera, the outputs.
+struct Plan {
+    images: Vec<PathBuf>,
+    names: Vec<String>,
+    /// The camera of `--camera-k`, for the photos' one size.
+    camera: Option<PinholeCamera>,
+    workspace: PathBuf,
+    match_list: PathBuf,
+    sparse: PathBuf,
+    /// `None` with --no-colmap or when `colmap` is not on PATH.
+    colmap: Option<ColmapProgram>,
+}
+
 /// Runs `clatch colmap`.
 pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let settings = settings(&args.backend, &args.detect, Some(&args.matching))?;
-    let images = list_images(&args.images)?;
-    let names = images
-        .iter()
-        .map(|p| colmap_name(p))
-        .collect::<Result<Vec<_>, _>>()?;
-    let k_text = args
-        .camera_k
-        .as_deref()
-        .map(|path| {
-            std::fs::read_to_string(path).map_err(|source| CliError::Read {
-                path: path.to_path_buf(),
-                source,
-            })
-        })
-        .transpose()?;
-    let workspace = args
-        .workspace
-        .clone()
-        .unwrap_or_else(|| default_workspace(&args.database));
-    std::fs::create_dir_all(&workspace).map_err(CliError::write(&workspace))?;
-    // Refuse to overwrite before any work, not after it.
-    let sparse = workspace.join("sparse");
-    if !args.force {
-        if args.database.exists() {
-            return Err(clatch::colmap::ColmapError::DatabaseExists {
-                path: args.database.display().to_string(),
-            }
-            .into());
-        }
-        if !args.no_colmap && !model_dirs_if_any(&sparse)?.is_empty() {
-            return Err(CliError::ModelsExist { path: sparse });
-        }
-    } else if args.database.exists() {
-        std::fs::remove_file(&args.database).map_err(CliError::write(&args.database))?;
-    }
+    let plan = preflight(args)?;
     let mut times = Times::default();
 
     // Detect and describe every photo.
     let extractor = Extractor::new(settings.backend, extraction_config(&settings, args.grid))?;
-    let progress = Progress::counter(images.len() as u64, "extracting features");
+    let progress = Progress::counter(plan.images.len() as u64, "extracting features");
     let watch = Stopwatch::start();
+    let limits = args.input.limits();
     let extract_one = |(path, name): (&PathBuf, &String)| {
         let photo = extract(
             &extractor,
             path,
             name,
+            &limits,
             settings.extractor.detector.max_keypoints,
             (args.grid, args.subpixel, args.subpixel_radius),
         );
@@ -101,15 +83,15 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     // The CPU extractor is parallel inside; decoding a JPEG is not, so on the CPU photos go two by two
     // through rayon too. A GPU extractor is fed one photo at a time.
     let photos: Vec<Photo> = if settings.backend == Backend::Cpu {
-        images
+        plan.images
             .par_iter()
-            .zip(names.par_iter())
+            .zip(plan.names.par_iter())
             .map(extract_one)
             .collect::<Result<_, _>>()?
     } else {
-        images
+        plan.images
             .iter()
-            .zip(names.iter())
+            .zip(plan.names.iter())
             .map(extract_one)
             .collect::<Result<_, _>>()?
     };
@@ -145,65 +127,80 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     times.matching = watch.stop();
     progress.finish();
 
-    // Write the database and the match list.
-    let watch = Stopwatch::start();
-    let match_list = workspace.join("matches.txt");
-    write_database(
-        &args.database,
-        k_text.as_deref(),
-        args.camera_k.as_deref(),
+    // Outputs: a workspace made here is removed again if nothing could be written to it.
+    let workspace_existed = plan.workspace.exists();
+    std::fs::create_dir_all(&plan.workspace).map_err(CliError::write(&plan.workspace))?;
+    let result = write_and_run(
+        args,
+        &plan,
+        &settings.backend,
         &photos,
-    )?;
-    write_match_list(&match_list, &photos, &pairs, &matches)?;
+        (&pairs, &matches),
+        &mut times,
+    );
+    if result.is_err() && !workspace_existed {
+        // Only when empty: a failed COLMAP step leaves its log there.
+        std::fs::remove_dir(&plan.workspace).ok();
+    }
+    result
+}
+
+/// Writes the database and the match list to temporary files, runs COLMAP on them, and renames them
+/// into place (replacing older ones, with --force) only when everything succeeded.
+fn write_and_run(
+    args: &ColmapArgs,
+    plan: &Plan,
+    backend: &Backend,
+    photos: &[Photo],
+    (pairs, matches): (&[(usize, usize)], &[Vec<Match>]),
+    times: &mut Times,
+) -> Result<(), CliError> {
+    let watch = Stopwatch::start();
+    let mut staged = Staged::new();
+    let database = staged.reserve(&args.database)?;
+    // `Database::create` makes the file itself (and never opens an existing one).
+    std::fs::remove_file(&database).map_err(CliError::write(&database))?;
+    write_database(&database, plan.camera.as_ref(), photos)?;
+    let match_list = staged.write(&plan.match_list, |w| {
+        write_match_list(w, photos, pairs, matches).map_err(std::io::Error::other)
+    })?;
     times.write = watch.stop();
 
-    print_extraction_report(args, &settings.backend, &photos, &pairs, &matches, &times);
-
-    let colmap = if args.no_colmap {
-        None
-    } else {
-        let explicit = args.colmap.is_some();
-        let program = args.colmap.clone().unwrap_or_else(|| "colmap".into());
-        let found = ColmapProgram::find(&program, &workspace)?;
-        if found.is_none() {
-            if explicit {
-                return Err(CliError::ColmapStart {
-                    program,
-                    step: "help",
-                    source: std::io::Error::from(std::io::ErrorKind::NotFound),
-                });
-            }
-            println!("  colmap      not found on PATH: database written, COLMAP not run. Run:");
-        }
-        found
-    };
-    let steps = colmap_steps(args, &match_list, &sparse);
-    let Some(colmap) = colmap else {
+    let Some(colmap) = &plan.colmap else {
+        staged.commit()?;
+        print_extraction_report(args, backend, photos, pairs, matches, times);
         if !args.no_colmap {
-            for (step, step_args) in &steps {
+            println!("  colmap      not found on PATH: database written, COLMAP not run. Run:");
+            let final_paths = (
+                args.database.as_path(),
+                plan.match_list.as_path(),
+                plan.sparse.as_path(),
+            );
+            for (step, step_args) in &colmap_steps(args, final_paths) {
                 println!("    colmap {step} {}", shell_words(step_args));
             }
         }
         return Ok(());
     };
 
-    let [(_, import_args), (_, mapper_args)] = &steps;
+    let sparse = TempDir::beside(&plan.sparse)?;
+    let [(_, import_args), (_, mapper_args)] =
+        &colmap_steps(args, (&database, &match_list, sparse.path()));
     let watch = Stopwatch::start();
     colmap.run("matches_importer", import_args)?;
     times.verify = watch.stop();
-    let (verified, inliers) = verified_pairs(&args.database)?;
-
-    if args.force && sparse.exists() {
-        std::fs::remove_dir_all(&sparse).map_err(CliError::write(&sparse))?;
-    }
-    std::fs::create_dir_all(&sparse).map_err(CliError::write(&sparse))?;
+    let (verified, inliers) = verified_pairs(&database)?;
     let watch = Stopwatch::start();
     colmap.run("mapper", mapper_args)?;
     times.map = watch.stop();
 
+    staged.commit()?;
+    sparse.replace(&plan.sparse)?;
+    print_extraction_report(args, backend, photos, pairs, matches, times);
+
     let watch = Stopwatch::start();
     let mut models = Vec::new();
-    for model in model_dirs(&sparse)? {
+    for model in model_dirs(&plan.sparse)? {
         let output = colmap.run(
             "model_analyzer",
             &[OsString::from("--path"), model.clone().into()],
@@ -211,8 +208,109 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
         models.push(parse_model_analyzer(&model, &output)?);
     }
     times.analyze = watch.stop();
-    print_colmap_report(&photos, &pairs, verified, inliers, &models, &times);
+    print_colmap_report(photos, pairs, verified, inliers, &models, times);
     Ok(())
+}
+
+/// Checks every input and output before any work: photo names, headers (size limits, truncation,
+/// the detector's minimum), the camera matrix against the photos' size, outputs that would overwrite
+/// an input or an earlier result, and the `colmap` program.
+fn preflight(args: &ColmapArgs) -> Result<Plan, CliError> {
+    let images = list_images(&args.images)?;
+    let names = images
+        .iter()
+        .map(|p| colmap_name(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let limits = args.input.limits();
+    let sizes = images
+        .iter()
+        .map(|p| probe_detectable(p, &limits).map(|info| (info.width, info.height)))
+        .collect::<Result<Vec<_>, _>>()?;
+    let camera = args
+        .camera_k
+        .as_deref()
+        .map(|k| camera_for_all(k, &images, &sizes))
+        .transpose()?;
+
+    let workspace = args
+        .workspace
+        .clone()
+        .unwrap_or_else(|| default_workspace(&args.database));
+    let match_list = workspace.join("matches.txt");
+    let sparse = workspace.join("sparse");
+    check_writable(&args.database)?;
+    check_writable(&match_list)?;
+    let mut inputs: Vec<(&'static str, &Path)> =
+        images.iter().map(|p| ("image", p.as_path())).collect();
+    if let Some(k) = &args.camera_k {
+        inputs.push(("camera matrix", k));
+    }
+    check_distinct(
+        &inputs,
+        &[("database", &args.database), ("match list", &match_list)],
+    )?;
+    if !args.force {
+        if args.database.exists() {
+            return Err(clatch::colmap::ColmapError::DatabaseExists {
+                path: args.database.display().to_string(),
+            }
+            .into());
+        }
+        if !args.no_colmap && !model_dirs_if_any(&sparse)?.is_empty() {
+            return Err(CliError::ModelsExist { path: sparse });
+        }
+    }
+
+    let colmap = if args.no_colmap {
+        None
+    } else {
+        let program = args.colmap.clone().unwrap_or_else(|| "colmap".into());
+        let found = ColmapProgram::find(&program, &workspace)?;
+        if found.is_none() && args.colmap.is_some() {
+            return Err(CliError::ColmapStart {
+                program,
+                step: "help",
+                source: std::io::Error::from(std::io::ErrorKind::NotFound),
+            });
+        }
+        found
+    };
+    Ok(Plan {
+        images,
+        names,
+        camera,
+        workspace,
+        match_list,
+        sparse,
+        colmap,
+    })
+}
+
+/// The camera of the K file `k_path`, which needs every photo to have the first one's size.
+fn camera_for_all(
+    k_path: &Path,
+    images: &[PathBuf],
+    sizes: &[(u32, u32)],
+) -> Result<PinholeCamera, CliError> {
+    let text = read_text(k_path, "camera matrix")?;
+    let (want_w, want_h) = sizes.first().copied().unwrap_or_default();
+    let camera =
+        PinholeCamera::from_k_text(&text, want_w, want_h).map_err(|source| CliError::CameraK {
+            path: k_path.to_path_buf(),
+            source,
+        })?;
+    for (path, &(got_w, got_h)) in images.iter().zip(sizes) {
+        if (got_w, got_h) != (want_w, want_h) {
+            return Err(CliError::ImageSizeMismatch {
+                path: path.clone(),
+                got_w,
+                got_h,
+                want_w,
+                want_h,
+            });
+        }
+    }
+    Ok(camera)
 }
 
 /// `out.db` → `out-colmap/` beside it.
@@ -235,10 +333,12 @@ fn extract(
     extractor: &Extractor,
     path: &Path,
     name: &str,
+    limits: &DecodeLimits,
     max_keypoints: usize,
     (grid, method, subpixel_radius): (u32, subpixel::Subpixel, u32),
 ) -> Result<Photo, CliError> {
-    let (img, exif_block) = load_gray_with_exif(path)?;
+    let (img, exif_block) = load_gray_with_exif(path, limits)?;
+    check_detectable(path, img.width(), img.height())?;
     let view = GrayView::try_from(&img).map_err(CliError::in_image(path))?;
     let detected = extractor.detect(&view).map_err(CliError::in_image(path))?;
     let keypoints = if grid > 1 {
@@ -250,7 +350,6 @@ fn extract(
         .describe(&view, &keypoints)
         .map_err(CliError::in_image(path))?;
     Ok(Photo {
-        path: path.to_path_buf(),
         focal_35mm: exif_block.as_deref().and_then(exif::focal_length_35mm),
         name: name.to_owned(),
         width: img.width(),
@@ -262,44 +361,32 @@ fn extract(
     })
 }
 
-/// Cameras, images and keypoints. With K, one camera shared by every photo (which must then all have
-/// one size); without, one camera per image size and EXIF focal length: the focal length from EXIF's
-/// 35 mm equivalent where the photo has it (as COLMAP does), else COLMAP's guess.
+/// Cameras, images and keypoints. With K, one camera shared by every photo (which all have its size,
+/// checked before any work); without, one camera per image size and EXIF focal length: the focal
+/// length from EXIF's 35 mm equivalent where the photo has it (as COLMAP does), else COLMAP's guess.
 fn write_database(
     path: &Path,
-    k_text: Option<&str>,
-    k_path: Option<&Path>,
+    camera: Option<&PinholeCamera>,
     photos: &[Photo],
 ) -> Result<(), CliError> {
     let mut db = Database::create(path)?;
+    let shared = camera.map(|c| db.add_camera(c)).transpose()?;
     type CameraKey = ((u32, u32), Option<u16>);
     let mut cameras: Vec<(CameraKey, u32)> = Vec::new();
     for photo in photos {
-        let size = (photo.width, photo.height);
-        let key = (size, photo.focal_35mm.filter(|_| k_text.is_none()));
-        let camera_id = match cameras.iter().find(|(k, _)| *k == key) {
-            Some(&(_, id)) => id,
+        let camera_id = match shared {
+            Some(id) => id,
             None => {
-                let camera = match (k_text, cameras.first()) {
-                    (Some(_), Some(&(((w, h), _), _))) => {
-                        return Err(CliError::ImageSizeMismatch {
-                            path: photo.path.clone(),
-                            got_w: size.0,
-                            got_h: size.1,
-                            want_w: w,
-                            want_h: h,
-                        });
+                let size = (photo.width, photo.height);
+                let key = (size, photo.focal_35mm);
+                match cameras.iter().find(|(k, _)| *k == key) {
+                    Some(&(_, id)) => id,
+                    None => {
+                        let id = db.add_camera(&guess_camera(size, photo.focal_35mm)?)?;
+                        cameras.push((key, id));
+                        id
                     }
-                    (Some(text), None) => PinholeCamera::from_k_text(text, size.0, size.1)
-                        .map_err(|source| CliError::CameraK {
-                            path: k_path.unwrap_or(Path::new("K")).to_path_buf(),
-                            source,
-                        })?,
-                    (None, _) => guess_camera(size, photo.focal_35mm)?,
-                };
-                let id = db.add_camera(&camera)?;
-                cameras.push((key, id));
-                id
+                }
             }
         };
         let image_id = db.add_image(&photo.name, camera_id)?;
@@ -332,13 +419,12 @@ fn guess_camera(
 }
 
 fn write_match_list(
-    path: &Path,
+    out: impl std::io::Write,
     photos: &[Photo],
     pairs: &[(usize, usize)],
     matches: &[Vec<Match>],
-) -> Result<(), CliError> {
-    let file = std::fs::File::create(path).map_err(CliError::write(path))?;
-    let mut list = MatchList::new(BufWriter::new(file));
+) -> Result<(), clatch::colmap::ColmapError> {
+    let mut list = MatchList::new(out);
     for (&(i, j), m) in pairs.iter().zip(matches) {
         if !m.is_empty() {
             list.add_pair(&photos[i].name, &photos[j].name, m)?;
@@ -348,16 +434,16 @@ fn write_match_list(
     Ok(())
 }
 
-/// The two COLMAP steps after the database: import with verification, then the mapper.
+/// The two COLMAP steps after the database: import with verification, then the mapper, on the given
+/// database, match list and model folder.
 fn colmap_steps(
     args: &ColmapArgs,
-    match_list: &Path,
-    sparse: &Path,
+    (database, match_list, sparse): (&Path, &Path, &Path),
 ) -> [(&'static str, Vec<OsString>); 2] {
     let os = |s: &str| OsString::from(s);
     let import = vec![
         os("--database_path"),
-        args.database.clone().into(),
+        database.into(),
         os("--match_list_path"),
         match_list.into(),
         os("--match_type"),
@@ -368,7 +454,7 @@ fn colmap_steps(
     ];
     let mut mapper = vec![
         os("--database_path"),
-        args.database.clone().into(),
+        database.into(),
         os("--image_path"),
         args.images.clone().into(),
         os("--output_path"),

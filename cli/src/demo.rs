@@ -40,8 +40,8 @@ pub struct DemoRun {
 /// Decodes the embedded photo.
 pub fn embedded_image() -> Result<GrayImage, CliError> {
     let decoded = image::load_from_memory_with_format(ASTRONAUT_PNG, image::ImageFormat::Png)
-        .map_err(|source| CliError::Decode {
-            path: NAME_A.into(),
+        .map_err(|source| CliError::Embedded {
+            name: NAME_A,
             source,
         })?;
     Ok(clatch::decode::gray_from_dynamic(&decoded))

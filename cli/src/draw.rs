@@ -1,11 +1,14 @@
 //! Pictures of matches: two gray images side by side, keypoint circles, lines between matches.
 
+use std::io::{Seek, Write};
 use std::path::Path;
 
 use clatch::{KeyPoint, Match};
-use image::{GrayImage, ImageFormat, Rgb, RgbImage};
+use image::codecs::pnm::{PnmEncoder, PnmSubtype, SampleEncoding};
+use image::{ExtendedColorType, GrayImage, ImageEncoder, ImageFormat, Rgb, RgbImage};
 
 use crate::error::CliError;
+use crate::output::Staged;
 
 /// Lines and circles of matches that agree with the ground truth.
 pub const INLIER: Rgb<u8> = Rgb([0, 230, 0]);
@@ -179,27 +182,80 @@ pub fn draw_matches(
     canvas
 }
 
-/// Checks, before any work, that `path`'s extension names a format this build can write.
-pub fn check_picture_path(path: &Path) -> Result<(), CliError> {
-    let refuse = |reason: &str| CliError::PictureFormat {
-        path: path.to_path_buf(),
-        reason: reason.into(),
-    };
-    match ImageFormat::from_path(path) {
-        Ok(f) if f.can_write() && f.writing_enabled() => Ok(()),
-        Ok(_) => Err(refuse("use .png, .jpg, .ppm or .pgm")),
-        Err(_) => Err(refuse(
-            "the extension names no image format (use .png, .jpg, .ppm or .pgm)",
-        )),
+/// The formats a picture is written in, chosen by the path's extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PictureFormat {
+    /// `.png`.
+    Png,
+    /// `.jpg`, `.jpeg`.
+    Jpeg,
+    /// `.ppm`, `.pnm`: binary PPM (P6), as every PPM reader expects.
+    Ppm,
+    /// `.pgm`: binary PGM (P5), the picture in gray ([`clatch::decode::luma`]).
+    Pgm,
+}
+
+/// The format `path`'s extension names, checked before any work.
+pub fn picture_format(path: &Path) -> Result<PictureFormat, CliError> {
+    let extension = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match extension.as_deref() {
+        Some("png") => Ok(PictureFormat::Png),
+        Some("jpg" | "jpeg") => Ok(PictureFormat::Jpeg),
+        Some("ppm" | "pnm") => Ok(PictureFormat::Ppm),
+        Some("pgm") => Ok(PictureFormat::Pgm),
+        _ => Err(CliError::PictureFormat {
+            path: path.to_path_buf(),
+            reason: "use .png, .jpg, .ppm or .pgm".into(),
+        }),
     }
 }
 
-/// Saves a picture, in the format its extension names.
+/// Checks, before any work, that `path`'s extension names a format this build can write and that the
+/// path can be a file.
+pub fn check_picture_path(path: &Path) -> Result<(), CliError> {
+    picture_format(path)?;
+    crate::output::check_writable(path)
+}
+
+/// Encodes `picture` as `format`.
+pub fn encode_picture(
+    picture: &RgbImage,
+    format: PictureFormat,
+    out: &mut (impl Write + Seek),
+) -> image::ImageResult<()> {
+    let (w, h) = picture.dimensions();
+    match format {
+        PictureFormat::Png => picture.write_to(out, ImageFormat::Png),
+        PictureFormat::Jpeg => picture.write_to(out, ImageFormat::Jpeg),
+        PictureFormat::Ppm => PnmEncoder::new(out)
+            .with_subtype(PnmSubtype::Pixmap(SampleEncoding::Binary))
+            .write_image(picture.as_raw(), w, h, ExtendedColorType::Rgb8),
+        PictureFormat::Pgm => {
+            let gray = clatch::decode::gray_from_rgb(picture);
+            PnmEncoder::new(out)
+                .with_subtype(PnmSubtype::Graymap(SampleEncoding::Binary))
+                .write_image(gray.as_raw(), w, h, ExtendedColorType::L8)
+        }
+    }
+}
+
+/// Encodes a picture, in the format its extension names, into a temporary file of `staged`.
+pub fn stage_picture(staged: &mut Staged, picture: &RgbImage, path: &Path) -> Result<(), CliError> {
+    let format = picture_format(path)?;
+    staged.write(path, |out| {
+        encode_picture(picture, format, out).map_err(std::io::Error::other)
+    })?;
+    Ok(())
+}
+
+/// Saves a picture, in the format its extension names, through a temporary file renamed into place.
 pub fn save_picture(picture: &RgbImage, path: &Path) -> Result<(), CliError> {
-    picture.save(path).map_err(|source| CliError::Encode {
-        path: path.to_path_buf(),
-        source,
-    })
+    let mut staged = Staged::new();
+    stage_picture(&mut staged, picture, path)?;
+    staged.commit()
 }
 
 #[cfg(test)]
@@ -298,10 +354,42 @@ mod tests {
         for ok in ["a.png", "dir/b.JPG", "c.jpeg", "d.ppm"] {
             assert!(check_picture_path(Path::new(ok)).is_ok(), "{ok}");
         }
-        for bad in ["a.bmp", "noext", "x.txt"] {
+        for bad in ["a.bmp", "noext", "x.txt", "x.pam", "x.pbm"] {
             let e = check_picture_path(Path::new(bad)).unwrap_err();
             assert!(e.to_string().contains(bad), "{e}");
         }
+    }
+
+    #[test]
+    fn ppm_and_pgm_are_binary_p6_and_p5() {
+        let picture = RgbImage::from_fn(5, 3, |x, y| Rgb([x as u8 * 50, y as u8 * 100, 7]));
+        let encode = |format| {
+            let mut out = std::io::Cursor::new(Vec::new());
+            encode_picture(&picture, format, &mut out).unwrap();
+            out.into_inner()
+        };
+        // P6/P5 header (magic, width, height, 255, each followed by one whitespace), then raw bytes.
+        let split = |data: &[u8]| {
+            let text = String::from_utf8_lossy(&data[..data.len().min(16)]).into_owned();
+            let fields: Vec<String> = text.split_whitespace().take(4).map(str::to_owned).collect();
+            let header_len = fields.iter().map(|f| f.len() + 1).sum::<usize>();
+            (fields, data[header_len..].to_vec())
+        };
+        let (fields, pixels) = split(&encode(PictureFormat::Ppm));
+        assert_eq!(fields, ["P6", "5", "3", "255"]);
+        assert_eq!(pixels, picture.as_raw().as_slice());
+        let (fields, pixels) = split(&encode(PictureFormat::Pgm));
+        assert_eq!(fields, ["P5", "5", "3", "255"]);
+        let gray = clatch::decode::gray_from_rgb(&picture);
+        assert_eq!(pixels, gray.as_raw().as_slice());
+        assert_eq!(
+            picture_format(Path::new("x.PPM")).unwrap(),
+            PictureFormat::Ppm
+        );
+        assert_eq!(
+            picture_format(Path::new("x.pnm")).unwrap(),
+            PictureFormat::Ppm
+        );
     }
 
     #[test]

@@ -32,12 +32,59 @@ pub enum CliError {
         source: std::io::Error,
     },
 
-    /// An image file could not be decoded.
-    #[error("cannot decode image {path}: {source}", path = .path.display())]
-    Decode {
-        path: PathBuf,
+    /// An image file that was refused before or while decoding (size from its header, not a regular
+    /// file, truncated, corrupt).
+    #[error("{0}")]
+    Decode(#[from] clatch::decode::DecodeError),
+
+    /// The embedded photo could not be decoded (a broken build).
+    #[error("cannot decode the embedded image {name}: {source}")]
+    Embedded {
+        name: &'static str,
         source: image::ImageError,
     },
+
+    /// An image too small for the detector to score a single pixel.
+    #[error(
+        "{path} is {width}x{height}: keypoints are detected at least {margin} pixels from every border, \
+         so an image needs at least {min}x{min} pixels",
+        path = .path.display()
+    )]
+    ImageTooSmall {
+        path: PathBuf,
+        width: u32,
+        height: u32,
+        margin: usize,
+        min: usize,
+    },
+
+    /// An input that is a folder, FIFO, device or socket: reading it could block or never end.
+    #[error("{path}: not a regular file ({kind})", path = .path.display())]
+    NotAFile { path: PathBuf, kind: &'static str },
+
+    /// A text input (homography, camera matrix) larger than any such file can be.
+    #[error("{path}: more than {max} bytes; not a {what} file", path = .path.display())]
+    TextTooLarge {
+        path: PathBuf,
+        max: u64,
+        what: &'static str,
+    },
+
+    /// An output path that names an input or another output.
+    #[error(
+        "the {role} {path} is the same file as the {other_role} {other}; choose another path",
+        path = .path.display(), other = .other.display()
+    )]
+    OutputClash {
+        role: &'static str,
+        path: PathBuf,
+        other_role: &'static str,
+        other: PathBuf,
+    },
+
+    /// An output path that cannot be written as a file (a folder, a device, ...).
+    #[error("cannot write {path}: {reason}", path = .path.display())]
+    OutputPath { path: PathBuf, reason: String },
 
     /// An image could not be encoded or saved.
     #[error("cannot save image {path}: {source}", path = .path.display())]
@@ -61,9 +108,9 @@ pub enum CliError {
     #[error("no image in {path} (looked for the extensions {extensions})", path = .path.display())]
     NoImages { path: PathBuf, extensions: String },
 
-    /// A file name that is not UTF-8 (COLMAP stores names as text).
-    #[error("{path}: the file name is not valid UTF-8", path = .path.display())]
-    ImageName { path: PathBuf },
+    /// A file name COLMAP cannot take (not UTF-8, or with whitespace, which its match list cannot hold).
+    #[error("{path}: {reason}; rename the file", path = .path.display())]
+    ImageName { path: PathBuf, reason: &'static str },
 
     /// Images of different sizes with one given camera matrix.
     #[error(

@@ -1,13 +1,14 @@
 //! `clatch extract IMG -o PREFIX`: keypoints as CSV and JSON, descriptors as `.npy`.
 
 use std::ffi::OsString;
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use clatch::{DescriptorSet, Extractor, KeyPoint};
 
 use crate::error::CliError;
-use crate::input::load_gray;
+use crate::input::{check_detectable, load_gray};
+use crate::output::{Staged, check_distinct, check_writable, ends_with_separator};
 use crate::pipeline::{self, EXTRACT_STAGES};
 use crate::progress::Progress;
 use crate::report::ms;
@@ -55,22 +56,45 @@ pub fn write_descriptors_npy(w: impl Write, descriptors: &DescriptorSet) -> std:
     npy::write_u8(w, &bytes, descriptors.len(), descriptors.width().bytes())
 }
 
-fn write_file(
-    path: &Path,
-    write: impl FnOnce(BufWriter<std::fs::File>) -> std::io::Result<()>,
-) -> Result<(), CliError> {
-    let file = std::fs::File::create(path).map_err(CliError::write(path))?;
-    write(BufWriter::new(file)).map_err(CliError::write(path))
+/// The three output paths of `PREFIX`: keypoints CSV, keypoints JSON, descriptors `.npy`. A prefix
+/// that names a folder (`out/`, `.`, an existing folder) is refused: the files would be hidden
+/// `out/.keypoints.csv`.
+pub fn output_paths(prefix: &Path) -> Result<[PathBuf; 3], CliError> {
+    let names_folder = prefix.file_name().is_none()
+        || ends_with_separator(prefix)
+        || prefix.is_dir()
+        || prefix.file_name().is_some_and(|n| n == "." || n == "..");
+    if names_folder {
+        return Err(CliError::OutputPath {
+            path: prefix.to_path_buf(),
+            reason: "the output prefix names a folder; give a file name prefix such as DIR/photo"
+                .into(),
+        });
+    }
+    Ok([".keypoints.csv", ".keypoints.json", ".descriptors.npy"].map(|s| with_suffix(prefix, s)))
 }
 
 /// Runs `clatch extract`.
 pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
     let settings = settings(&args.backend, &args.detect, None)?;
     let extractor = Extractor::new(settings.backend, settings.extractor)?;
+    let [csv, json, npy_path] = output_paths(&args.output)?;
+    check_distinct(
+        &[("image", &args.image)],
+        &[
+            ("keypoints CSV", &csv),
+            ("keypoints JSON", &json),
+            ("descriptors", &npy_path),
+        ],
+    )?;
+    for path in [&csv, &json, &npy_path] {
+        check_writable(path)?;
+    }
     let progress = Progress::new(1 + EXTRACT_STAGES + 1);
 
     progress.stage("reading image");
-    let img = load_gray(&args.image)?;
+    let img = load_gray(&args.image, &args.input.limits())?;
+    check_detectable(&args.image, img.width(), img.height())?;
     progress.done();
 
     let latch = args.opencv.latch()?;
@@ -81,14 +105,14 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
     let features = &extracted.features;
 
     progress.stage("writing files");
-    let csv = with_suffix(&args.output, ".keypoints.csv");
-    let json = with_suffix(&args.output, ".keypoints.json");
-    let npy_path = with_suffix(&args.output, ".descriptors.npy");
-    write_file(&csv, |w| write_keypoints_csv(w, &features.keypoints))?;
-    write_file(&json, |w| write_keypoints_json(w, &features.keypoints))?;
-    write_file(&npy_path, |w| {
+    // All three are written in full before any replaces an older file.
+    let mut staged = Staged::new();
+    staged.write(&csv, |w| write_keypoints_csv(w, &features.keypoints))?;
+    staged.write(&json, |w| write_keypoints_json(w, &features.keypoints))?;
+    staged.write(&npy_path, |w| {
         write_descriptors_npy(w, &features.descriptors)
     })?;
+    staged.commit()?;
     progress.done();
     progress.finish();
 
@@ -134,6 +158,18 @@ mod tests {
                 ..KeyPoint::new(1.5, 2.0)
             },
         ]
+    }
+
+    #[test]
+    fn a_prefix_naming_a_folder_is_refused() {
+        for prefix in ["out/", ".", "..", "/"] {
+            let e = output_paths(Path::new(prefix)).unwrap_err();
+            assert!(matches!(e, CliError::OutputPath { .. }), "{prefix}: {e}");
+        }
+        let e = output_paths(&std::env::temp_dir()).unwrap_err();
+        assert!(e.to_string().contains("prefix names a folder"), "{e}");
+        let [csv, ..] = output_paths(Path::new("out/photo")).unwrap();
+        assert_eq!(csv, PathBuf::from("out/photo.keypoints.csv"));
     }
 
     #[test]

@@ -104,9 +104,9 @@ impl Homography {
         for token in text.split_whitespace() {
             let v: f64 = token
                 .parse()
-                .map_err(|_| format!("`{token}` is not a number"))?;
+                .map_err(|_| format!("`{}` is not a number", token.escape_debug()))?;
             if !v.is_finite() {
-                return Err(format!("`{token}` is not a finite number"));
+                return Err(format!("`{}` is not a finite number", token.escape_debug()));
             }
             values.push(v);
         }
@@ -151,12 +151,10 @@ impl Homography {
     }
 
     /// Reads and parses a homography file: nine numbers (the Oxford format), or OpenCV FileStorage
-    /// XML when the file starts with `<?xml` or `<opencv_storage>`.
+    /// XML when the file starts with `<?xml` or `<opencv_storage>`. Only a regular file of at most
+    /// [`crate::text_input::MAX_TEXT_BYTES`] is read; a UTF-8 byte-order mark is skipped.
     pub fn from_file(path: &Path) -> Result<Homography, CliError> {
-        let text = std::fs::read_to_string(path).map_err(|source| CliError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::text_input::read_text(path, "homography")?;
         let start = text.trim_start();
         let parsed = if start.starts_with("<?xml") || start.starts_with("<opencv_storage>") {
             Homography::parse_opencv_xml(&text)
@@ -240,6 +238,14 @@ mod tests {
         assert!(e.to_string().contains("bad"), "{e}");
         let e = Homography::from_file(&dir.join("missing")).unwrap_err();
         assert!(matches!(e, CliError::Read { .. }), "{e}");
+        // Saved by an editor that writes a byte-order mark: read as the same matrix.
+        let bom = dir.join("H-bom");
+        std::fs::write(&bom, "\u{feff}2 0 15\n0 2 -4\n0 0 1\n").unwrap();
+        assert_eq!(Homography::from_file(&bom).unwrap(), from_xml);
+        // An invisible character elsewhere is shown escaped.
+        std::fs::write(&bom, "2 0 15\n0 2\u{200b} -4\n0 0 1\n").unwrap();
+        let e = Homography::from_file(&bom).unwrap_err().to_string();
+        assert!(e.contains("`2\\u{200b}`"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
 

@@ -35,14 +35,24 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>, CliError> {
     Ok(images)
 }
 
-/// An image's name as COLMAP stores it: its file name (the folder is COLMAP's `--image_path`).
+/// An image's name as COLMAP stores it: its file name (the folder is COLMAP's `--image_path`). It
+/// must be UTF-8 (COLMAP stores names as text) and hold no whitespace (the match list separates names
+/// with a space).
 pub fn colmap_name(path: &Path) -> Result<String, CliError> {
-    path.file_name()
+    let refuse = |reason| CliError::ImageName {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let name = path
+        .file_name()
         .and_then(|n| n.to_str())
-        .map(str::to_owned)
-        .ok_or_else(|| CliError::ImageName {
-            path: path.to_path_buf(),
-        })
+        .ok_or_else(|| refuse("the file name is not valid UTF-8"))?;
+    if name.chars().any(char::is_whitespace) {
+        return Err(refuse(
+            "the file name holds whitespace, which COLMAP's match list cannot hold",
+        ));
+    }
+    Ok(name.to_owned())
 }
 
 #[cfg(test)]
@@ -67,5 +77,8 @@ mod tests {
             .collect();
         std::fs::remove_dir_all(&dir).ok();
         assert_eq!(names, ["a.png", "b.JPG"]);
+        let e = colmap_name(Path::new("dir/my photo.jpg")).unwrap_err();
+        assert!(matches!(e, CliError::ImageName { .. }), "{e}");
+        assert!(e.to_string().contains("whitespace"), "{e}");
     }
 }

@@ -1,40 +1,53 @@
-//! Reading input images as 8-bit gray, with errors that name the file.
+//! Reading input images as 8-bit gray, with errors that name the file: the size is checked from the
+//! header against `--max-pixels` before decoding ([`clatch::decode::open_gray`]).
 
-use std::io::BufReader;
 use std::path::Path;
 
-use clatch::WINDOW;
-use image::{DynamicImage, GrayImage, ImageDecoder, ImageReader};
+use clatch::decode::{DecodeLimits, ImageInfo};
+use clatch::{DetectorConfig, WINDOW};
+use image::GrayImage;
 
 use crate::error::CliError;
 
-/// Decodes any image the `image` crate reads here (PNG, JPEG, PGM/PPM/PBM/PAM), converts it to gray
-/// with [`clatch::decode::gray_from_dynamic`] and checks that it holds one descriptor window.
-pub fn load_gray(path: &Path) -> Result<GrayImage, CliError> {
-    load_gray_with_exif(path).map(|(gray, _)| gray)
+/// Decodes any image the `image` crate reads here (PNG, JPEG, PGM/PPM/PBM/PAM) within `limits`,
+/// converts it to gray with [`clatch::decode::gray_from_dynamic`] and checks that it holds one
+/// descriptor window.
+pub fn load_gray(path: &Path, limits: &DecodeLimits) -> Result<GrayImage, CliError> {
+    load_gray_with_exif(path, limits).map(|(gray, _)| gray)
 }
 
 /// [`load_gray`], with the file's raw EXIF block when it has one.
-pub fn load_gray_with_exif(path: &Path) -> Result<(GrayImage, Option<Vec<u8>>), CliError> {
-    let read_err = |source| CliError::Read {
-        path: path.to_path_buf(),
-        source,
-    };
-    let decode_err = |source| CliError::Decode {
-        path: path.to_path_buf(),
-        source,
-    };
-    let file = std::fs::File::open(path).map_err(read_err)?;
-    let reader = ImageReader::new(BufReader::new(file))
-        .with_guessed_format()
-        .map_err(read_err)?;
-    let mut decoder = reader.into_decoder().map_err(decode_err)?;
-    // EXIF is optional: a block that cannot be read is simply absent.
-    let exif = decoder.exif_metadata().ok().flatten();
-    let decoded = DynamicImage::from_decoder(decoder).map_err(decode_err)?;
-    let gray = clatch::decode::gray_from_dynamic(&decoded);
+pub fn load_gray_with_exif(
+    path: &Path,
+    limits: &DecodeLimits,
+) -> Result<(GrayImage, Option<Vec<u8>>), CliError> {
+    let (gray, exif) = clatch::decode::open_gray_with_exif(path, limits)?;
     check_size(&gray).map_err(CliError::in_image(path))?;
     Ok((gray, exif))
+}
+
+/// The header of an image file, refused when too large, truncated (JPEG) or too small to detect on.
+pub fn probe_detectable(path: &Path, limits: &DecodeLimits) -> Result<ImageInfo, CliError> {
+    let info = clatch::decode::probe(path, limits)?;
+    check_detectable(path, info.width, info.height)?;
+    Ok(info)
+}
+
+/// Refuses an image in which the detector cannot score a single pixel: it scores only pixels at least
+/// [`DetectorConfig::margin`] from every border, so a side needs `2 margin + 1` pixels.
+pub fn check_detectable(path: &Path, width: u32, height: u32) -> Result<(), CliError> {
+    let margin = DetectorConfig::default().margin();
+    let min = 2 * margin + 1;
+    if (width as usize) < min || (height as usize) < min {
+        return Err(CliError::ImageTooSmall {
+            path: path.to_path_buf(),
+            width,
+            height,
+            margin,
+            min,
+        });
+    }
+    Ok(())
 }
 
 /// The library's error for an image that cannot hold one 64x64 descriptor window (or that is larger
@@ -55,14 +68,41 @@ pub fn check_size(img: &GrayImage) -> Result<(), clatch::Error> {
 mod tests {
     use super::*;
 
+    fn limits() -> DecodeLimits {
+        DecodeLimits::default()
+    }
+
+    #[test]
+    fn the_detectable_minimum_follows_the_detector_margin() {
+        // The default 64-pixel keypoints: margin ceil(64 / sqrt 2) + 2 = 48, so 97 pixels.
+        let path = Path::new("img.png");
+        assert!(check_detectable(path, 97, 97).is_ok());
+        let e = check_detectable(path, 96, 500).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                CliError::ImageTooSmall {
+                    min: 97,
+                    margin: 48,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(check_detectable(path, 500, 64).is_err());
+    }
+
     fn temp_path(name: &str) -> std::path::PathBuf {
         std::env::temp_dir().join(format!("clatch-input-test-{}-{name}", std::process::id()))
     }
 
     #[test]
     fn missing_file_is_a_read_error() {
-        let e = load_gray(Path::new("/nonexistent/clatch/none.png")).unwrap_err();
-        assert!(matches!(e, CliError::Read { .. }), "{e}");
+        let e = load_gray(Path::new("/nonexistent/clatch/none.png"), &limits()).unwrap_err();
+        assert!(
+            matches!(e, CliError::Decode(clatch::decode::DecodeError::Io { .. })),
+            "{e}"
+        );
         assert!(e.to_string().contains("none.png"));
     }
 
@@ -70,9 +110,9 @@ mod tests {
     fn garbage_is_a_decode_error() {
         let path = temp_path("garbage.png");
         std::fs::write(&path, b"this is not an image at all").unwrap();
-        let e = load_gray(&path).unwrap_err();
+        let e = load_gray(&path, &limits()).unwrap_err();
         std::fs::remove_file(&path).ok();
-        assert!(matches!(e, CliError::Decode { .. }), "{e}");
+        assert!(matches!(e, CliError::Decode(_)), "{e}");
     }
 
     #[test]
@@ -81,7 +121,7 @@ mod tests {
         let mut pgm = b"P5\n32 32\n255\n".to_vec();
         pgm.resize(pgm.len() + 32 * 32, 77);
         std::fs::write(&path, &pgm).unwrap();
-        let e = load_gray(&path).unwrap_err();
+        let e = load_gray(&path, &limits()).unwrap_err();
         assert!(
             matches!(
                 e,
@@ -96,7 +136,7 @@ mod tests {
         let mut pgm = b"P5\n64 70\n255\n".to_vec();
         pgm.resize(pgm.len() + 64 * 70, 77);
         std::fs::write(&path, &pgm).unwrap();
-        let img = load_gray(&path).unwrap();
+        let img = load_gray(&path, &limits()).unwrap();
         std::fs::remove_file(&path).ok();
         assert_eq!(img.dimensions(), (64, 70));
         assert_eq!(img.get_pixel(5, 5).0[0], 77);

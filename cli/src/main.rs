@@ -17,17 +17,20 @@ mod image_dir;
 mod input;
 mod match_cmd;
 mod npy;
+mod output;
 mod pipeline;
 mod progress;
 mod report;
 mod spread;
 mod subpixel;
+mod text_input;
 mod warp;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use clatch::decode::DecodeLimits;
 use clatch::{Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, ExtractorConfig};
 use clatch::{MatchConfig, OpencvLatch, PatchWeights, Pyramid};
 
@@ -176,6 +179,8 @@ pub struct MatchArgs {
     #[arg(long, value_name = "FILE")]
     pub matches_csv: Option<PathBuf>,
     #[command(flatten)]
+    pub input: InputArgs,
+    #[command(flatten)]
     pub backend: BackendArgs,
     #[command(flatten)]
     pub detect: DetectArgs,
@@ -195,6 +200,8 @@ pub struct ExtractArgs {
     /// Output prefix: writes PREFIX.keypoints.csv, PREFIX.keypoints.json, PREFIX.descriptors.npy.
     #[arg(short, long, value_name = "PREFIX")]
     pub output: PathBuf,
+    #[command(flatten)]
+    pub input: InputArgs,
     #[command(flatten)]
     pub backend: BackendArgs,
     #[command(flatten)]
@@ -282,9 +289,11 @@ pub struct ColmapArgs {
     /// Half side of the window of --subpixel corner.
     #[arg(long, default_value_t = 3, value_name = "R", value_parser = clap::value_parser!(u32).range(1..=16))]
     pub subpixel_radius: u32,
-    /// Replace an existing database and model.
+    /// Replace an existing database and model, once the new ones are complete.
     #[arg(long)]
     pub force: bool,
+    #[command(flatten)]
+    pub input: InputArgs,
     /// Only write the database and match list; do not run COLMAP.
     #[arg(long)]
     pub no_colmap: bool,
@@ -301,6 +310,24 @@ pub struct ColmapArgs {
     pub detect: DetectArgs,
     #[command(flatten)]
     pub matching: MatchingArgs,
+}
+
+/// Limits on input images.
+#[derive(Debug, Args)]
+pub struct InputArgs {
+    /// Refuse images of more than this many pixels (width x height), read from the file's header
+    /// before decoding. The default, 100 megapixels, is a 12000x8000 photo.
+    #[arg(long, value_name = "PIXELS", default_value_t = DecodeLimits::DEFAULT_MAX_PIXELS, value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_pixels: u64,
+}
+
+impl InputArgs {
+    /// The decoding limits.
+    pub fn limits(&self) -> DecodeLimits {
+        DecodeLimits {
+            max_pixels: self.max_pixels,
+        }
+    }
 }
 
 /// Which backend runs detection, description and matching.
@@ -337,8 +364,8 @@ pub struct DetectArgs {
     /// Descriptor width in bits: a multiple of 8 from 8 to 512.
     #[arg(long, default_value_t = 512, value_parser = parse_bits)]
     pub bits: usize,
-    /// Detect on a scale pyramid of LEVELS levels (full resolution included), each FACTOR (in (1, 2],
-    /// default 2) smaller than the one before; each keypoint is described on its own level.
+    /// Detect on a scale pyramid of LEVELS levels (full resolution included), each FACTOR (in
+    /// [1.05, 2], default 2) smaller than the one before; each keypoint is described on its own level.
     #[arg(long, value_name = "LEVELS[:FACTOR]", value_parser = parse_pyramid)]
     pub pyramid: Option<Pyramid>,
 }
@@ -391,13 +418,24 @@ fn parse_bits(s: &str) -> Result<usize, String> {
         .map_err(|_| "must be a multiple of 8 between 8 and 512".into())
 }
 
-/// `LEVELS` or `LEVELS:FACTOR`; the ranges are checked with the keypoint size by the library.
+/// Smallest pyramid factor: closer levels are near-identical copies whose corners duplicate each other's
+/// (at 1.05 every level of an image the detector accepts is at least 4 pixels smaller than the last).
+pub const MIN_PYRAMID_FACTOR: f32 = 1.05;
+
+/// `LEVELS` or `LEVELS:FACTOR`; the ranges are checked with the keypoint size by the library, and the
+/// factor against [`MIN_PYRAMID_FACTOR`].
 fn parse_pyramid(s: &str) -> Result<Pyramid, String> {
     let (levels, factor) = s.split_once(':').unwrap_or((s, "2"));
     let levels = levels
         .parse::<usize>()
         .map_err(|e| format!("LEVELS: {e}"))?;
     let scale_factor = factor.parse::<f32>().map_err(|e| format!("FACTOR: {e}"))?;
+    if levels > 1 && scale_factor.is_finite() && scale_factor < MIN_PYRAMID_FACTOR {
+        return Err(format!(
+            "FACTOR {scale_factor} is below {MIN_PYRAMID_FACTOR}: levels that close are near-identical \
+             copies of each other"
+        ));
+    }
     let pyramid = Pyramid {
         levels,
         scale_factor,
@@ -529,6 +567,9 @@ mod tests {
             &["clatch", "demo", "--pyramid", "3:1"],
             &["clatch", "demo", "--pyramid", "3:2.5"],
             &["clatch", "demo", "--pyramid", "3:x"],
+            &["clatch", "demo", "--pyramid", "32:1.0000153"],
+            &["clatch", "demo", "--pyramid", "2:1.049"],
+            &["clatch", "match", "a.png", "b.png", "--max-pixels", "0"],
             &["clatch", "demo", "--pyramid", "3:"],
             &["clatch", "match", "only-one.png"],
             &["clatch", "extract", "img.png"],
@@ -570,6 +611,7 @@ mod tests {
             };
             demo.detect.config().unwrap().pyramid.unwrap()
         };
+        assert_eq!(parse("2:1.05").scale_factor, MIN_PYRAMID_FACTOR);
         assert_eq!(
             (parse("3"), parse("8:1.2")),
             (

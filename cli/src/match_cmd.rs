@@ -1,14 +1,15 @@
 //! `clatch match A B`: match two image files, optionally check against a homography, draw, export.
 
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::path::Path;
 
 use clatch::{KeyPoint, Match};
 
-use crate::draw::{MatchClass, check_picture_path, draw_matches, save_picture};
+use crate::draw::{MatchClass, check_picture_path, draw_matches, stage_picture};
 use crate::error::CliError;
 use crate::homography::Homography;
-use crate::input::load_gray;
+use crate::input::{check_detectable, load_gray};
+use crate::output::{Staged, check_distinct, check_writable};
 use crate::pipeline;
 use crate::progress::Progress;
 use crate::report;
@@ -37,6 +38,7 @@ pub fn write_matches_csv(
 pub fn main(args: &MatchArgs) -> Result<(), CliError> {
     let settings = settings(&args.backend, &args.detect, Some(&args.matching))?;
     check_picture_path(&args.output)?;
+    check_paths(args)?;
     // Read the cheap inputs first, so a bad homography file fails before any work.
     let homography = args
         .homography
@@ -46,9 +48,12 @@ pub fn main(args: &MatchArgs) -> Result<(), CliError> {
 
     let progress = Progress::new(2 + pipeline::PAIR_STAGES + 1);
     progress.stage("reading images");
-    let img_a = load_gray(&args.image_a)?;
+    let limits = args.input.limits();
+    let img_a = load_gray(&args.image_a, &limits)?;
+    check_detectable(&args.image_a, img_a.width(), img_a.height())?;
     progress.done();
-    let img_b = load_gray(&args.image_b)?;
+    let img_b = load_gray(&args.image_b, &limits)?;
+    check_detectable(&args.image_b, img_b.width(), img_b.height())?;
     progress.done();
 
     let run = pipeline::match_pair(
@@ -76,10 +81,13 @@ pub fn main(args: &MatchArgs) -> Result<(), CliError> {
         &classes,
         args.draw.max_lines,
     );
-    save_picture(&picture, &args.output)?;
+    // The picture and the CSV are both complete before either replaces an older file.
+    let mut staged = Staged::new();
+    stage_picture(&mut staged, &picture, &args.output)?;
     if let Some(path) = &args.matches_csv {
-        write_csv_file(path, &run.matches, kps_a, kps_b)?;
+        staged.write(path, |w| write_matches_csv(w, &run.matches, kps_a, kps_b))?;
     }
+    staged.commit()?;
     progress.done();
     progress.finish();
 
@@ -123,14 +131,19 @@ pub fn main(args: &MatchArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-fn write_csv_file(
-    path: &Path,
-    matches: &[Match],
-    query: &[KeyPoint],
-    train: &[KeyPoint],
-) -> Result<(), CliError> {
-    let file = std::fs::File::create(path).map_err(CliError::write(path))?;
-    write_matches_csv(BufWriter::new(file), matches, query, train).map_err(CliError::write(path))
+/// Refuses outputs that name an input or each other, before any work.
+fn check_paths(args: &MatchArgs) -> Result<(), CliError> {
+    let mut inputs: Vec<(&'static str, &Path)> =
+        vec![("image A", &args.image_a), ("image B", &args.image_b)];
+    if let Some(h) = &args.homography {
+        inputs.push(("homography", h));
+    }
+    let mut outputs: Vec<(&'static str, &Path)> = vec![("picture", &args.output)];
+    if let Some(csv) = &args.matches_csv {
+        check_writable(csv)?;
+        outputs.push(("matches CSV", csv));
+    }
+    check_distinct(&inputs, &outputs)
 }
 
 #[cfg(test)]

@@ -160,13 +160,11 @@ fn save_panels(
         path: path.to_path_buf(),
         source,
     };
-    let file = std::fs::File::create(path).map_err(CliError::write(path))?;
-    let encoder = PngEncoder::new_with_quality(
-        std::io::BufWriter::new(file),
-        CompressionType::Best,
-        FilterType::Adaptive,
-    );
-    picture.write_with_encoder(encoder).map_err(encode_error)
+    let mut encoded = Vec::new();
+    let encoder =
+        PngEncoder::new_with_quality(&mut encoded, CompressionType::Best, FilterType::Adaptive);
+    picture.write_with_encoder(encoder).map_err(encode_error)?;
+    crate::output::write_file(path, |w| std::io::Write::write_all(w, &encoded))
 }
 
 /// The colour of each method, by its place in `methods`.

@@ -215,14 +215,19 @@ fn group_table(results: &[PairResult]) -> Table {
     Table { header, rows }
 }
 
+/// Writes a text output through a temporary file renamed into place.
+fn write_text(path: &std::path::Path, text: &str) -> Result<(), CliError> {
+    crate::output::write_file(path, |w| std::io::Write::write_all(w, text.as_bytes()))
+}
+
 /// Runs `clatch eval`.
 pub fn main(args: &EvalArgs) -> Result<(), CliError> {
     let from_flags = settings(&args.backend, &args.detect, Some(&args.matching))?;
     std::fs::create_dir_all(&args.out).map_err(CliError::write(&args.out))?;
     let (pairs, notes) = collect_pairs(args)?;
     let manifest_path = args.out.join("pairs.csv");
-    std::fs::write(&manifest_path, pairs::manifest(&pairs)?)
-        .map_err(CliError::write(&manifest_path))?;
+    let manifest = pairs::manifest(&pairs)?;
+    write_text(&manifest_path, &manifest)?;
     let ratios = ratio_grid();
     let tolerance = args.check.inlier_px;
 
@@ -291,11 +296,10 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
         ));
     }
     let json_path = args.out.join("results.json");
-    std::fs::write(
+    write_text(
         &json_path,
-        results::to_json(&results, tolerance, &setting_text),
-    )
-    .map_err(CliError::write(&json_path))?;
+        &results::to_json(&results, tolerance, &setting_text),
+    )?;
     written.push(json_path);
 
     let methods = methods(&results);
@@ -369,7 +373,7 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
         markdown.push_str(&format!("\n**{title}**\n\n{}", table.to_markdown()));
     }
     let md_path = args.out.join("tables.md");
-    std::fs::write(&md_path, markdown).map_err(CliError::write(&md_path))?;
+    write_text(&md_path, &markdown)?;
     written.push(md_path);
     println!();
     for path in [&manifest_path].into_iter().chain(&written) {

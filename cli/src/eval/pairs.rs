@@ -4,6 +4,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use clatch::decode::DecodeLimits;
 use image::GrayImage;
 
 use crate::error::CliError;
@@ -152,7 +153,7 @@ pub fn synthetic_source(arg: &str) -> Result<SyntheticSource, CliError> {
         });
     }
     Ok(SyntheticSource {
-        image: load_gray(&path)?,
+        image: load_gray(&path, &DecodeLimits::default())?,
         name,
     })
 }
@@ -199,11 +200,10 @@ pub fn homography_text(h: &Homography) -> String {
 }
 
 fn save_png(img: &GrayImage, path: &Path) -> Result<(), CliError> {
-    img.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|source| CliError::Encode {
-            path: path.to_path_buf(),
-            source,
-        })
+    crate::output::write_file(path, |w| {
+        img.write_to(w, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
 }
 
 /// Writes `source` and its warped views into `dir` (PNG images, Oxford-format homographies) and
@@ -224,7 +224,10 @@ pub fn write_synthetic(source: &SyntheticSource, dir: &Path) -> Result<Vec<EvalP
         let image_b = dir.join(format!("{file}.png"));
         save_png(&warped, &image_b)?;
         let homography = dir.join(format!("{file}.H"));
-        std::fs::write(&homography, homography_text(&hom)).map_err(CliError::write(&homography))?;
+        let text = homography_text(&hom);
+        crate::output::write_file(&homography, |w| {
+            std::io::Write::write_all(w, text.as_bytes())
+        })?;
         pairs.push(EvalPair {
             name: format!("{} {suffix}", source.name),
             group: group.into(),
@@ -317,8 +320,16 @@ mod tests {
         assert_eq!(pairs.len(), synthetic_warps(70, 66).len());
         let rot = &pairs[2];
         assert_eq!(rot.name, "ramp rot 30");
-        assert_eq!(load_gray(&rot.image_a).unwrap(), source.image);
-        assert_eq!(load_gray(&rot.image_b).unwrap().dimensions(), (70, 66));
+        assert_eq!(
+            load_gray(&rot.image_a, &DecodeLimits::default()).unwrap(),
+            source.image
+        );
+        assert_eq!(
+            load_gray(&rot.image_b, &DecodeLimits::default())
+                .unwrap()
+                .dimensions(),
+            (70, 66)
+        );
         let h = Homography::from_file(&rot.homography).unwrap();
         assert_eq!(h, synthetic_warps(70, 66)[2].3);
         let text = manifest(&pairs).unwrap();
@@ -376,7 +387,7 @@ mod tests {
         ));
         assert!(matches!(
             synthetic_source("/nonexistent/clatch.png"),
-            Err(CliError::Read { .. })
+            Err(CliError::Decode(clatch::decode::DecodeError::Io { .. }))
         ));
     }
 }

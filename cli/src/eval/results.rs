@@ -193,7 +193,7 @@ pub fn write_csv(results: &[PairResult], prefix: &Path) -> Result<[PathBuf; 2], 
         crate::extract::with_suffix(prefix, ".pr.csv"),
     ];
     for (path, text) in paths.iter().zip([summary, pr]) {
-        std::fs::write(path, text).map_err(CliError::write(path))?;
+        crate::output::write_file(path, |w| std::io::Write::write_all(w, text.as_bytes()))?;
     }
     Ok(paths)
 }

@@ -1,6 +1,7 @@
 //! Running clatch on one pair and turning its features and matches into [`PairResult`]s.
 
 use clap::ValueEnum;
+use clatch::decode::DecodeLimits;
 use clatch::{Match, Matcher, OpencvLatch};
 use image::GrayImage;
 
@@ -68,7 +69,11 @@ pub struct LoadedPair {
 /// Reads a pair's images and homography.
 pub fn load_pair(pair: &EvalPair, tolerance: f64) -> Result<LoadedPair, CliError> {
     let h = Homography::from_file(&pair.homography)?;
-    let (a, b) = (load_gray(&pair.image_a)?, load_gray(&pair.image_b)?);
+    let limits = DecodeLimits::default();
+    let (a, b) = (
+        load_gray(&pair.image_a, &limits)?,
+        load_gray(&pair.image_b, &limits)?,
+    );
     let truth = PairTruth::new(h, a.dimensions(), b.dimensions(), tolerance).ok_or_else(|| {
         CliError::Homography {
             path: pair.homography.clone(),

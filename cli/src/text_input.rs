@@ -1,0 +1,124 @@
+//! Reading the small text inputs (homography, camera matrix): regular files only, with a size limit,
+//! a UTF-8 byte-order mark skipped.
+
+use std::io::Read;
+use std::path::Path;
+
+use crate::error::CliError;
+
+/// Largest text input: a 3x3 matrix, even as OpenCV XML with comments, is far smaller.
+pub const MAX_TEXT_BYTES: u64 = 64 * 1024;
+
+/// The UTF-8 byte-order mark some editors write at the start of a file.
+const BOM: char = '\u{feff}';
+
+/// The content of the text file `path` (a `what` file, for the message), without a leading BOM.
+pub fn read_text(path: &Path, what: &'static str) -> Result<String, CliError> {
+    let read_err = |source| CliError::Read {
+        path: path.to_path_buf(),
+        source,
+    };
+    let meta = std::fs::metadata(path).map_err(read_err)?;
+    if !meta.is_file() {
+        return Err(CliError::NotAFile {
+            path: path.to_path_buf(),
+            kind: file_kind(&meta),
+        });
+    }
+    let file = std::fs::File::open(path).map_err(read_err)?;
+    let mut bytes = Vec::new();
+    file.take(MAX_TEXT_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(read_err)?;
+    if bytes.len() as u64 > MAX_TEXT_BYTES {
+        return Err(CliError::TextTooLarge {
+            path: path.to_path_buf(),
+            max: MAX_TEXT_BYTES,
+            what,
+        });
+    }
+    let text = String::from_utf8(bytes)
+        .map_err(|e| read_err(std::io::Error::new(std::io::ErrorKind::InvalidData, e)))?;
+    Ok(text.strip_prefix(BOM).map(str::to_owned).unwrap_or(text))
+}
+
+/// What a non-regular file is, in words.
+pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if meta.is_dir() {
+        "a folder"
+    } else {
+        "not a regular file"
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp(name: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("clatch-text-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join(name)
+    }
+
+    #[test]
+    fn a_bom_is_skipped() {
+        let path = temp("bom.txt");
+        std::fs::write(&path, "\u{feff}1 0 0").unwrap();
+        assert_eq!(read_text(&path, "homography").unwrap(), "1 0 0");
+    }
+
+    #[test]
+    fn oversized_and_special_files_are_refused_without_reading_them_whole() {
+        let path = temp("big.txt");
+        std::fs::write(&path, vec![b' '; MAX_TEXT_BYTES as usize + 1]).unwrap();
+        assert!(matches!(
+            read_text(&path, "homography"),
+            Err(CliError::TextTooLarge { .. })
+        ));
+        std::fs::write(&path, vec![b' '; MAX_TEXT_BYTES as usize]).unwrap();
+        assert!(read_text(&path, "homography").is_ok());
+        #[cfg(unix)]
+        {
+            let e = read_text(Path::new("/dev/zero"), "homography").unwrap_err();
+            assert!(
+                matches!(
+                    e,
+                    CliError::NotAFile {
+                        kind: "a device",
+                        ..
+                    }
+                ),
+                "{e}"
+            );
+            let fifo = temp("pipe");
+            std::fs::remove_file(&fifo).ok();
+            assert!(
+                std::process::Command::new("mkfifo")
+                    .arg(&fifo)
+                    .status()
+                    .unwrap()
+                    .success()
+            );
+            let e = read_text(&fifo, "camera matrix").unwrap_err();
+            assert!(
+                matches!(e, CliError::NotAFile { kind: "a FIFO", .. }),
+                "{e}"
+            );
+        }
+    }
+}

@@ -1,0 +1,347 @@
+//! Opening image files with their size checked from the header before anything large is allocated.
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, Cursor, Read, Seek};
+use std::path::{Path, PathBuf};
+
+use image::{DynamicImage, GrayImage, ImageDecoder, ImageFormat, ImageReader};
+use thiserror::Error;
+
+use super::jpeg_end::{JpegEnd, find_end};
+use super::palette;
+use crate::gray_view::MAX_IMAGE_SIDE;
+
+/// How large an image file may be decoded.
+///
+/// The size is read from the file's header and checked before any pixel buffer is allocated; the
+/// decoder's own allocations are capped at [`DecodeLimits::max_alloc`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DecodeLimits {
+    /// Most pixels (width × height) an image may have. Default [`DecodeLimits::DEFAULT_MAX_PIXELS`].
+    /// Each side is also capped at [`crate::MAX_IMAGE_SIDE`], the most clatch can process.
+    pub max_pixels: u64,
+}
+
+impl DecodeLimits {
+    /// 100 megapixels: a 12 000 × 8 000 photo; its decoded RGB takes 300 MB.
+    pub const DEFAULT_MAX_PIXELS: u64 = 100_000_000;
+
+    /// Bytes the decoder may allocate: 8 per pixel, the largest decoded pixel (16-bit RGBA).
+    pub fn max_alloc(&self) -> u64 {
+        self.max_pixels.saturating_mul(8)
+    }
+}
+
+impl Default for DecodeLimits {
+    fn default() -> Self {
+        Self {
+            max_pixels: Self::DEFAULT_MAX_PIXELS,
+        }
+    }
+}
+
+/// Why an image file was not decoded. Every variant names the file.
+// Field names are described by each variant's message.
+#[allow(missing_docs)]
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum DecodeError {
+    /// The path is a folder, a FIFO, a device or a socket: reading it could block or never end.
+    #[error("{path}: not a regular file ({kind}); images are read from regular files only", path = .path.display())]
+    NotAFile { path: PathBuf, kind: &'static str },
+
+    /// The file could not be opened or read.
+    #[error("cannot read {path}: {source}", path = .path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+
+    /// The header declares more pixels, or a longer side, than allowed.
+    #[error(
+        "{path}: the header says {width}x{height} ({pixels} pixels), more than allowed \
+         ({max_pixels} pixels, sides up to {max_side})",
+        path = .path.display(), pixels = u64::from(*.width) * u64::from(*.height)
+    )]
+    TooLarge {
+        path: PathBuf,
+        width: u32,
+        height: u32,
+        max_pixels: u64,
+        max_side: u32,
+    },
+
+    /// A palette PNG file larger than the decoder may allocate (it is read whole to check its indices).
+    #[error("{path}: {bytes} bytes is more than the {max} a palette image of the allowed size may take", path = .path.display())]
+    FileTooLarge { path: PathBuf, bytes: u64, max: u64 },
+
+    /// A JPEG file that stops before its end-of-image marker.
+    #[error("{path}: the JPEG data is truncated (the file ends after {bytes} bytes, before the end-of-image marker)", path = .path.display())]
+    TruncatedJpeg { path: PathBuf, bytes: u64 },
+
+    /// A palette PNG with pixels whose index is past the end of its palette.
+    #[error("{path}: palette PNG with pixels whose colour index is past the end of its {entries}-colour palette", path = .path.display())]
+    PaletteIndex { path: PathBuf, entries: usize },
+
+    /// The decoder refused the file (unknown format, corrupt or truncated data, ...).
+    #[error("cannot decode image {path}: {source}", path = .path.display())]
+    Image {
+        path: PathBuf,
+        source: image::ImageError,
+    },
+}
+
+/// A gray image and the raw EXIF block of its file, when it has one.
+type GrayWithExif = (GrayImage, Option<Vec<u8>>);
+
+/// What a file's header says, checked against the limits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImageInfo {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// The format, from the file's content (not its name).
+    pub format: ImageFormat,
+}
+
+/// Reads `path`'s header: its size (checked against `limits`) and format, without decoding pixels.
+/// JPEG files are also followed to their end marker, so a truncated one is refused here.
+pub fn probe(path: &Path, limits: &DecodeLimits) -> Result<ImageInfo, DecodeError> {
+    let reader = reader(path)?;
+    let format = format_of(&reader, path)?;
+    let decoder = reader.into_decoder().map_err(image_error(path))?;
+    let (width, height) = decoder.dimensions();
+    check_size(path, width, height, limits)?;
+    if format == ImageFormat::Jpeg {
+        check_jpeg_end(path)?;
+    }
+    Ok(ImageInfo {
+        width,
+        height,
+        format,
+    })
+}
+
+/// Decodes `path` (PNG, JPEG or PNM, by content) to 8-bit gray with [`super::gray_from_dynamic`].
+///
+/// Before decoding: the path must be a regular file, the header's size within `limits`, a JPEG
+/// complete to its end marker. A palette PNG with indices past its palette is refused.
+///
+/// ```
+/// use clatch::decode::{DecodeError, DecodeLimits, open_gray};
+///
+/// let path = std::env::temp_dir().join(format!("clatch-doc-open-{}.png", std::process::id()));
+/// image::GrayImage::from_pixel(120, 100, image::Luma([9])).save(&path)?;
+/// let gray = open_gray(&path, &DecodeLimits::default())?;
+/// assert_eq!(gray.dimensions(), (120, 100));
+/// let small = DecodeLimits { max_pixels: 10_000 };
+/// assert!(matches!(open_gray(&path, &small), Err(DecodeError::TooLarge { .. })));
+/// # std::fs::remove_file(&path)?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn open_gray(path: &Path, limits: &DecodeLimits) -> Result<GrayImage, DecodeError> {
+    open_gray_with_exif(path, limits).map(|(gray, _)| gray)
+}
+
+/// [`open_gray`], with the file's raw EXIF block when it has a readable one.
+pub fn open_gray_with_exif(
+    path: &Path,
+    limits: &DecodeLimits,
+) -> Result<(GrayImage, Option<Vec<u8>>), DecodeError> {
+    let reader = reader(path)?;
+    match format_of(&reader, path)? {
+        ImageFormat::Jpeg => check_jpeg_end(path)?,
+        ImageFormat::Png => {
+            if let Some(decoded) = open_palette_png(path, limits)? {
+                return Ok(decoded);
+            }
+        }
+        _ => {}
+    }
+    let (img, exif) = decode(reader, path, limits)?;
+    Ok((super::gray_from_dynamic(&img), exif))
+}
+
+/// The path's metadata, refusing anything but a regular file (symbolic links are followed).
+fn regular_file(path: &Path) -> Result<std::fs::Metadata, DecodeError> {
+    let meta = std::fs::metadata(path).map_err(io_error(path))?;
+    if meta.is_file() {
+        return Ok(meta);
+    }
+    Err(DecodeError::NotAFile {
+        path: path.to_path_buf(),
+        kind: file_kind(&meta),
+    })
+}
+
+/// What a non-regular file is, in words.
+pub(crate) fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if meta.is_dir() {
+        "a folder"
+    } else {
+        "not a file"
+    }
+}
+
+fn reader(path: &Path) -> Result<ImageReader<BufReader<File>>, DecodeError> {
+    regular_file(path)?;
+    let file = File::open(path).map_err(io_error(path))?;
+    ImageReader::new(BufReader::new(file))
+        .with_guessed_format()
+        .map_err(io_error(path))
+}
+
+fn format_of<R: BufRead + Seek>(
+    reader: &ImageReader<R>,
+    path: &Path,
+) -> Result<ImageFormat, DecodeError> {
+    reader.format().ok_or_else(|| DecodeError::Image {
+        path: path.to_path_buf(),
+        source: image::ImageError::Unsupported(
+            image::error::UnsupportedError::from_format_and_kind(
+                image::error::ImageFormatHint::Unknown,
+                image::error::UnsupportedErrorKind::Format(image::error::ImageFormatHint::Unknown),
+            ),
+        ),
+    })
+}
+
+fn check_size(
+    path: &Path,
+    width: u32,
+    height: u32,
+    limits: &DecodeLimits,
+) -> Result<(), DecodeError> {
+    let max_side = MAX_IMAGE_SIDE as u32;
+    let pixels = u64::from(width) * u64::from(height);
+    if pixels > limits.max_pixels || width > max_side || height > max_side {
+        return Err(DecodeError::TooLarge {
+            path: path.to_path_buf(),
+            width,
+            height,
+            max_pixels: limits.max_pixels,
+            max_side,
+        });
+    }
+    Ok(())
+}
+
+fn check_jpeg_end(path: &Path) -> Result<(), DecodeError> {
+    let file = File::open(path).map_err(io_error(path))?;
+    match find_end(BufReader::new(file)).map_err(io_error(path))? {
+        JpegEnd::Complete => Ok(()),
+        JpegEnd::Truncated { bytes } => Err(DecodeError::TruncatedJpeg {
+            path: path.to_path_buf(),
+            bytes,
+        }),
+    }
+}
+
+/// Size check from the header, allocation limit, then the pixels and the EXIF block.
+fn decode<R: BufRead + Seek>(
+    mut reader: ImageReader<R>,
+    path: &Path,
+    limits: &DecodeLimits,
+) -> Result<(DynamicImage, Option<Vec<u8>>), DecodeError> {
+    let mut image_limits = image::Limits::default();
+    image_limits.max_alloc = Some(limits.max_alloc());
+    reader.limits(image_limits);
+    let mut decoder = reader.into_decoder().map_err(image_error(path))?;
+    let (width, height) = decoder.dimensions();
+    check_size(path, width, height, limits)?;
+    // EXIF is optional: a block that cannot be read is simply absent.
+    let exif = decoder.exif_metadata().ok().flatten();
+    let img = DynamicImage::from_decoder(decoder).map_err(image_error(path))?;
+    Ok((img, exif))
+}
+
+/// A palette PNG that could hold indices past its palette: decoded with the sentinel palette and
+/// checked. `None` for every other PNG.
+fn open_palette_png(
+    path: &Path,
+    limits: &DecodeLimits,
+) -> Result<Option<GrayWithExif>, DecodeError> {
+    let mut start = [0u8; 33];
+    let mut file = File::open(path).map_err(io_error(path))?;
+    let read = read_up_to(&mut file, &mut start).map_err(io_error(path))?;
+    let Some(header) = palette::Header::parse(&start[..read]) else {
+        return Ok(None);
+    };
+    if header.colour_type != 3 {
+        return Ok(None);
+    }
+    check_size(path, header.width, header.height, limits)?;
+    // A palette file is at most a byte per pixel once inflated; a larger one is refused unread.
+    let len = regular_file(path)?.len();
+    if len > limits.max_alloc() {
+        return Err(DecodeError::FileTooLarge {
+            path: path.to_path_buf(),
+            bytes: len,
+            max: limits.max_alloc(),
+        });
+    }
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.rewind().map_err(io_error(path))?;
+    file.read_to_end(&mut bytes).map_err(io_error(path))?;
+    let Some(rewritten) = palette::with_sentinel(&bytes) else {
+        return Ok(None);
+    };
+    drop(bytes);
+    let reader = ImageReader::with_format(Cursor::new(rewritten.png), ImageFormat::Png);
+    let (img, exif) = decode(reader, path, limits)?;
+    let rgb = img.to_rgb8();
+    if rgb.pixels().any(|p| p.0 == rewritten.sentinel) {
+        return Err(DecodeError::PaletteIndex {
+            path: path.to_path_buf(),
+            entries: rewritten.entries,
+        });
+    }
+    Ok(Some((super::gray_from_rgb(&rgb), exif)))
+}
+
+/// Reads until `buf` is full or the data ends; returns the bytes read.
+fn read_up_to(reader: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut filled = 0;
+    while filled < buf.len() {
+        match reader.read(&mut buf[filled..]) {
+            Ok(0) => break,
+            Ok(n) => filled += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(filled)
+}
+
+fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> DecodeError + '_ {
+    move |source| DecodeError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+fn image_error(path: &Path) -> impl FnOnce(image::ImageError) -> DecodeError + '_ {
+    move |source| DecodeError::Image {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+#[cfg(test)]
+#[path = "open_tests.rs"]
+mod tests;

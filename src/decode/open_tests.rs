@@ -1,0 +1,278 @@
+//! Hostile files, generated here: lying headers, truncated JPEGs, FIFOs, bad palettes, 16-bit data.
+
+use super::*;
+use crate::decode::palette::crc32;
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("clatch-decode-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn png_bytes(img: &DynamicImage) -> Vec<u8> {
+    let mut out = Cursor::new(Vec::new());
+    img.write_to(&mut out, ImageFormat::Png).unwrap();
+    out.into_inner()
+}
+
+/// A real PNG whose IHDR is patched to say `width` x `height` (CRC fixed, so only the size lies).
+fn lying_png(width: u32, height: u32) -> Vec<u8> {
+    let mut png = png_bytes(&DynamicImage::ImageLuma8(GrayImage::new(4, 4)));
+    png[16..20].copy_from_slice(&width.to_be_bytes());
+    png[20..24].copy_from_slice(&height.to_be_bytes());
+    let crc = crc32(&png[12..29]);
+    png[29..33].copy_from_slice(&crc.to_be_bytes());
+    png
+}
+
+fn textured(width: u32, height: u32) -> GrayImage {
+    GrayImage::from_fn(width, height, |x, y| {
+        image::Luma([((x * 31 + y * 17 + (x * y) % 7) % 256) as u8])
+    })
+}
+
+fn jpeg_bytes(img: &GrayImage) -> Vec<u8> {
+    let mut out = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 90)
+        .encode_image(img)
+        .unwrap();
+    out
+}
+
+#[test]
+fn lying_png_header_is_refused_before_decoding() {
+    let path = temp("lying.png");
+    std::fs::write(&path, lying_png(200_000, 200_000)).unwrap();
+    let e = open_gray(&path, &DecodeLimits::default()).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            DecodeError::TooLarge {
+                width: 200_000,
+                height: 200_000,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("lying.png"), "{e}");
+    assert!(matches!(
+        probe(&path, &DecodeLimits::default()),
+        Err(DecodeError::TooLarge { .. })
+    ));
+}
+
+#[test]
+fn lying_ppm_and_jpeg_headers_are_refused() {
+    let ppm = temp("lying.ppm");
+    let mut data = b"P6\n4000000000 2\n255\n".to_vec();
+    data.resize(320, 7);
+    std::fs::write(&ppm, &data).unwrap();
+    let e = open_gray(&ppm, &DecodeLimits::default()).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            DecodeError::TooLarge {
+                width: 4_000_000_000,
+                height: 2,
+                ..
+            }
+        ),
+        "{e}"
+    );
+
+    // A JPEG whose frame header is patched to 65500x65500.
+    let mut jpeg = jpeg_bytes(&textured(64, 64));
+    let sof = jpeg
+        .windows(2)
+        .position(|w| w == [0xFF, 0xC0])
+        .expect("a baseline frame header");
+    jpeg[sof + 5..sof + 7].copy_from_slice(&65500u16.to_be_bytes());
+    jpeg[sof + 7..sof + 9].copy_from_slice(&65500u16.to_be_bytes());
+    let path = temp("lying.jpg");
+    std::fs::write(&path, &jpeg).unwrap();
+    let e = open_gray(&path, &DecodeLimits::default()).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            DecodeError::TooLarge {
+                width: 65500,
+                height: 65500,
+                ..
+            }
+        ),
+        "{e}"
+    );
+}
+
+#[test]
+fn the_pixel_limit_is_configurable() {
+    let path = temp("medium.png");
+    std::fs::write(
+        &path,
+        png_bytes(&DynamicImage::ImageLuma8(textured(300, 200))),
+    )
+    .unwrap();
+    assert!(open_gray(&path, &DecodeLimits { max_pixels: 60_000 }).is_ok());
+    let e = open_gray(&path, &DecodeLimits { max_pixels: 59_999 }).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            DecodeError::TooLarge {
+                max_pixels: 59_999,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let info = probe(&path, &DecodeLimits::default()).unwrap();
+    assert_eq!(
+        (info.width, info.height, info.format),
+        (300, 200, ImageFormat::Png)
+    );
+}
+
+#[test]
+fn truncated_jpegs_are_refused_and_whole_ones_read() {
+    let img = textured(160, 120);
+    let jpeg = jpeg_bytes(&img);
+    let whole = temp("whole.jpg");
+    std::fs::write(&whole, &jpeg).unwrap();
+    let decoded = open_gray(&whole, &DecodeLimits::default()).unwrap();
+    assert_eq!(decoded.dimensions(), (160, 120));
+    for cut in [1000.min(jpeg.len() - 1), jpeg.len() / 2, jpeg.len() - 2] {
+        let path = temp("cut.jpg");
+        std::fs::write(&path, &jpeg[..cut]).unwrap();
+        let e = open_gray(&path, &DecodeLimits::default()).unwrap_err();
+        assert!(
+            matches!(e, DecodeError::TruncatedJpeg { bytes, .. } if bytes == cut as u64),
+            "cut at {cut}: {e}"
+        );
+        assert!(matches!(
+            probe(&path, &DecodeLimits::default()),
+            Err(DecodeError::TruncatedJpeg { .. })
+        ));
+    }
+}
+
+#[cfg(unix)]
+#[test]
+fn fifos_and_folders_are_refused_without_blocking() {
+    let fifo = temp("pipe.png");
+    std::fs::remove_file(&fifo).ok();
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let e = open_gray(&fifo, &DecodeLimits::default()).unwrap_err();
+    assert!(
+        matches!(e, DecodeError::NotAFile { kind: "a FIFO", .. }),
+        "{e}"
+    );
+    let dir = temp("folder.png");
+    std::fs::create_dir_all(&dir).unwrap();
+    let e = open_gray(&dir, &DecodeLimits::default()).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            DecodeError::NotAFile {
+                kind: "a folder",
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let e = open_gray(Path::new("/dev/zero"), &DecodeLimits::default()).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            DecodeError::NotAFile {
+                kind: "a device",
+                ..
+            }
+        ),
+        "{e}"
+    );
+}
+
+/// A 16x16 8-bit palette PNG with `entries` colours `(10 i, 0, 200)` whose pixels are the indices
+/// `index(x, y)`, written chunk by chunk (the `image` crate writes no palette PNGs): IHDR, PLTE, one
+/// stored (uncompressed) zlib IDAT, IEND.
+fn palette_png(entries: usize, index: impl Fn(u32, u32) -> u8) -> Vec<u8> {
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut chunk = |kind: &[u8; 4], data: &[u8]| {
+        out.extend_from_slice(&(data.len() as u32).to_be_bytes());
+        let start = out.len();
+        out.extend_from_slice(kind);
+        out.extend_from_slice(data);
+        let crc = crc32(&out[start..]);
+        out.extend_from_slice(&crc.to_be_bytes());
+    };
+    let mut ihdr = [16u32.to_be_bytes(), 16u32.to_be_bytes()].concat();
+    ihdr.extend_from_slice(&[8, 3, 0, 0, 0]);
+    chunk(b"IHDR", &ihdr);
+    let palette: Vec<u8> = (0..entries).flat_map(|i| [i as u8 * 10, 0, 200]).collect();
+    chunk(b"PLTE", &palette);
+    // Each row: filter byte 0, then the indices.
+    let mut rows = Vec::new();
+    for y in 0..16 {
+        rows.push(0u8);
+        rows.extend((0..16).map(|x| index(x, y)));
+    }
+    let mut zlib = vec![0x78, 0x01, 0x01];
+    zlib.extend_from_slice(&(rows.len() as u16).to_le_bytes());
+    zlib.extend_from_slice(&(!(rows.len() as u16)).to_le_bytes());
+    zlib.extend_from_slice(&rows);
+    zlib.extend_from_slice(&adler32(&rows).to_be_bytes());
+    chunk(b"IDAT", &zlib);
+    chunk(b"IEND", &[]);
+    out
+}
+
+fn adler32(data: &[u8]) -> u32 {
+    let (mut a, mut b) = (1u32, 0u32);
+    for &d in data {
+        a = (a + u32::from(d)) % 65521;
+        b = (b + a) % 65521;
+    }
+    (b << 16) | a
+}
+
+#[test]
+fn palette_indices_past_the_palette_are_refused() {
+    let good = temp("palette-good.png");
+    std::fs::write(&good, palette_png(4, |x, _| (x % 4) as u8)).unwrap();
+    let gray = open_gray(&good, &DecodeLimits::default()).unwrap();
+    // Index 3 is (30, 0, 200): the same gray as through the image crate's own decoding.
+    assert_eq!(gray.get_pixel(3, 0).0[0], super::super::luma(30, 0, 200));
+    let plain = image::open(&good).unwrap();
+    assert_eq!(gray, super::super::gray_from_dynamic(&plain));
+
+    let bad = temp("palette-bad.png");
+    std::fs::write(
+        &bad,
+        palette_png(4, |x, y| if (x, y) == (9, 9) { 200 } else { 1 }),
+    )
+    .unwrap();
+    let e = open_gray(&bad, &DecodeLimits::default()).unwrap_err();
+    assert!(
+        matches!(e, DecodeError::PaletteIndex { entries: 4, .. }),
+        "{e}"
+    );
+}
+
+#[test]
+fn sixteen_bit_data_is_scaled_full_range() {
+    // 12-bit data (0..4095) in a 16-bit PNG: the high byte alone would be 0..15.
+    let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(64, 8, |x, _| {
+        image::Luma([(x * 65) as u16])
+    });
+    let path = temp("twelve-bit.png");
+    std::fs::write(&path, png_bytes(&DynamicImage::ImageLuma16(img))).unwrap();
+    let gray = open_gray(&path, &DecodeLimits::default()).unwrap();
+    assert_eq!(gray.get_pixel(0, 0).0[0], 0);
+    assert_eq!(gray.get_pixel(63, 0).0[0], 255);
+    // x = 32: (32 * 65) * 255 / (63 * 65) = 129.52, rounded to 130.
+    assert_eq!(gray.get_pixel(32, 3).0[0], 130);
+}

@@ -6,7 +6,8 @@
 #     bash tools/gpu_suite.sh [tests|sanitize|all]     (default all; each part fits one 10-minute call)
 #     bash tools/gpu_suite.sh soak [SECONDS]            (tests/cuda_soak.rs for SECONDS, default 570)
 #     bash tools/gpu_suite.sh sanitize-all [TOOL...]    (every GPU test binary, whole, under each tool;
-#                                                       default memcheck racecheck initcheck synccheck)
+#                                                       default memcheck racecheck initcheck synccheck;
+#                                                       SAN_TIMEOUT=S bounds each binary's run, default 590)
 set -uo pipefail
 cd "$(dirname "$0")/.."
 O=${OUT:-/tmp/out}; mkdir -p "$O" .gpu/bin
@@ -65,10 +66,11 @@ if [ "$part" = sanitize-all ]; then
     shift
     tools=${*:-memcheck racecheck initcheck synccheck}
     for tool in $tools; do
-        for t in ${SUITES/cuda_soak/}; do
+        # Cheapest first, so a short call still covers the most binaries; SAN_TIMEOUT bounds each run.
+        for t in cuda_async cuda_faults cuda_match cuda_pyramid cuda_detect cuda_describe cuda_describe_opencv; do
             start=$(date +%s)
             echo "== $tool $t (whole)" >> "$O/sanitize.txt"
-            timeout 590 compute-sanitizer --tool "$tool" "$B/$t" > /tmp/san.txt 2>&1; rc=$?
+            timeout "${SAN_TIMEOUT:-590}" compute-sanitizer --tool "$tool" "$B/$t" > /tmp/san.txt 2>&1; rc=$?
             grep -E "^test result|SUMMARY" /tmp/san.txt >> "$O/sanitize.txt"
             summary+=("sanitizer $tool $t (whole) rc=$rc $(( $(date +%s) - start ))s: $(grep -E '^test result' /tmp/san.txt | tail -1 | cut -c1-60) $(grep -E 'ERROR SUMMARY|RACECHECK SUMMARY' /tmp/san.txt | tail -1)")
         done

@@ -55,6 +55,7 @@ mod gpu {
             threshold,
             max_keypoints,
             keypoint_size,
+            ..DetectorConfig::default()
         }
     }
 

@@ -110,6 +110,12 @@ fn random_config(rng: &mut SplitMix64) -> ExtractorConfig {
         threshold: rng.below(256) as u8,
         max_keypoints: wild_usize!(rng, 1 + rng.below(3000) as usize),
         keypoint_size: wild_f32!(rng, 8.0 + rng.below(120) as f32),
+        grid: wild_usize!(rng, 1 + rng.below(12) as usize),
+        level_budget: if rng.below(2) == 0 {
+            clatch::LevelBudget::Global
+        } else {
+            clatch::LevelBudget::Geometric
+        },
     };
     let bits = match rng.below(6) {
         0 => rng.below(600) as usize,

@@ -405,6 +405,7 @@ fn detection_is_covariant_under_quarter_turns() {
             max_keypoints: usize::MAX,
             threshold: 10,
             keypoint_size: 31.0,
+            ..DetectorConfig::default()
         },
     ];
     for config in configs {

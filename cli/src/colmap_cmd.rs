@@ -18,7 +18,6 @@ use crate::input::{check_detectable, load_gray_with_exif, probe_detectable};
 use crate::output::{Staged, TempDir, check_distinct, check_writable};
 use crate::progress::Progress;
 use crate::settings;
-use crate::spread::spread;
 use crate::subpixel;
 use crate::text_input::read_text;
 use clatch::decode::DecodeLimits;
@@ -64,7 +63,8 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let mut times = Times::default();
 
     // Detect and describe every photo.
-    let extractor = Extractor::new(settings.backend, extraction_config(&settings, args.grid))?;
+    let grid = args.detect.grid.unwrap_or(DEFAULT_GRID);
+    let extractor = Extractor::new(settings.backend, extraction_config(&settings, grid))?;
     let progress = Progress::counter(plan.images.len() as u64, "extracting features");
     let watch = Stopwatch::start();
     let limits = args.input.limits();
@@ -74,8 +74,7 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
             path,
             name,
             &limits,
-            settings.extractor.detector.max_keypoints,
-            (args.grid, args.subpixel, args.subpixel_radius),
+            (args.subpixel, args.subpixel_radius),
         );
         progress.done();
         photo
@@ -319,35 +318,31 @@ fn default_workspace(database: &Path) -> PathBuf {
     database.with_file_name(format!("{stem}-colmap"))
 }
 
-/// The extractor's settings: with a grid, detection keeps every corner so that the grid can choose.
+/// The grid keypoints are spread over when `--grid` is not given: 8 x 8 keeps textured corners of a
+/// photo (foliage, gravel) from taking every keypoint.
+const DEFAULT_GRID: u32 = 8;
+
+/// The extractor's settings: the library spreads keypoints over the grid
+/// ([`clatch::DetectorConfig::grid`]).
 fn extraction_config(settings: &crate::pipeline::Settings, grid: u32) -> clatch::ExtractorConfig {
     let mut config = settings.extractor.clone();
-    if grid > 1 {
-        config.detector.max_keypoints = usize::MAX;
-    }
+    config.detector.grid = grid as usize;
     config
 }
 
-/// Reads, detects (spreading over the grid) and describes one photo.
+/// Reads, detects (spread over the extractor's grid) and describes one photo.
 fn extract(
     extractor: &Extractor,
     path: &Path,
     name: &str,
     limits: &DecodeLimits,
-    max_keypoints: usize,
-    (grid, method, subpixel_radius): (u32, subpixel::Subpixel, u32),
+    (method, subpixel_radius): (subpixel::Subpixel, u32),
 ) -> Result<Photo, CliError> {
     let (img, exif_block) = load_gray_with_exif(path, limits)?;
     check_detectable(path, img.width(), img.height())?;
     let view = GrayView::try_from(&img).map_err(CliError::in_image(path))?;
-    let detected = extractor.detect(&view).map_err(CliError::in_image(path))?;
-    let keypoints = if grid > 1 {
-        spread(&detected, img.width(), img.height(), grid, max_keypoints)
-    } else {
-        detected
-    };
     let features = extractor
-        .describe(&view, &keypoints)
+        .detect_and_describe(&view)
         .map_err(CliError::in_image(path))?;
     Ok(Photo {
         focal_35mm: exif_block.as_deref().and_then(exif::focal_length_35mm),

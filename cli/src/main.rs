@@ -21,7 +21,6 @@ mod output;
 mod pipeline;
 mod progress;
 mod report;
-mod spread;
 mod subpixel;
 mod text_input;
 mod warp;
@@ -278,10 +277,6 @@ pub struct ColmapArgs {
     /// Folder for the match list, COLMAP's logs and its model (default: DATABASE's name + `-colmap`).
     #[arg(long, value_name = "DIR")]
     pub workspace: Option<PathBuf>,
-    /// Spread keypoints over a GRID x GRID division of each image (1: the strongest anywhere). The
-    /// default 8 keeps textured corners of a photo (foliage, gravel) from taking every keypoint.
-    #[arg(long, default_value_t = 8, value_name = "GRID", value_parser = clap::value_parser!(u32).range(1..=64))]
-    pub grid: u32,
     /// How the keypoint positions written to COLMAP are refined below a pixel (descriptors and
     /// matches do not change).
     #[arg(long, value_enum, default_value_t = subpixel::Subpixel::Score)]
@@ -368,6 +363,23 @@ pub struct DetectArgs {
     /// [1.05, 2], default 2) smaller than the one before; each keypoint is described on its own level.
     #[arg(long, value_name = "LEVELS[:FACTOR]", value_parser = parse_pyramid)]
     pub pyramid: Option<Pyramid>,
+    /// Spread keypoints over a GRID x GRID division of each image (1: the strongest anywhere; default
+    /// 1, and 8 for `colmap`, so that textured corners of a photo cannot take every keypoint).
+    #[arg(long, value_name = "GRID", value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub grid: Option<u32>,
+    /// How --max-keypoints is shared among pyramid levels: `global` (the strongest of all levels) or
+    /// `geometric` (ORB's shares, each level's in proportion to its scale).
+    #[arg(long, value_enum, default_value_t = LevelBudgetArg::Global)]
+    pub level_budget: LevelBudgetArg,
+}
+
+/// `--level-budget`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum LevelBudgetArg {
+    /// The strongest keypoints of all levels together.
+    Global,
+    /// ORB's geometric shares per level.
+    Geometric,
 }
 
 /// Which matches are kept.
@@ -488,6 +500,11 @@ impl DetectArgs {
             detector: DetectorConfig {
                 threshold: self.threshold,
                 max_keypoints: self.max_keypoints,
+                grid: self.grid.unwrap_or(1) as usize,
+                level_budget: match self.level_budget {
+                    LevelBudgetArg::Global => clatch::LevelBudget::Global,
+                    LevelBudgetArg::Geometric => clatch::LevelBudget::Geometric,
+                },
                 ..DetectorConfig::default()
             },
             descriptor: DescriptorConfig {

@@ -354,6 +354,7 @@ mod tests {
                 threshold: 1,
                 max_keypoints: usize::MAX,
                 keypoint_size: 16.0,
+                ..DetectorConfig::default()
             };
             let geometry = Geometry::new(w, h, &config);
             assert!(detect(&image, &config).len() <= geometry.capacity);

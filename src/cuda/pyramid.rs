@@ -30,7 +30,7 @@ pub(crate) struct QueuedPyramid {
     stream: Arc<CudaStream>,
     plan: Plan,
     pyramid: Pyramid,
-    max_keypoints: usize,
+    config: DetectorConfig,
     levels: Vec<DeviceImage>,
     found: Vec<DeviceKeypoints>,
 }
@@ -52,15 +52,16 @@ pub(crate) fn queue(
             .downscale(dev, stream, plan.step, size)?;
         levels.push(next);
     }
+    let candidates = config.candidates();
     let found = levels
         .iter()
-        .map(|level| detect_on_device(dev, stream, level, config))
+        .map(|level| detect_on_device(dev, stream, level, &candidates))
         .collect::<Result<Vec<_>>>()?;
     Ok(QueuedPyramid {
         stream: stream.clone(),
         plan,
         pyramid: *p,
-        max_keypoints: config.max_keypoints,
+        config: config.clone(),
         levels,
         found,
     })
@@ -74,7 +75,12 @@ impl QueuedPyramid {
             .iter()
             .map(|f| f.download(&self.stream))
             .collect::<Result<Vec<_>>>()?;
-        Ok(pyramid::select(&per_level, self.max_keypoints))
+        Ok(pyramid::select(
+            &per_level,
+            &self.plan.sizes,
+            self.plan.scale_factor(),
+            &self.config,
+        ))
     }
 
     fn report(&self, selected: &[LevelKeypoint]) -> Vec<KeyPoint> {

@@ -49,6 +49,9 @@ pub const FAST_CIRCLE: [[i32; 2]; 16] = [
 /// Contiguous circle pixels that must all be brighter (or all darker): FAST-9.
 pub const FAST_ARC: usize = 9;
 
+/// Most cells per side of the spreading grid.
+pub const MAX_GRID: usize = 64;
+
 /// Radius of the disc the orientation moments are summed over.
 pub const ORIENTATION_RADIUS: i32 = 15;
 
@@ -63,6 +66,29 @@ pub struct DetectorConfig {
     pub max_keypoints: usize,
     /// `size` given to detected keypoints: the side of their descriptor window in pixels. Default 64.
     pub keypoint_size: f32,
+    /// Spreading: the keypoints kept are spread over a `grid` x `grid` division of the image (of each
+    /// pyramid level), so that the most textured part of a photo cannot take them all. Each cell first
+    /// keeps its strongest `ceil(budget / grid²)`, then the strongest of the rest fill what sparse cells
+    /// left. 1 (the default) keeps the plain strongest; at most 64.
+    pub grid: usize,
+    /// How `max_keypoints` is shared among the levels of a [`crate::Pyramid`]. Default
+    /// [`LevelBudget::Global`].
+    pub level_budget: LevelBudget,
+}
+
+/// How the keypoint budget is shared among pyramid levels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum LevelBudget {
+    /// The strongest keypoints over all levels together: a textured full-resolution level can take
+    /// almost all of them.
+    #[default]
+    Global,
+    /// As ORB shares its features: level `l` gets a share proportional to `scale_factor^-l`
+    /// (`max_keypoints · (1 - f) / (1 - f^L) · f^l` with `f = 1 / scale_factor`, rounded; the last
+    /// level gets the rest), each level keeps its strongest within its share, and what levels short of
+    /// keypoints leave goes to the strongest of the others.
+    Geometric,
 }
 
 impl Default for DetectorConfig {
@@ -71,6 +97,8 @@ impl Default for DetectorConfig {
             threshold: 20,
             max_keypoints: 5000,
             keypoint_size: DEFAULT_KEYPOINT_SIZE,
+            grid: 1,
+            level_budget: LevelBudget::Global,
         }
     }
 }
@@ -92,11 +120,37 @@ impl DetectorConfig {
                 reason: "must be at least 1",
             });
         }
+        if !(1..=MAX_GRID).contains(&self.grid) {
+            return Err(Error::InvalidConfig {
+                field: "grid",
+                value: self.grid.to_string(),
+                reason: "must be in 1..=64",
+            });
+        }
         crate::describe::check_size(self.keypoint_size).map_err(|reason| Error::InvalidConfig {
             field: "keypoint_size",
             value: self.keypoint_size.to_string(),
             reason,
         })
+    }
+
+    /// Whether keypoints are chosen by more than the plain top-N (then extraction goes through the
+    /// selection of [`crate::pyramid`], with a one-level pyramid when none is configured).
+    pub(crate) fn selects(&self) -> bool {
+        self.grid > 1 || self.level_budget != LevelBudget::Global
+    }
+
+    /// The settings each level is detected with before selection: with spreading every corner is a
+    /// candidate (the grid chooses), otherwise a level never contributes more than the whole budget.
+    pub(crate) fn candidates(&self) -> DetectorConfig {
+        DetectorConfig {
+            max_keypoints: if self.grid > 1 {
+                usize::MAX
+            } else {
+                self.max_keypoints
+            },
+            ..self.clone()
+        }
     }
 
     /// Pixels left free at each border: the rotated window (half-diagonal `size / sqrt 2`) plus one pixel

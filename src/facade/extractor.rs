@@ -64,6 +64,18 @@ impl Extractor {
         &self.config
     }
 
+    /// The pyramid detection goes through: the configured one, or a single level when the detector
+    /// spreads keypoints or shares them out (that selection lives in the pyramid path, on the host, for
+    /// every backend).
+    fn levels(&self) -> Option<Pyramid> {
+        self.config.pyramid.or_else(|| {
+            self.config.detector.selects().then_some(Pyramid {
+                levels: 1,
+                scale_factor: 2.0,
+            })
+        })
+    }
+
     fn check_image(image: &GrayView) -> Result<()> {
         if image.width() < WINDOW || image.height() < WINDOW {
             return Err(Error::ImageTooSmall {
@@ -82,7 +94,7 @@ impl Extractor {
     /// With a [`Pyramid`], keypoints of every level in level-0 coordinates.
     pub fn detect(&self, image: &GrayView) -> Result<Vec<KeyPoint>> {
         Self::check_image(image)?;
-        if let Some(p) = &self.config.pyramid {
+        if let Some(p) = &self.levels() {
             return self.detect_pyramid(image, p);
         }
         match self.backend {
@@ -164,7 +176,7 @@ impl Extractor {
     /// level 0, sampled from the downscaled level), so [`Extractor::describe`] of the returned
     /// keypoints, which samples level 0, gives the same descriptors only for level-0 keypoints.
     pub fn detect_and_describe(&self, image: &GrayView) -> Result<Features> {
-        if let Some(p) = &self.config.pyramid {
+        if let Some(p) = &self.levels() {
             Self::check_image(image)?;
             return match self.backend {
                 Backend::Cpu => pyramid::cpu::detect_and_describe(
@@ -229,7 +241,7 @@ impl Extractor {
                     image,
                     &self.config.detector,
                     &self.config.descriptor,
-                    self.config.pyramid.as_ref(),
+                    self.levels().as_ref(),
                 )
             }
             Backend::Cpu => Err(Error::InvalidConfig {

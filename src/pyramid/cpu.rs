@@ -100,10 +100,11 @@ fn detect_levels(
     plan: &Plan,
     config: &DetectorConfig,
 ) -> Vec<LevelKeypoint> {
+    let candidates = config.candidates();
     let per_level: Vec<_> = (0..plan.sizes.len())
-        .map(|l| detect::cpu::detect(&level_view(img, levels, plan, l), config))
+        .map(|l| detect::cpu::detect(&level_view(img, levels, plan, l), &candidates))
         .collect();
-    super::select(&per_level, config.max_keypoints)
+    super::select(&per_level, &plan.sizes, plan.scale_factor(), config)
 }
 
 /// Multi-scale detection on the CPU: keypoints in level-0 coordinates, strongest first.

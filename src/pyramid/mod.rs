@@ -25,6 +25,7 @@
 pub mod cpu;
 
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
+use crate::detect::{DetectorConfig, LevelBudget};
 use crate::error::{Error, Result};
 use crate::keypoint::KeyPoint;
 
@@ -118,6 +119,11 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// The scale factor the levels really have: `step / 2^16` (exact in `f64`).
+    pub fn scale_factor(&self) -> f64 {
+        self.step as f64 / (1u64 << STEP_FRAC_BITS) as f64
+    }
+
     /// The levels of a `width` x `height` image for a detector margin of `margin` pixels.
     pub fn new(pyramid: &Pyramid, width: usize, height: usize, margin: usize) -> Self {
         let step = pyramid.step();
@@ -167,9 +173,91 @@ pub struct LevelKeypoint {
     pub keypoint: KeyPoint,
 }
 
-/// The strongest `max_keypoints` of all levels: sorted by (score descending, level, y, x ascending).
-/// `per_level[l]` is level `l`'s detection (at most `max_keypoints` each, as the detector returns).
-pub fn select(per_level: &[Vec<KeyPoint>], max_keypoints: usize) -> Vec<LevelKeypoint> {
+/// The order of selection: score descending, then level, `y`, `x` ascending (level coordinates).
+/// Scores are integers 1..=255 and positions integers: exact comparisons.
+fn selection_key(k: &LevelKeypoint) -> (i32, usize, u32, u32) {
+    (
+        -(k.keypoint.response as i32),
+        k.level,
+        k.keypoint.y as u32,
+        k.keypoint.x as u32,
+    )
+}
+
+/// Each level's share of `budget` under [`LevelBudget::Geometric`] for `levels` levels of
+/// `scale_factor`: `budget · (1 - f) / (1 - f^levels) · f^l` rounded, `f = 1 / scale_factor`, the
+/// last level taking what is left (ORB's rule). Host `f64` arithmetic, the same for every backend.
+pub fn level_shares(budget: usize, levels: usize, scale_factor: f64) -> Vec<usize> {
+    if levels <= 1 {
+        return vec![budget];
+    }
+    let f = 1.0 / scale_factor;
+    let first = budget as f64 * (1.0 - f) / (1.0 - f.powi(levels as i32));
+    let mut shares = Vec::with_capacity(levels);
+    let mut given = 0usize;
+    for l in 0..levels - 1 {
+        let share = ((first * f.powi(l as i32)).round() as usize).min(budget - given);
+        shares.push(share);
+        given += share;
+    }
+    shares.push(budget - given);
+    shares
+}
+
+/// Keeps at most `budget` of `candidates` (in selection order) spread over a `grid` x `grid`
+/// division of the image (a keypoint's cell is found on its own level, `sizes[level]`, so a cell is
+/// the same part of the scene on every level): each cell first keeps its strongest
+/// `ceil(budget / grid²)`, then the strongest of the rest fill what sparse cells left. Marks the kept
+/// ones in `keep`. With `grid = 1` this is the plain strongest `budget`.
+fn spread(
+    candidates: &[LevelKeypoint],
+    sizes: &[(usize, usize)],
+    grid: usize,
+    budget: usize,
+    keep: &mut [bool],
+) {
+    let per_cell = budget.div_ceil(grid * grid);
+    let cell_of = |k: &LevelKeypoint| {
+        let (w, h) = sizes[k.level];
+        let cx = (k.keypoint.x as usize * grid / w.max(1)).min(grid - 1);
+        let cy = (k.keypoint.y as usize * grid / h.max(1)).min(grid - 1);
+        cy * grid + cx
+    };
+    let mut taken = vec![0usize; grid * grid];
+    let mut kept = 0;
+    for (i, k) in candidates.iter().enumerate() {
+        if kept == budget {
+            return;
+        }
+        let in_cell = &mut taken[cell_of(k)];
+        if *in_cell < per_cell {
+            *in_cell += 1;
+            keep[i] = true;
+            kept += 1;
+        }
+    }
+    for flag in keep.iter_mut() {
+        if kept == budget {
+            return;
+        }
+        if !*flag {
+            *flag = true;
+            kept += 1;
+        }
+    }
+}
+
+/// The keypoints kept over all levels, in selection order (score descending, level, y, x
+/// ascending). `per_level[l]` is level `l`'s detection with [`DetectorConfig::candidates`];
+/// `sizes[l]` its size. With the default settings this is the strongest `max_keypoints` of all levels;
+/// [`LevelBudget::Geometric`] gives each level its share first, [`DetectorConfig::grid`] spreads each
+/// share over the level, and what is left of the budget goes to the strongest keypoints not yet kept.
+pub fn select(
+    per_level: &[Vec<KeyPoint>],
+    sizes: &[(usize, usize)],
+    scale_factor: f64,
+    config: &DetectorConfig,
+) -> Vec<LevelKeypoint> {
     let mut all: Vec<LevelKeypoint> = per_level
         .iter()
         .enumerate()
@@ -178,18 +266,43 @@ pub fn select(per_level: &[Vec<KeyPoint>], max_keypoints: usize) -> Vec<LevelKey
                 .map(move |&keypoint| LevelKeypoint { level, keypoint })
         })
         .collect();
-    // Scores are integers 1..=255 and positions integers: exact comparisons.
-    let key = |k: &LevelKeypoint| {
-        (
-            -(k.keypoint.response as i32),
-            k.level,
-            k.keypoint.y as u32,
-            k.keypoint.x as u32,
-        )
-    };
-    all.sort_by_key(key);
-    all.truncate(max_keypoints);
-    all
+    all.sort_by_key(selection_key);
+    let budget = config.max_keypoints;
+    let mut keep = vec![false; all.len()];
+    match config.level_budget {
+        LevelBudget::Global => spread(&all, sizes, config.grid, budget, &mut keep),
+        LevelBudget::Geometric => {
+            let shares = level_shares(budget, per_level.len(), scale_factor);
+            for (level, &share) in shares.iter().enumerate() {
+                let (index, of_level): (Vec<usize>, Vec<LevelKeypoint>) = all
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, k)| k.level == level)
+                    .map(|(i, k)| (i, *k))
+                    .unzip();
+                let mut level_keep = vec![false; of_level.len()];
+                spread(&of_level, sizes, config.grid, share, &mut level_keep);
+                for (i, kept) in index.into_iter().zip(level_keep) {
+                    keep[i] |= kept;
+                }
+            }
+        }
+    }
+    // What levels short of keypoints left goes to the strongest not yet kept.
+    let mut kept = keep.iter().filter(|&&k| k).count();
+    for flag in keep.iter_mut() {
+        if kept >= budget {
+            break;
+        }
+        if !*flag {
+            *flag = true;
+            kept += 1;
+        }
+    }
+    all.into_iter()
+        .zip(keep)
+        .filter_map(|(k, kept)| kept.then_some(k))
+        .collect()
 }
 
 /// The selected keypoints of one level, in selection order.
@@ -291,6 +404,89 @@ mod tests {
         assert_eq!(to_level0(10, 2, 78_643), 14.621_094);
     }
 
+    fn budget(max_keypoints: usize) -> DetectorConfig {
+        DetectorConfig {
+            max_keypoints,
+            ..DetectorConfig::default()
+        }
+    }
+
+    fn scored(x: f32, y: f32, score: f32) -> KeyPoint {
+        KeyPoint {
+            response: score,
+            ..KeyPoint::new(x, y)
+        }
+    }
+
+    #[test]
+    fn geometric_shares_follow_orb_and_add_up() {
+        assert_eq!(level_shares(5000, 1, 1.2), vec![5000]);
+        let shares = level_shares(5000, 8, 1.2);
+        assert_eq!(shares.iter().sum::<usize>(), 5000);
+        // ORB's first share: 5000 · (1 - 1/1.2) / (1 - 1.2^-8) = 833.3 / 0.76743 = 1085.9 -> 1086.
+        assert_eq!(shares[0], 1086);
+        assert!(shares.windows(2).take(6).all(|w| w[0] > w[1]));
+        // Factor 2 halves each share: 4000 · 0.5 / (1 - 1/8) = 2285.7.
+        assert_eq!(level_shares(4000, 3, 2.0), vec![2286, 1143, 571]);
+        // Tiny budgets never hand out more than there is.
+        for n in 0..20 {
+            assert_eq!(level_shares(n, 8, 1.2).iter().sum::<usize>(), n);
+        }
+    }
+
+    #[test]
+    fn a_crowded_cell_gives_way_to_the_rest_of_the_level() {
+        // 10 strong keypoints in the top-left cell of a 2x2 grid, 2 weaker ones in each other cell.
+        let mut level: Vec<KeyPoint> = (0..10).map(|i| scored(i as f32, 1.0, 90.0)).collect();
+        for (x, y) in [(60.0, 1.0), (61.0, 1.0), (1.0, 60.0), (2.0, 60.0), (60.0, 60.0), (61.0, 61.0)] {
+            level.push(scored(x, y, 30.0));
+        }
+        let spread_config = |max| DetectorConfig {
+            grid: 2,
+            ..budget(max)
+        };
+        let kept = select(&[level.clone()], &[(100, 100)], 2.0, &spread_config(8));
+        // 2 per cell: 2 from the crowded cell, 2 from each other one.
+        assert_eq!(kept.len(), 8);
+        let top_left = |s: &[LevelKeypoint]| {
+            s.iter()
+                .filter(|k| k.keypoint.x < 50.0 && k.keypoint.y < 50.0)
+                .count()
+        };
+        assert_eq!(top_left(&kept), 2);
+        // Sparse cells leave room that the strongest of the rest fill.
+        let kept = select(&[level.clone()], &[(100, 100)], 2.0, &spread_config(12));
+        assert_eq!(top_left(&kept), 6);
+        // Selection order stays score, then raster.
+        assert!(kept.windows(2).all(|w| selection_key(&w[0]) < selection_key(&w[1])));
+        // Without a grid: the plain strongest.
+        let kept = select(&[level], &[(100, 100)], 2.0, &budget(8));
+        assert_eq!(top_left(&kept), 8);
+    }
+
+    #[test]
+    fn geometric_budget_keeps_each_levels_share() {
+        // Level 0 has 100 strong keypoints, level 1 has 100 weak ones: the global cut takes level 0
+        // only, the geometric one gives level 1 its third (factor 2, 2 levels: 67 and 33).
+        let level0: Vec<KeyPoint> = (0..100).map(|i| scored((i % 10) as f32, (i / 10) as f32, 90.0)).collect();
+        let level1: Vec<KeyPoint> = (0..100).map(|i| scored((i % 10) as f32, (i / 10) as f32, 10.0)).collect();
+        let per_level = [level0, level1];
+        let sizes = [(100, 100), (50, 50)];
+        let count = |s: &[LevelKeypoint], l| s.iter().filter(|k| k.level == l).count();
+        let global = select(&per_level, &sizes, 2.0, &budget(100));
+        assert_eq!((count(&global, 0), count(&global, 1)), (100, 0));
+        let geometric = DetectorConfig {
+            level_budget: LevelBudget::Geometric,
+            ..budget(100)
+        };
+        let kept = select(&per_level, &sizes, 2.0, &geometric);
+        assert_eq!((count(&kept, 0), count(&kept, 1)), (67, 33));
+        // A level short of keypoints leaves its share to the strongest of the others.
+        let short = [per_level[0].clone(), per_level[1][..10].to_vec()];
+        let kept = select(&short, &sizes, 2.0, &geometric);
+        assert_eq!((count(&kept, 0), count(&kept, 1)), (90, 10));
+    }
+
     #[test]
     fn selection_is_by_score_then_level_then_raster_order() {
         let kp = |x: f32, y: f32, score: f32| KeyPoint {
@@ -302,7 +498,7 @@ mod tests {
             vec![kp(60.0, 60.0, 90.0), kp(55.0, 55.0, 40.0)],
             vec![kp(50.0, 50.0, 95.0)],
         ];
-        let selected = select(&per_level, 4);
+        let selected = select(&per_level, &[(100, 100); 3], 2.0, &budget(4));
         let got: Vec<(usize, f32, f32)> = selected
             .iter()
             .map(|k| (k.level, k.keypoint.x, k.keypoint.y))
@@ -338,7 +534,7 @@ mod tests {
                 })
                 .collect();
             let max = 1 + rng.below(60) as usize;
-            let selected = select(&per_level, max);
+            let selected = select(&per_level, &[(50, 50); 5], 2.0, &budget(max));
             let total: usize = per_level.iter().map(Vec::len).sum();
             assert_eq!(selected.len(), max.min(total));
             for (l, list) in per_level.iter().enumerate() {

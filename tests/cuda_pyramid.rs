@@ -30,6 +30,7 @@ fn trials() -> Vec<Trial> {
             "pyramid_async_on_several_streams_equals_cpu",
             gpu::async_streams,
         ),
+        Trial::test("selection_grid_and_level_shares_equal_cpu", gpu::selection),
     ]
 }
 
@@ -195,6 +196,62 @@ mod gpu {
         if upper == 0 {
             return Err("no keypoint above level 0: the comparison proved nothing".into());
         }
+        Ok(())
+    }
+
+    /// Spreading over a grid and ORB's level shares (host selection over the device's candidates,
+    /// every corner with a grid), with and without a pyramid, blocking and asynchronous.
+    pub fn selection() -> Result<(), Failed> {
+        use clatch::LevelBudget;
+        let stream = clatch::cuda::GpuStream::new(0)?;
+        let (mut runs, mut keypoints) = (0, 0);
+        for (name, image) in images() {
+            for p in [
+                None,
+                Some(pyramids()[0]),
+                Some(Pyramid {
+                    levels: 8,
+                    scale_factor: 1.2,
+                }),
+            ] {
+                for (grid, level_budget) in [
+                    (8, LevelBudget::Global),
+                    (1, LevelBudget::Geometric),
+                    (4, LevelBudget::Geometric),
+                ] {
+                    let detector = DetectorConfig {
+                        grid,
+                        level_budget,
+                        max_keypoints: 700,
+                        ..DetectorConfig::default()
+                    };
+                    let config = ExtractorConfig {
+                        detector,
+                        pyramid: p,
+                        ..ExtractorConfig::default()
+                    };
+                    let view = image.view();
+                    let cpu =
+                        Extractor::new(Backend::Cpu, config.clone())?.detect_and_describe(&view)?;
+                    let gpu = Extractor::new(GPU, config.clone())?;
+                    let blocking = gpu.detect_and_describe(&view)?;
+                    let queued = gpu.detect_and_describe_async(&stream, &view)?.wait()?;
+                    for (how, got) in [("blocking", &blocking), ("asynchronous", &queued)] {
+                        if first_keypoint_difference(&cpu.keypoints, &got.keypoints).is_some()
+                            || cpu.descriptors != got.descriptors
+                        {
+                            return Err(format!(
+                                "{name} {p:?} grid {grid} {level_budget:?} ({how}): differs from the CPU"
+                            )
+                            .into());
+                        }
+                    }
+                    runs += 1;
+                    keypoints += cpu.keypoints.len();
+                }
+            }
+        }
+        println!("{runs} selections (grid, level shares), {keypoints} keypoints, 0 differences");
         Ok(())
     }
 

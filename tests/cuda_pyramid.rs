@@ -202,7 +202,7 @@ mod gpu {
     /// Spreading over a grid and ORB's level shares (host selection over the device's candidates,
     /// every corner with a grid), with and without a pyramid, blocking and asynchronous.
     pub fn selection() -> Result<(), Failed> {
-        use clatch::LevelBudget;
+        use clatch::{LevelBudget, Ranking};
         let stream = clatch::cuda::GpuStream::new(0)?;
         let (mut runs, mut keypoints) = (0, 0);
         for (name, image) in images() {
@@ -214,14 +214,17 @@ mod gpu {
                     scale_factor: 1.2,
                 }),
             ] {
-                for (grid, level_budget) in [
-                    (8, LevelBudget::Global),
-                    (1, LevelBudget::Geometric),
-                    (4, LevelBudget::Geometric),
+                for (grid, level_budget, ranking) in [
+                    (8, LevelBudget::Global, Ranking::Fast),
+                    (1, LevelBudget::Geometric, Ranking::Fast),
+                    (4, LevelBudget::Geometric, Ranking::Fast),
+                    (1, LevelBudget::Global, Ranking::Harris),
+                    (1, LevelBudget::Geometric, Ranking::Harris),
                 ] {
                     let detector = DetectorConfig {
                         grid,
                         level_budget,
+                        ranking,
                         max_keypoints: 700,
                         ..DetectorConfig::default()
                     };
@@ -241,7 +244,7 @@ mod gpu {
                             || cpu.descriptors != got.descriptors
                         {
                             return Err(format!(
-                                "{name} {p:?} grid {grid} {level_budget:?} ({how}): differs from the CPU"
+                                "{name} {p:?} grid {grid} {level_budget:?} {ranking:?} ({how}): differs from the CPU"
                             )
                             .into());
                         }
@@ -251,7 +254,9 @@ mod gpu {
                 }
             }
         }
-        println!("{runs} selections (grid, level shares), {keypoints} keypoints, 0 differences");
+        println!(
+            "{runs} selections (grid, level shares, Harris ranking), {keypoints} keypoints, 0 differences"
+        );
         Ok(())
     }
 

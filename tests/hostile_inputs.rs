@@ -116,6 +116,11 @@ fn random_config(rng: &mut SplitMix64) -> ExtractorConfig {
         } else {
             clatch::LevelBudget::Geometric
         },
+        ranking: if rng.below(2) == 0 {
+            clatch::Ranking::Fast
+        } else {
+            clatch::Ranking::Harris
+        },
     };
     let bits = match rng.below(6) {
         0 => rng.below(600) as usize,

@@ -371,6 +371,19 @@ pub struct DetectArgs {
     /// `geometric` (ORB's shares, each level's in proportion to its scale).
     #[arg(long, value_enum, default_value_t = LevelBudgetArg::Global)]
     pub level_budget: LevelBudgetArg,
+    /// What orders corners when the strongest are kept: `fast` (the FAST score) or `harris` (ORB's
+    /// Harris response over the strongest 2 x --max-keypoints).
+    #[arg(long, value_enum, default_value_t = RankingArg::Fast)]
+    pub ranking: RankingArg,
+}
+
+/// `--ranking`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum RankingArg {
+    /// The FAST score.
+    Fast,
+    /// The Harris response, as ORB ranks.
+    Harris,
 }
 
 /// `--level-budget`.
@@ -504,6 +517,10 @@ impl DetectArgs {
                 level_budget: match self.level_budget {
                     LevelBudgetArg::Global => clatch::LevelBudget::Global,
                     LevelBudgetArg::Geometric => clatch::LevelBudget::Geometric,
+                },
+                ranking: match self.ranking {
+                    RankingArg::Fast => clatch::Ranking::Fast,
+                    RankingArg::Harris => clatch::Ranking::Harris,
                 },
                 ..DetectorConfig::default()
             },

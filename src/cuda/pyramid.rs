@@ -17,7 +17,7 @@ use super::memory::{alloc_zeros, upload};
 use super::texture::DeviceImage;
 use crate::describe::DescriptorConfig;
 use crate::descriptor::DescriptorSet;
-use crate::detect::DetectorConfig;
+use crate::detect::{DetectorConfig, Ranking};
 use crate::error::Result;
 use crate::features::Features;
 use crate::gray_view::GrayView;
@@ -75,11 +75,33 @@ impl QueuedPyramid {
             .iter()
             .map(|f| f.download(&self.stream))
             .collect::<Result<Vec<_>>>()?;
+        // Harris ranking reads the levels' pixels: computed on the host from the levels read back,
+        // by the CPU's own function, so both backends rank alike. (A kernel would save the copy.)
+        let pixels = match self.config.ranking {
+            Ranking::Fast => Vec::new(),
+            Ranking::Harris => self
+                .levels
+                .iter()
+                .map(|level| level.download(&self.stream))
+                .collect::<Result<Vec<_>>>()?,
+        };
+        let views = pixels
+            .iter()
+            .zip(&self.plan.sizes)
+            .map(|(p, &(w, h))| GrayView::new(p, w, h, w))
+            .collect::<Result<Vec<_>>>()?;
+        let rank = |level: usize, k: &KeyPoint| match self.config.ranking {
+            Ranking::Fast => pyramid::fast_rank(level, k),
+            Ranking::Harris => {
+                crate::detect::cpu::harris_response(&views[level], k.x as usize, k.y as usize)
+            }
+        };
         Ok(pyramid::select(
             &per_level,
             &self.plan.sizes,
             self.plan.scale_factor(),
             &self.config,
+            &rank,
         ))
     }
 

@@ -200,7 +200,6 @@ impl DeviceImage {
     }
 
     /// The pixels read back, row-major with stride = width (waits for the stream).
-    #[cfg(feature = "internals")]
     pub(crate) fn download(&self, stream: &Arc<CudaStream>) -> Result<Vec<u8>> {
         let pitched = stream
             .clone_dtoh(&self.pixels)

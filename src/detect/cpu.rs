@@ -90,6 +90,30 @@ pub fn suppress_non_maxima(scores: &[u8], width: usize, height: usize) -> Vec<(u
         .collect()
 }
 
+/// Harris corner response of the pixel at `(x, y)`, scaled by 25 so that it is an exact integer:
+/// with the 3x3 Sobel gradients `(gx, gy)` of every pixel of the 7x7 block around `(x, y)` and
+/// `A = Σ gx²`, `B = Σ gy²`, `C = Σ gx·gy`, the response is `25 (A B - C²) - (A + B)²`, i.e.
+/// `25 · (det - 0.04 · trace²)`, Harris's `k = 0.04` as ORB ranks its corners. `|g| ≤ 1020`, so the
+/// sums stay below 2^26 and the result fits `i64` exactly. `(x, y)` must be at least 4 pixels from
+/// every border (detected keypoints are, by the margin).
+pub fn harris_response(img: &GrayView, x: usize, y: usize) -> i64 {
+    const HALF: i32 = 3;
+    let p = |dx: i32, dy: i32| img.at((x as i32 + dx) as usize, (y as i32 + dy) as usize) as i64;
+    let (mut a, mut b, mut c) = (0i64, 0i64, 0i64);
+    for v in -HALF..=HALF {
+        for u in -HALF..=HALF {
+            let gx = (p(u + 1, v - 1) + 2 * p(u + 1, v) + p(u + 1, v + 1))
+                - (p(u - 1, v - 1) + 2 * p(u - 1, v) + p(u - 1, v + 1));
+            let gy = (p(u - 1, v + 1) + 2 * p(u, v + 1) + p(u + 1, v + 1))
+                - (p(u - 1, v - 1) + 2 * p(u, v - 1) + p(u + 1, v - 1));
+            a += gx * gx;
+            b += gy * gy;
+            c += gx * gy;
+        }
+    }
+    25 * (a * b - c * c) - (a + b) * (a + b)
+}
+
 /// Intensity-centroid moments `(m10, m01)` over the orientation disc around `(x, y)`.
 pub fn centroid_moments(img: &GrayView, x: usize, y: usize) -> (i64, i64) {
     let r = ORIENTATION_RADIUS;
@@ -138,6 +162,29 @@ pub fn detect(img: &GrayView, config: &DetectorConfig) -> Vec<KeyPoint> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn harris_response_worked_by_hand() {
+        // A vertical step: columns >= 10 are 100. At (10, 10) the 7x7 block covers columns 7..=13;
+        // Sobel gx is 4 · 100 = 400 on columns 9 and 10 (their right neighbour is bright, their left
+        // one dark) and 0 elsewhere, gy is 0: A = 14 · 400², B = C = 0, response = -(A + B)².
+        let pixels: Vec<u8> = (0..400).map(|i| if i % 20 >= 10 { 100 } else { 0 }).collect();
+        let img = GrayView::new(&pixels, 20, 20, 20).unwrap();
+        let a = 14 * 400 * 400;
+        assert_eq!(harris_response(&img, 10, 10), -(a * a));
+        // Far from the step: flat, 0.
+        assert_eq!(harris_response(&img, 4, 10), 0);
+        // A corner (the bright quadrant x, y >= 10) is positive, and transposing the image keeps it.
+        let corner: Vec<u8> = (0..400)
+            .map(|i| if i % 20 >= 10 && i / 20 >= 10 { 100 } else { 0 })
+            .collect();
+        let img = GrayView::new(&corner, 20, 20, 20).unwrap();
+        let r = harris_response(&img, 10, 10);
+        assert!(r > 0);
+        let transposed: Vec<u8> = (0..400).map(|i| corner[(i % 20) * 20 + i / 20]).collect();
+        let t = GrayView::new(&transposed, 20, 20, 20).unwrap();
+        assert_eq!(harris_response(&t, 10, 10), r);
+    }
 
     fn image(w: usize, h: usize, f: impl Fn(usize, usize) -> u8) -> Vec<u8> {
         (0..w * h).map(|i| f(i % w, i / w)).collect()

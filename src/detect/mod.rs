@@ -74,6 +74,21 @@ pub struct DetectorConfig {
     /// How `max_keypoints` is shared among the levels of a [`crate::Pyramid`]. Default
     /// [`LevelBudget::Global`].
     pub level_budget: LevelBudget,
+    /// Which corners count as the strongest. Default [`Ranking::Fast`].
+    pub ranking: Ranking,
+}
+
+/// What orders corners when the strongest are kept.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum Ranking {
+    /// The FAST score (the detector's `response`).
+    #[default]
+    Fast,
+    /// As ORB ranks: the strongest `2 · max_keypoints` by FAST score are candidates, ordered by their
+    /// Harris response (Sobel gradients over a 7x7 block, `k = 0.04`, integer-exact; see
+    /// `docs/numerics.md`). The keypoints' `response` stays the FAST score.
+    Harris,
 }
 
 /// How the keypoint budget is shared among pyramid levels.
@@ -99,6 +114,7 @@ impl Default for DetectorConfig {
             keypoint_size: DEFAULT_KEYPOINT_SIZE,
             grid: 1,
             level_budget: LevelBudget::Global,
+            ranking: Ranking::Fast,
         }
     }
 }
@@ -137,7 +153,7 @@ impl DetectorConfig {
     /// Whether keypoints are chosen by more than the plain top-N (then extraction goes through the
     /// selection of [`crate::pyramid`], with a one-level pyramid when none is configured).
     pub(crate) fn selects(&self) -> bool {
-        self.grid > 1 || self.level_budget != LevelBudget::Global
+        self.grid > 1 || self.level_budget != LevelBudget::Global || self.ranking != Ranking::Fast
     }
 
     /// The settings each level is detected with before selection: with spreading every corner is a
@@ -146,6 +162,8 @@ impl DetectorConfig {
         DetectorConfig {
             max_keypoints: if self.grid > 1 {
                 usize::MAX
+            } else if self.ranking == Ranking::Harris {
+                self.max_keypoints.saturating_mul(2)
             } else {
                 self.max_keypoints
             },

@@ -4,7 +4,7 @@ use crate::parallel::*;
 
 use super::{LevelKeypoint, Plan, Pyramid, STEP_FRAC_BITS, downscaled, source_position};
 use crate::describe::{self, DescriptorConfig};
-use crate::detect::{self, DetectorConfig};
+use crate::detect::{self, DetectorConfig, Ranking};
 use crate::error::Result;
 use crate::features::Features;
 use crate::gray_view::GrayView;
@@ -101,10 +101,18 @@ fn detect_levels(
     config: &DetectorConfig,
 ) -> Vec<LevelKeypoint> {
     let candidates = config.candidates();
-    let per_level: Vec<_> = (0..plan.sizes.len())
-        .map(|l| detect::cpu::detect(&level_view(img, levels, plan, l), &candidates))
+    let views: Vec<GrayView> = (0..plan.sizes.len())
+        .map(|l| level_view(img, levels, plan, l))
         .collect();
-    super::select(&per_level, &plan.sizes, plan.scale_factor(), config)
+    let per_level: Vec<_> = views
+        .iter()
+        .map(|view| detect::cpu::detect(view, &candidates))
+        .collect();
+    let rank = |level: usize, k: &crate::keypoint::KeyPoint| match config.ranking {
+        Ranking::Fast => super::fast_rank(level, k),
+        Ranking::Harris => detect::cpu::harris_response(&views[level], k.x as usize, k.y as usize),
+    };
+    super::select(&per_level, &plan.sizes, plan.scale_factor(), config, &rank)
 }
 
 /// Multi-scale detection on the CPU: keypoints in level-0 coordinates, strongest first.

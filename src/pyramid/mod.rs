@@ -171,17 +171,24 @@ pub struct LevelKeypoint {
     pub level: usize,
     /// The detector's keypoint on that level (integer position, the configured size).
     pub keypoint: KeyPoint,
+    /// What orders it ([`crate::Ranking`]): the FAST score, or the Harris response.
+    pub rank: i64,
 }
 
-/// The order of selection: score descending, then level, `y`, `x` ascending (level coordinates).
-/// Scores are integers 1..=255 and positions integers: exact comparisons.
-fn selection_key(k: &LevelKeypoint) -> (i32, usize, u32, u32) {
+/// The order of selection: rank descending, then level, `y`, `x` ascending (level coordinates).
+/// Ranks and positions are integers: exact comparisons.
+fn selection_key(k: &LevelKeypoint) -> (i64, usize, u32, u32) {
     (
-        -(k.keypoint.response as i32),
+        -k.rank,
         k.level,
         k.keypoint.y as u32,
         k.keypoint.x as u32,
     )
+}
+
+/// The rank of a detected keypoint under [`crate::Ranking::Fast`]: its FAST score.
+pub fn fast_rank(_level: usize, k: &KeyPoint) -> i64 {
+    k.response as i64
 }
 
 /// Each level's share of `budget` under [`LevelBudget::Geometric`] for `levels` levels of
@@ -257,13 +264,17 @@ pub fn select(
     sizes: &[(usize, usize)],
     scale_factor: f64,
     config: &DetectorConfig,
+    rank: &(dyn Fn(usize, &KeyPoint) -> i64 + Sync),
 ) -> Vec<LevelKeypoint> {
     let mut all: Vec<LevelKeypoint> = per_level
         .iter()
         .enumerate()
         .flat_map(|(level, kps)| {
-            kps.iter()
-                .map(move |&keypoint| LevelKeypoint { level, keypoint })
+            kps.iter().map(move |&keypoint| LevelKeypoint {
+                level,
+                keypoint,
+                rank: rank(level, &keypoint),
+            })
         })
         .collect();
     all.sort_by_key(selection_key);
@@ -445,7 +456,7 @@ mod tests {
             grid: 2,
             ..budget(max)
         };
-        let kept = select(&[level.clone()], &[(100, 100)], 2.0, &spread_config(8));
+        let kept = select(&[level.clone()], &[(100, 100)], 2.0, &spread_config(8), &fast_rank);
         // 2 per cell: 2 from the crowded cell, 2 from each other one.
         assert_eq!(kept.len(), 8);
         let top_left = |s: &[LevelKeypoint]| {
@@ -455,12 +466,12 @@ mod tests {
         };
         assert_eq!(top_left(&kept), 2);
         // Sparse cells leave room that the strongest of the rest fill.
-        let kept = select(&[level.clone()], &[(100, 100)], 2.0, &spread_config(12));
+        let kept = select(&[level.clone()], &[(100, 100)], 2.0, &spread_config(12), &fast_rank);
         assert_eq!(top_left(&kept), 6);
         // Selection order stays score, then raster.
         assert!(kept.windows(2).all(|w| selection_key(&w[0]) < selection_key(&w[1])));
         // Without a grid: the plain strongest.
-        let kept = select(&[level], &[(100, 100)], 2.0, &budget(8));
+        let kept = select(&[level], &[(100, 100)], 2.0, &budget(8), &fast_rank);
         assert_eq!(top_left(&kept), 8);
     }
 
@@ -473,17 +484,17 @@ mod tests {
         let per_level = [level0, level1];
         let sizes = [(100, 100), (50, 50)];
         let count = |s: &[LevelKeypoint], l| s.iter().filter(|k| k.level == l).count();
-        let global = select(&per_level, &sizes, 2.0, &budget(100));
+        let global = select(&per_level, &sizes, 2.0, &budget(100), &fast_rank);
         assert_eq!((count(&global, 0), count(&global, 1)), (100, 0));
         let geometric = DetectorConfig {
             level_budget: LevelBudget::Geometric,
             ..budget(100)
         };
-        let kept = select(&per_level, &sizes, 2.0, &geometric);
+        let kept = select(&per_level, &sizes, 2.0, &geometric, &fast_rank);
         assert_eq!((count(&kept, 0), count(&kept, 1)), (67, 33));
         // A level short of keypoints leaves its share to the strongest of the others.
         let short = [per_level[0].clone(), per_level[1][..10].to_vec()];
-        let kept = select(&short, &sizes, 2.0, &geometric);
+        let kept = select(&short, &sizes, 2.0, &geometric, &fast_rank);
         assert_eq!((count(&kept, 0), count(&kept, 1)), (90, 10));
     }
 
@@ -498,7 +509,7 @@ mod tests {
             vec![kp(60.0, 60.0, 90.0), kp(55.0, 55.0, 40.0)],
             vec![kp(50.0, 50.0, 95.0)],
         ];
-        let selected = select(&per_level, &[(100, 100); 3], 2.0, &budget(4));
+        let selected = select(&per_level, &[(100, 100); 3], 2.0, &budget(4), &fast_rank);
         let got: Vec<(usize, f32, f32)> = selected
             .iter()
             .map(|k| (k.level, k.keypoint.x, k.keypoint.y))
@@ -534,7 +545,7 @@ mod tests {
                 })
                 .collect();
             let max = 1 + rng.below(60) as usize;
-            let selected = select(&per_level, &[(50, 50); 5], 2.0, &budget(max));
+            let selected = select(&per_level, &[(50, 50); 5], 2.0, &budget(max), &fast_rank);
             let total: usize = per_level.iter().map(Vec::len).sum();
             assert_eq!(selected.len(), max.min(total));
             for (l, list) in per_level.iter().enumerate() {

@@ -356,6 +356,10 @@ pub struct DetectArgs {
     /// Keep at most this many keypoints per image, strongest first.
     #[arg(long, default_value_t = 5000, value_name = "N", value_parser = parse_positive)]
     pub max_keypoints: usize,
+    /// Side in pixels of the window each detected keypoint is described over (the 64x64 samples are
+    /// spread over it): 1 to 1024.
+    #[arg(long, default_value_t = clatch::KeyPoint::DEFAULT_SIZE, value_name = "PIXELS", value_parser = parse_keypoint_size)]
+    pub keypoint_size: f32,
     /// Descriptor width in bits: a multiple of 8 from 8 to 512.
     #[arg(long, default_value_t = 512, value_parser = parse_bits)]
     pub bits: usize,
@@ -471,6 +475,15 @@ fn parse_pyramid(s: &str) -> Result<Pyramid, String> {
     Ok(pyramid)
 }
 
+fn parse_keypoint_size(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && (1.0..=1024.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err("must be a number of pixels from 1 to 1024".into())
+    }
+}
+
 fn parse_ratio(s: &str) -> Result<f32, String> {
     let ratio = s.parse::<f32>().map_err(|e| e.to_string())?;
     if ratio.is_finite() && ratio > 0.0 && ratio <= 1.0 {
@@ -513,6 +526,7 @@ impl DetectArgs {
             detector: DetectorConfig {
                 threshold: self.threshold,
                 max_keypoints: self.max_keypoints,
+                keypoint_size: self.keypoint_size,
                 grid: self.grid.unwrap_or(1) as usize,
                 level_budget: match self.level_budget {
                     LevelBudgetArg::Global => clatch::LevelBudget::Global,

@@ -536,7 +536,6 @@ impl DetectArgs {
                     RankingArg::Fast => clatch::Ranking::Fast,
                     RankingArg::Harris => clatch::Ranking::Harris,
                 },
-                ..DetectorConfig::default()
             },
             descriptor: DescriptorConfig {
                 width: DescriptorWidth::from_bits(self.bits)?,

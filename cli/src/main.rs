@@ -81,8 +81,8 @@ enum Command {
     Colmap(ColmapArgs),
     /// Descriptor quality on image pairs with ground-truth homographies, optionally beside OpenCV.
     ///
-    /// Pairs: OpenCV's graf1/graf3 sample (--opencv-samples), the Oxford graf, boat and bikes
-    /// sequences, img1 against img2..img6 (--data), and synthetic warps (rotations 0-180 degrees,
+    /// Pairs: OpenCV's graf1/graf3 sample (--opencv-samples), homography sequences in the Oxford or
+    /// HPatches layout, image 1 against the others (--data), and synthetic warps (rotations 0-180 degrees,
     /// scales 0.5-2, two perspective tilts) of the embedded photo and of --synthetic-image photos.
     /// Per pair and method: keypoints in the overlap, matches, correct matches (within --inlier-px
     /// of the true homography), matching score, and precision and recall of the ratio test at
@@ -95,9 +95,12 @@ enum Command {
 /// Arguments of `clatch eval`.
 #[derive(Debug, Args)]
 pub struct EvalArgs {
-    /// Folder holding oxford_graf/, oxford_boat/, oxford_bikes/ (img1..img6, H1to2p..H1to6p each).
+    /// A homography sequence folder, or a folder of them (repeatable). A sequence is image 1 against
+    /// every image k with a homography 1 to k, in the Oxford layout (img1.ppm, H1to2p, ...) or the
+    /// HPatches layout (1.ppm, H_1_2, ...); images .ppm, .pgm, .png or .jpg. Pairs are named after
+    /// the folder (`v_wall 1-2`; a leading `oxford_` is dropped: oxford_graf gives `graf 1-2`).
     #[arg(long, value_name = "DIR")]
-    pub data: Option<PathBuf>,
+    pub data: Vec<PathBuf>,
     /// Folder holding OpenCV's graf1.png, graf3.png and H1to3p.xml (Debian's opencv-doc package
     /// installs them in /usr/share/doc/opencv-doc/examples/data).
     #[arg(long, value_name = "DIR")]

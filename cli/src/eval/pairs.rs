@@ -1,5 +1,6 @@
-//! The image pairs of `clatch eval`: Oxford sequences, OpenCV's graf sample, synthetic warps; and the
-//! manifest (`pairs.csv`) that hands the very same files to `tools/eval_opencv.py`.
+//! The image pairs of `clatch eval`: OpenCV's graf sample, synthetic warps (sequences on disk are in
+//! [`super::sequences`]); and the manifest (`pairs.csv`) that hands the very same files to
+//! `tools/eval_opencv.py`.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -38,9 +39,6 @@ pub const GROUP_SCALE: &str = "synthetic-scale";
 /// Synthetic perspective warps.
 pub const GROUP_PERSPECTIVE: &str = "synthetic-perspective";
 
-/// The Oxford sequences looked for under the data folder.
-pub const OXFORD_SEQUENCES: [&str; 3] = ["graf", "boat", "bikes"];
-
 /// Synthetic rotations, degrees (scale 1).
 pub fn rotations() -> Vec<f64> {
     (0..=12).map(|i| 15.0 * i as f64).collect()
@@ -54,54 +52,6 @@ fn missing(path: &Path, what: &str) -> CliError {
         path: path.to_path_buf(),
         reason: format!("{what} not found"),
     }
-}
-
-/// The first file among `dir/stem.{extensions}` that exists.
-fn find_image(dir: &Path, stem: &str) -> Result<PathBuf, CliError> {
-    ["ppm", "pgm", "png", "jpg"]
-        .iter()
-        .map(|ext| dir.join(format!("{stem}.{ext}")))
-        .find(|p| p.is_file())
-        .ok_or_else(|| missing(dir, &format!("{stem}.ppm/.pgm/.png/.jpg")))
-}
-
-/// img1 against img2..img6 of one Oxford sequence folder (`img1.ppm`..., `H1to2p`...).
-pub fn oxford_pairs(dir: &Path, sequence: &str) -> Result<Vec<EvalPair>, CliError> {
-    let image_a = find_image(dir, "img1")?;
-    (2..=6)
-        .map(|n| {
-            let homography = dir.join(format!("H1to{n}p"));
-            if !homography.is_file() {
-                return Err(missing(&homography, "homography file"));
-            }
-            Ok(EvalPair {
-                name: format!("{sequence} 1-{n}"),
-                group: format!("oxford-{sequence}"),
-                param: None,
-                image_a: image_a.clone(),
-                image_b: find_image(dir, &format!("img{n}"))?,
-                homography,
-            })
-        })
-        .collect()
-}
-
-/// The Oxford sequences present under `data` (folders `oxford_graf`, ...); absent ones are named in
-/// the second list.
-pub fn oxford_under(data: &Path) -> Result<(Vec<EvalPair>, Vec<String>), CliError> {
-    if !data.is_dir() {
-        return Err(missing(data, "data folder"));
-    }
-    let (mut pairs, mut absent) = (Vec::new(), Vec::new());
-    for sequence in OXFORD_SEQUENCES {
-        let dir = data.join(format!("oxford_{sequence}"));
-        if dir.is_dir() {
-            pairs.extend(oxford_pairs(&dir, sequence)?);
-        } else {
-            absent.push(dir.display().to_string());
-        }
-    }
-    Ok((pairs, absent))
 }
 
 /// OpenCV's sample pair in `dir`: `graf1.png`, `graf3.png`, `H1to3p.xml`.
@@ -349,36 +299,11 @@ mod tests {
 
     #[test]
     fn missing_inputs_are_typed_errors() {
-        let dir = temp_dir("oxford");
-        let e = oxford_pairs(&dir, "graf").unwrap_err();
-        assert!(
-            matches!(e, CliError::EvalInput { .. }) && e.to_string().contains("img1"),
-            "{e}"
-        );
-        std::fs::write(dir.join("img1.ppm"), b"P5").unwrap();
-        let e = oxford_pairs(&dir, "graf").unwrap_err();
-        assert!(e.to_string().contains("H1to2p"), "{e}");
-        for n in 2..=6 {
-            std::fs::write(dir.join(format!("H1to{n}p")), b"").unwrap();
-        }
-        let e = oxford_pairs(&dir, "graf").unwrap_err();
-        assert!(e.to_string().contains("img2"), "{e}");
-        for n in 2..=6 {
-            std::fs::write(dir.join(format!("img{n}.pgm")), b"P5").unwrap();
-        }
-        let pairs = oxford_pairs(&dir, "graf").unwrap();
-        assert_eq!(pairs[4].name, "graf 1-6");
-        assert_eq!(pairs[4].homography, dir.join("H1to6p"));
+        let dir = temp_dir("sample");
         assert!(matches!(
             opencv_sample_pair(&dir),
             Err(CliError::EvalInput { .. })
         ));
-        assert!(matches!(
-            oxford_under(&dir.join("nope")),
-            Err(CliError::EvalInput { .. })
-        ));
-        let (pairs, absent) = oxford_under(&dir).unwrap();
-        assert!(pairs.is_empty() && absent.len() == 3);
         std::fs::remove_dir_all(&dir).ok();
 
         assert!(matches!(

@@ -115,15 +115,10 @@ pub struct EvalArgs {
     #[arg(short, long, default_value = "clatch-eval", value_name = "DIR")]
     pub out: PathBuf,
     /// clatch configurations to evaluate (repeatable): `clatch` (CLATCH descriptors) and
-    /// `clatch-opencv` (the same keypoints, OpenCV-compatible LATCH with cv2's defaults).
-    #[arg(
-        long = "method",
-        value_enum,
-        default_values_t = [
-            eval::run::ClatchMethod::Clatch,
-            eval::run::ClatchMethod::ClatchOpencv
-        ]
-    )]
+    /// `clatch-opencv` (the same keypoints, OpenCV-compatible LATCH with cv2's defaults). Default:
+    /// both; with --pyramid only `clatch`, since OpenCV-compatible LATCH describes full-resolution
+    /// keypoints only.
+    #[arg(long = "method", value_enum)]
     pub methods: Vec<eval::run::ClatchMethod>,
     /// Run the OpenCV script with this Python (which needs opencv-contrib-python-headless) and merge
     /// its results.

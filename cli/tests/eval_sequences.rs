@@ -120,3 +120,48 @@ fn eval_reads_oxford_and_hpatches_sequences_named_by_folder() {
     common::assert_refused(&twice, "two pairs are named `v_tiny 1-2`");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn pyramid_runs_with_the_default_methods_and_refuses_the_opencv_column_when_asked() {
+    let dir = workdir("eval-seq", "pyramid");
+    let data = dir.join("v_tiny");
+    write_sequence(&data, |k| format!("{k}.png"), |k| format!("H_1_{k}"));
+    let out = dir.join("out");
+    let run = clatch(&[
+        "eval",
+        "--no-synthetic",
+        "--data",
+        str(&data),
+        "--pyramid",
+        "2:2",
+        "-o",
+        str(&out),
+    ]);
+    assert!(run.status.success(), "{}", common::stderr(&run));
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        stdout.contains("clatch (OpenCV-compatible) left out"),
+        "{stdout}"
+    );
+    let methods: Vec<String> = rows(&out.join("clatch.summary.csv"))
+        .into_iter()
+        .map(|r| r[0].clone())
+        .collect();
+    assert_eq!(methods, ["clatch", "clatch"]);
+
+    let asked = clatch(&[
+        "eval",
+        "--no-synthetic",
+        "--data",
+        str(&data),
+        "--pyramid",
+        "2:2",
+        "--method",
+        "clatch-opencv",
+        "-o",
+        str(&dir.join("out2")),
+    ]);
+    common::assert_refused(&asked, "--method clatch-opencv with --pyramid: ");
+    assert!(!common::stderr(&asked).contains("InvalidConfig"));
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -260,7 +260,10 @@ fn write_text(path: &std::path::Path, text: &str) -> Result<(), CliError> {
 pub fn main(args: &EvalArgs) -> Result<(), CliError> {
     let from_flags = settings(&args.backend, &args.detect, Some(&args.matching))?;
     std::fs::create_dir_all(&args.out).map_err(CliError::write(&args.out))?;
-    let (pairs, notes) = collect_pairs(args)?;
+    let (methods_run, methods_note) =
+        run::methods_to_run(&args.methods, from_flags.extractor.pyramid.is_some())?;
+    let (pairs, mut notes) = collect_pairs(args)?;
+    notes.extend(methods_note);
     let manifest_path = args.out.join("pairs.csv");
     let manifest = pairs::manifest(&pairs)?;
     write_text(&manifest_path, &manifest)?;
@@ -277,7 +280,7 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
             pair.name.clone(),
             [loaded.a.dimensions(), loaded.b.dimensions()],
         );
-        for &method in &args.methods {
+        for &method in &methods_run {
             results.push(run::evaluate_pair(method, &from_flags, &loaded, &ratios)?);
         }
         progress.done();
@@ -324,7 +327,7 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
         args.detect.bits,
         crate::report::describe_matching(&from_flags.matching),
     );
-    if args.methods.contains(&run::ClatchMethod::ClatchOpencv) {
+    if methods_run.contains(&run::ClatchMethod::ClatchOpencv) {
         setting_text.push_str(&format!(
             "; {}: the same keypoints, OpenCV-compatible LATCH (64 bytes, rotation invariance, \
              half_ssd_size 3, sigma 2)",

@@ -82,8 +82,10 @@ enum Command {
     /// Descriptor quality on image pairs with ground-truth homographies, optionally beside OpenCV.
     ///
     /// Pairs: OpenCV's graf1/graf3 sample (--opencv-samples), homography sequences in the Oxford or
-    /// HPatches layout, image 1 against the others (--data), and synthetic warps (rotations 0-180 degrees,
-    /// scales 0.5-2, two perspective tilts) of the embedded photo and of --synthetic-image photos.
+    /// HPatches layout, image 1 against the others (--data), and synthetic views of the embedded
+    /// photo and of --synthetic-image photos: warps (rotations 0-180 degrees, scales 0.5-2, two
+    /// perspective tilts) and copies with Gaussian noise (sigma 5-25 gray levels) or Gaussian blur
+    /// (sigma 1-3 pixels).
     /// Per pair and method: keypoints in the overlap, matches, correct matches (within --inlier-px
     /// of the true homography), matching score, and precision and recall of the ratio test at
     /// thresholds 0.50..1.00. Writes OUT/pairs.csv (the pairs, for tools/eval_opencv.py),

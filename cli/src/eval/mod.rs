@@ -3,6 +3,7 @@
 //! through `tools/eval_opencv.py`. The definitions are in [`metrics`] and EVALUATION.md.
 
 pub mod chart;
+pub mod degrade;
 pub mod metrics;
 pub mod pairs;
 pub mod results;
@@ -19,7 +20,7 @@ use crate::progress::Progress;
 use crate::{EvalArgs, settings};
 use chart::{PrPanel, SweepPanel};
 use metrics::ratio_grid;
-use pairs::{EvalPair, GROUP_OPENCV_SAMPLE, GROUP_ROTATION, GROUP_SCALE};
+use pairs::{EvalPair, GROUP_BLUR, GROUP_NOISE, GROUP_OPENCV_SAMPLE, GROUP_ROTATION, GROUP_SCALE};
 use results::PairResult;
 use tables::{Table, methods, pooled_curve};
 
@@ -353,6 +354,16 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
             "synthetic rotation, scale 1",
         ),
         (GROUP_SCALE, "scale factor", "synthetic scale, no rotation"),
+        (
+            GROUP_NOISE,
+            "noise sigma (gray levels)",
+            "synthetic Gaussian noise, no warp",
+        ),
+        (
+            GROUP_BLUR,
+            "blur sigma (pixels)",
+            "synthetic Gaussian blur, no warp",
+        ),
     ]
     .into_iter()
     .map(|(group, x_label, title)| SweepPanel {

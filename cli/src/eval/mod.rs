@@ -1,6 +1,6 @@
 //! `clatch eval`: descriptor quality on image pairs with ground-truth homographies (homography
-//! sequences in the Oxford or HPatches layout, OpenCV's graf sample, synthetic warps), with OpenCV's LATCH, ORB and SIFT beside clatch
-//! through `tools/eval_opencv.py`. The definitions are in [`metrics`] and EVALUATION.md.
+//! sequences in the Oxford or HPatches layout, OpenCV's graf sample, synthetic warps, noise and
+//! blur), with OpenCV's LATCH, ORB and SIFT beside clatch through `tools/eval_opencv.py`. The definitions are in [`metrics`] and EVALUATION.md.
 
 pub mod chart;
 pub mod degrade;
@@ -260,9 +260,9 @@ fn write_text(path: &std::path::Path, text: &str) -> Result<(), CliError> {
 /// Runs `clatch eval`.
 pub fn main(args: &EvalArgs) -> Result<(), CliError> {
     let from_flags = settings(&args.backend, &args.detect, Some(&args.matching))?;
-    std::fs::create_dir_all(&args.out).map_err(CliError::write(&args.out))?;
     let (methods_run, methods_note) =
         run::methods_to_run(&args.methods, from_flags.extractor.pyramid.is_some())?;
+    std::fs::create_dir_all(&args.out).map_err(CliError::write(&args.out))?;
     let (pairs, mut notes) = collect_pairs(args)?;
     notes.extend(methods_note);
     let manifest_path = args.out.join("pairs.csv");

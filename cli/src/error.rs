@@ -194,6 +194,10 @@ pub enum CliError {
     #[error("{command} failed: {reason}")]
     Script { command: String, reason: String },
 
+    /// Options that cannot be given together.
+    #[error("{options}: {reason}")]
+    OptionConflict { options: String, reason: String },
+
     /// A chart could not be drawn.
     #[error("cannot draw chart {path}: {reason}", path = .path.display())]
     Chart { path: PathBuf, reason: String },

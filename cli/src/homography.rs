@@ -11,7 +11,6 @@ pub struct Homography(pub [[f64; 3]; 3]);
 
 impl Homography {
     /// The identity map.
-    #[cfg(test)]
     pub fn identity() -> Self {
         Self([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     }

@@ -81,9 +81,11 @@ enum Command {
     Colmap(ColmapArgs),
     /// Descriptor quality on image pairs with ground-truth homographies, optionally beside OpenCV.
     ///
-    /// Pairs: OpenCV's graf1/graf3 sample (--opencv-samples), the Oxford graf, boat and bikes
-    /// sequences, img1 against img2..img6 (--data), and synthetic warps (rotations 0-180 degrees,
-    /// scales 0.5-2, two perspective tilts) of the embedded photo and of --synthetic-image photos.
+    /// Pairs: OpenCV's graf1/graf3 sample (--opencv-samples), homography sequences in the Oxford or
+    /// HPatches layout, image 1 against the others (--data), and synthetic views of the embedded
+    /// photo and of --synthetic-image photos: warps (rotations 0-180 degrees, scales 0.5-2, two
+    /// perspective tilts) and copies with Gaussian noise (sigma 5-25 gray levels) or Gaussian blur
+    /// (sigma 1-3 pixels).
     /// Per pair and method: keypoints in the overlap, matches, correct matches (within --inlier-px
     /// of the true homography), matching score, and precision and recall of the ratio test at
     /// thresholds 0.50..1.00. Writes OUT/pairs.csv (the pairs, for tools/eval_opencv.py),
@@ -95,9 +97,12 @@ enum Command {
 /// Arguments of `clatch eval`.
 #[derive(Debug, Args)]
 pub struct EvalArgs {
-    /// Folder holding oxford_graf/, oxford_boat/, oxford_bikes/ (img1..img6, H1to2p..H1to6p each).
+    /// A homography sequence folder, or a folder of them (repeatable). A sequence is image 1 against
+    /// every image k with a homography 1 to k, in the Oxford layout (img1.ppm, H1to2p, ...) or the
+    /// HPatches layout (1.ppm, H_1_2, ...); images .ppm, .pgm, .png or .jpg. Pairs are named after
+    /// the folder (`v_wall 1-2`; a leading `oxford_` is dropped: oxford_graf gives `graf 1-2`).
     #[arg(long, value_name = "DIR")]
-    pub data: Option<PathBuf>,
+    pub data: Vec<PathBuf>,
     /// Folder holding OpenCV's graf1.png, graf3.png and H1to3p.xml (Debian's opencv-doc package
     /// installs them in /usr/share/doc/opencv-doc/examples/data).
     #[arg(long, value_name = "DIR")]
@@ -112,15 +117,10 @@ pub struct EvalArgs {
     #[arg(short, long, default_value = "clatch-eval", value_name = "DIR")]
     pub out: PathBuf,
     /// clatch configurations to evaluate (repeatable): `clatch` (CLATCH descriptors) and
-    /// `clatch-opencv` (the same keypoints, OpenCV-compatible LATCH with cv2's defaults).
-    #[arg(
-        long = "method",
-        value_enum,
-        default_values_t = [
-            eval::run::ClatchMethod::Clatch,
-            eval::run::ClatchMethod::ClatchOpencv
-        ]
-    )]
+    /// `clatch-opencv` (the same keypoints, OpenCV-compatible LATCH with cv2's defaults). Default:
+    /// both; with --pyramid only `clatch`, since OpenCV-compatible LATCH describes full-resolution
+    /// keypoints only.
+    #[arg(long = "method", value_enum)]
     pub methods: Vec<eval::run::ClatchMethod>,
     /// Run the OpenCV script with this Python (which needs opencv-contrib-python-headless) and merge
     /// its results.

@@ -1,12 +1,14 @@
-//! `clatch eval`: descriptor quality on image pairs with ground-truth homographies (Oxford
-//! sequences, OpenCV's graf sample, synthetic warps), with OpenCV's LATCH, ORB and SIFT beside clatch
-//! through `tools/eval_opencv.py`. The definitions are in [`metrics`] and EVALUATION.md.
+//! `clatch eval`: descriptor quality on image pairs with ground-truth homographies (homography
+//! sequences in the Oxford or HPatches layout, OpenCV's graf sample, synthetic warps, noise and
+//! blur), with OpenCV's LATCH, ORB and SIFT beside clatch through `tools/eval_opencv.py`. The definitions are in [`metrics`] and EVALUATION.md.
 
 pub mod chart;
+pub mod degrade;
 pub mod metrics;
 pub mod pairs;
 pub mod results;
 pub mod run;
+pub mod sequences;
 pub mod tables;
 
 use std::collections::HashMap;
@@ -18,7 +20,7 @@ use crate::progress::Progress;
 use crate::{EvalArgs, settings};
 use chart::{PrPanel, SweepPanel};
 use metrics::ratio_grid;
-use pairs::{EvalPair, GROUP_OPENCV_SAMPLE, GROUP_ROTATION, GROUP_SCALE};
+use pairs::{EvalPair, GROUP_BLUR, GROUP_NOISE, GROUP_OPENCV_SAMPLE, GROUP_ROTATION, GROUP_SCALE};
 use results::PairResult;
 use tables::{Table, methods, pooled_curve};
 
@@ -35,14 +37,15 @@ fn collect_pairs(args: &EvalArgs) -> Result<(Vec<EvalPair>, Vec<String>), CliErr
     if let Some(dir) = &args.opencv_samples {
         pairs.push(pairs::opencv_sample_pair(dir)?);
     }
-    if let Some(data) = &args.data {
-        let (oxford, absent) = pairs::oxford_under(data)?;
-        pairs.extend(oxford);
-        notes.extend(
-            absent
-                .into_iter()
-                .map(|d| format!("no Oxford sequence at {d}")),
-        );
+    for data in &args.data {
+        let (found, skipped) = sequences::sequences_under(data)?;
+        pairs.extend(found);
+        notes.extend(skipped.into_iter().map(|d| {
+            format!(
+                "skipped {}: no img1.* or 1.* (not a sequence folder)",
+                d.display()
+            )
+        }));
     }
     if !args.no_synthetic {
         let mut sources = vec![pairs::SyntheticSource {
@@ -65,6 +68,16 @@ fn collect_pairs(args: &EvalArgs) -> Result<(Vec<EvalPair>, Vec<String>), CliErr
             pairs.extend(pairs::write_synthetic(source, &dir)?);
         }
     }
+    if let Some(twice) = repeated_name(&pairs) {
+        return Err(CliError::EvalInput {
+            path: twice.image_a.clone(),
+            reason: format!(
+                "two pairs are named `{}` (two sequence folders with one name?); \
+                 pair names must be unique",
+                twice.name
+            ),
+        });
+    }
     if pairs.is_empty() {
         return Err(CliError::EvalInput {
             path: args.out.clone(),
@@ -74,6 +87,12 @@ fn collect_pairs(args: &EvalArgs) -> Result<(Vec<EvalPair>, Vec<String>), CliErr
         });
     }
     Ok((pairs, notes))
+}
+
+/// The first pair whose name an earlier pair already has: results are told apart by pair name.
+fn repeated_name(pairs: &[EvalPair]) -> Option<&EvalPair> {
+    let mut seen = std::collections::HashSet::new();
+    pairs.iter().find(|p| !seen.insert(p.name.as_str()))
 }
 
 /// Runs the OpenCV script on the manifest; its results go to `prefix`.summary.csv / .pr.csv.
@@ -139,21 +158,39 @@ fn pr_panels(results: &[PairResult], headline: Option<&EvalPair>) -> Vec<PrPanel
         let kept: Vec<PairResult> = results.iter().filter(|r| keep(r)).cloned().collect();
         tables::distinct(&kept, |r| &r.pair).len()
     };
-    let oxford = |r: &PairResult| r.group.starts_with("oxford-");
+    let on_disk = |r: &PairResult| sequences::is_sequence_group(&r.group);
     let synthetic = |r: &PairResult| r.group.starts_with("synthetic-");
     let mut panels = Vec::new();
     if let Some(h) = headline {
         panels.extend(panel(h.name.clone(), &|r| r.pair == h.name));
     }
     panels.extend(panel(
-        format!("Oxford graf, boat, bikes: {} pairs pooled", count(&oxford)),
-        &oxford,
+        format!(
+            "{}: {} pairs pooled",
+            sequence_title(results),
+            count(&on_disk)
+        ),
+        &on_disk,
     ));
     panels.extend(panel(
-        format!("synthetic warps: {} pairs pooled", count(&synthetic)),
+        format!("synthetic pairs: {} pairs pooled", count(&synthetic)),
         &synthetic,
     ));
     panels
+}
+
+/// The sequences read from disk, by name when few (`sequences graf, boat, bikes`), else counted.
+fn sequence_title(results: &[PairResult]) -> String {
+    let groups = tables::distinct(results, |r| &r.group);
+    let names: Vec<&str> = groups
+        .iter()
+        .filter_map(|g| sequences::sequence_of_group(g))
+        .collect();
+    if names.len() <= 4 {
+        format!("sequences {}", names.join(", "))
+    } else {
+        format!("{} sequences", names.len())
+    }
 }
 
 /// Mean matching score of each method against the synthetic parameter of `group`.
@@ -223,8 +260,11 @@ fn write_text(path: &std::path::Path, text: &str) -> Result<(), CliError> {
 /// Runs `clatch eval`.
 pub fn main(args: &EvalArgs) -> Result<(), CliError> {
     let from_flags = settings(&args.backend, &args.detect, Some(&args.matching))?;
+    let (methods_run, methods_note) =
+        run::methods_to_run(&args.methods, from_flags.extractor.pyramid.is_some())?;
     std::fs::create_dir_all(&args.out).map_err(CliError::write(&args.out))?;
-    let (pairs, notes) = collect_pairs(args)?;
+    let (pairs, mut notes) = collect_pairs(args)?;
+    notes.extend(methods_note);
     let manifest_path = args.out.join("pairs.csv");
     let manifest = pairs::manifest(&pairs)?;
     write_text(&manifest_path, &manifest)?;
@@ -241,7 +281,7 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
             pair.name.clone(),
             [loaded.a.dimensions(), loaded.b.dimensions()],
         );
-        for &method in &args.methods {
+        for &method in &methods_run {
             results.push(run::evaluate_pair(method, &from_flags, &loaded, &ratios)?);
         }
         progress.done();
@@ -288,7 +328,7 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
         args.detect.bits,
         crate::report::describe_matching(&from_flags.matching),
     );
-    if args.methods.contains(&run::ClatchMethod::ClatchOpencv) {
+    if methods_run.contains(&run::ClatchMethod::ClatchOpencv) {
         setting_text.push_str(&format!(
             "; {}: the same keypoints, OpenCV-compatible LATCH (64 bytes, rotation invariance, \
              half_ssd_size 3, sigma 2)",
@@ -314,6 +354,16 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
             "synthetic rotation, scale 1",
         ),
         (GROUP_SCALE, "scale factor", "synthetic scale, no rotation"),
+        (
+            GROUP_NOISE,
+            "noise sigma (gray levels)",
+            "synthetic Gaussian noise, no warp",
+        ),
+        (
+            GROUP_BLUR,
+            "blur sigma (pixels)",
+            "synthetic Gaussian blur, no warp",
+        ),
     ]
     .into_iter()
     .map(|(group, x_label, title)| SweepPanel {
@@ -440,8 +490,8 @@ mod tests {
         assert_eq!(
             titles,
             [
-                "Oxford graf, boat, bikes: 2 pairs pooled",
-                "synthetic warps: 1 pairs pooled"
+                "sequences graf, boat: 2 pairs pooled",
+                "synthetic pairs: 1 pairs pooled"
             ]
         );
         assert_eq!(panels[0].curves[1].0, "OpenCV ORB");

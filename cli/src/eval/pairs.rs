@@ -1,5 +1,6 @@
-//! The image pairs of `clatch eval`: Oxford sequences, OpenCV's graf sample, synthetic warps; and the
-//! manifest (`pairs.csv`) that hands the very same files to `tools/eval_opencv.py`.
+//! The image pairs of `clatch eval`: OpenCV's graf sample, synthetic warps (sequences on disk are in
+//! [`super::sequences`]); and the manifest (`pairs.csv`) that hands the very same files to
+//! `tools/eval_opencv.py`.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -8,6 +9,7 @@ use clatch::decode::DecodeLimits;
 use image::GrayImage;
 
 use crate::error::CliError;
+use crate::eval::degrade::{BLUR_SIGMAS, NOISE_SIGMAS, add_noise, gaussian_blur, noise_seed};
 use crate::homography::{Homography, about_centre, demo_homography};
 use crate::input::load_gray;
 use crate::warp::warp;
@@ -37,9 +39,10 @@ pub const GROUP_ROTATION: &str = "synthetic-rotation";
 pub const GROUP_SCALE: &str = "synthetic-scale";
 /// Synthetic perspective warps.
 pub const GROUP_PERSPECTIVE: &str = "synthetic-perspective";
-
-/// The Oxford sequences looked for under the data folder.
-pub const OXFORD_SEQUENCES: [&str; 3] = ["graf", "boat", "bikes"];
+/// B is A plus Gaussian noise (no warp); the parameter is sigma in gray levels.
+pub const GROUP_NOISE: &str = "synthetic-noise";
+/// B is A blurred by a Gaussian (no warp); the parameter is sigma in pixels.
+pub const GROUP_BLUR: &str = "synthetic-blur";
 
 /// Synthetic rotations, degrees (scale 1).
 pub fn rotations() -> Vec<f64> {
@@ -54,54 +57,6 @@ fn missing(path: &Path, what: &str) -> CliError {
         path: path.to_path_buf(),
         reason: format!("{what} not found"),
     }
-}
-
-/// The first file among `dir/stem.{extensions}` that exists.
-fn find_image(dir: &Path, stem: &str) -> Result<PathBuf, CliError> {
-    ["ppm", "pgm", "png", "jpg"]
-        .iter()
-        .map(|ext| dir.join(format!("{stem}.{ext}")))
-        .find(|p| p.is_file())
-        .ok_or_else(|| missing(dir, &format!("{stem}.ppm/.pgm/.png/.jpg")))
-}
-
-/// img1 against img2..img6 of one Oxford sequence folder (`img1.ppm`..., `H1to2p`...).
-pub fn oxford_pairs(dir: &Path, sequence: &str) -> Result<Vec<EvalPair>, CliError> {
-    let image_a = find_image(dir, "img1")?;
-    (2..=6)
-        .map(|n| {
-            let homography = dir.join(format!("H1to{n}p"));
-            if !homography.is_file() {
-                return Err(missing(&homography, "homography file"));
-            }
-            Ok(EvalPair {
-                name: format!("{sequence} 1-{n}"),
-                group: format!("oxford-{sequence}"),
-                param: None,
-                image_a: image_a.clone(),
-                image_b: find_image(dir, &format!("img{n}"))?,
-                homography,
-            })
-        })
-        .collect()
-}
-
-/// The Oxford sequences present under `data` (folders `oxford_graf`, ...); absent ones are named in
-/// the second list.
-pub fn oxford_under(data: &Path) -> Result<(Vec<EvalPair>, Vec<String>), CliError> {
-    if !data.is_dir() {
-        return Err(missing(data, "data folder"));
-    }
-    let (mut pairs, mut absent) = (Vec::new(), Vec::new());
-    for sequence in OXFORD_SEQUENCES {
-        let dir = data.join(format!("oxford_{sequence}"));
-        if dir.is_dir() {
-            pairs.extend(oxford_pairs(&dir, sequence)?);
-        } else {
-            absent.push(dir.display().to_string());
-        }
-    }
-    Ok((pairs, absent))
 }
 
 /// OpenCV's sample pair in `dir`: `graf1.png`, `graf3.png`, `H1to3p.xml`.
@@ -206,23 +161,44 @@ fn save_png(img: &GrayImage, path: &Path) -> Result<(), CliError> {
     })
 }
 
-/// Writes `source` and its warped views into `dir` (PNG images, Oxford-format homographies) and
-/// returns their pairs.
+/// The photometric views of an image: (suffix, group, parameter, B), each with A's geometry.
+pub fn degraded_views(img: &GrayImage) -> Vec<(String, &'static str, f64, GrayImage)> {
+    let mut views = Vec::new();
+    for sigma in NOISE_SIGMAS {
+        let noisy = add_noise(img, sigma, noise_seed(sigma));
+        views.push((format!("noise {sigma}"), GROUP_NOISE, sigma, noisy));
+    }
+    for sigma in BLUR_SIGMAS {
+        let blurred = gaussian_blur(img, sigma);
+        views.push((format!("blur {sigma}"), GROUP_BLUR, sigma, blurred));
+    }
+    views
+}
+
+/// Writes `source` and its synthetic views into `dir` (PNG images, Oxford-format homographies) and
+/// returns their pairs: the warps, then the noisy and blurred copies.
 pub fn write_synthetic(source: &SyntheticSource, dir: &Path) -> Result<Vec<EvalPair>, CliError> {
     std::fs::create_dir_all(dir).map_err(CliError::write(dir))?;
     let (width, height) = source.image.dimensions();
     let image_a = dir.join(format!("{}.png", source.name));
     save_png(&source.image, &image_a)?;
-    let mut pairs = Vec::new();
+    let mut views = Vec::new();
     for (suffix, group, param, hom) in synthetic_warps(width, height) {
-        let file = format!("{}_{}", source.name, suffix.replace(' ', "_"));
         let warped =
             warp(&source.image, &hom, width, height).ok_or_else(|| CliError::EvalInput {
                 path: image_a.clone(),
                 reason: format!("warp `{suffix}` is singular"),
             })?;
+        views.push((suffix, group, param, hom, warped));
+    }
+    for (suffix, group, param, degraded) in degraded_views(&source.image) {
+        views.push((suffix, group, param, Homography::identity(), degraded));
+    }
+    let mut pairs = Vec::new();
+    for (suffix, group, param, hom, image) in views {
+        let file = format!("{}_{}", source.name, suffix.replace(' ', "_"));
         let image_b = dir.join(format!("{file}.png"));
-        save_png(&warped, &image_b)?;
+        save_png(&image, &image_b)?;
         let homography = dir.join(format!("{file}.H"));
         let text = homography_text(&hom);
         crate::output::write_file(&homography, |w| {
@@ -309,6 +285,11 @@ mod tests {
         assert_eq!(Homography::parse(&homography_text(&h)).unwrap(), h);
     }
 
+    /// Image A of the synthetic pairs (the same file for all).
+    fn rot_a(pairs: &[EvalPair]) -> PathBuf {
+        pairs[0].image_a.clone()
+    }
+
     #[test]
     fn synthetic_files_and_manifest() {
         let dir = temp_dir("synthetic");
@@ -317,7 +298,34 @@ mod tests {
             image: GrayImage::from_fn(70, 66, |x, y| image::Luma([(3 * x + y) as u8])),
         };
         let pairs = write_synthetic(&source, &dir).unwrap();
-        assert_eq!(pairs.len(), synthetic_warps(70, 66).len());
+        let warps = synthetic_warps(70, 66).len();
+        assert_eq!(pairs.len(), warps + NOISE_SIGMAS.len() + BLUR_SIGMAS.len());
+        // The photometric pairs: A itself against a noisy or blurred copy, through the identity.
+        let noise = &pairs[warps + 1];
+        assert_eq!(
+            (noise.name.as_str(), noise.group.as_str(), noise.param),
+            ("ramp noise 10", GROUP_NOISE, Some(10.0))
+        );
+        let blur = pairs.last().unwrap();
+        assert_eq!(
+            (blur.name.as_str(), blur.group.as_str(), blur.param),
+            ("ramp blur 3", GROUP_BLUR, Some(3.0))
+        );
+        for (pair, expected) in [
+            (noise, add_noise(&source.image, 10.0, noise_seed(10.0))),
+            (blur, gaussian_blur(&source.image, 3.0)),
+        ] {
+            assert_eq!(pair.image_a, rot_a(&pairs));
+            assert_eq!(
+                load_gray(&pair.image_b, &DecodeLimits::default()).unwrap(),
+                expected
+            );
+            assert_ne!(expected, source.image);
+            assert_eq!(
+                Homography::from_file(&pair.homography).unwrap(),
+                Homography::identity()
+            );
+        }
         let rot = &pairs[2];
         assert_eq!(rot.name, "ramp rot 30");
         assert_eq!(
@@ -349,36 +357,11 @@ mod tests {
 
     #[test]
     fn missing_inputs_are_typed_errors() {
-        let dir = temp_dir("oxford");
-        let e = oxford_pairs(&dir, "graf").unwrap_err();
-        assert!(
-            matches!(e, CliError::EvalInput { .. }) && e.to_string().contains("img1"),
-            "{e}"
-        );
-        std::fs::write(dir.join("img1.ppm"), b"P5").unwrap();
-        let e = oxford_pairs(&dir, "graf").unwrap_err();
-        assert!(e.to_string().contains("H1to2p"), "{e}");
-        for n in 2..=6 {
-            std::fs::write(dir.join(format!("H1to{n}p")), b"").unwrap();
-        }
-        let e = oxford_pairs(&dir, "graf").unwrap_err();
-        assert!(e.to_string().contains("img2"), "{e}");
-        for n in 2..=6 {
-            std::fs::write(dir.join(format!("img{n}.pgm")), b"P5").unwrap();
-        }
-        let pairs = oxford_pairs(&dir, "graf").unwrap();
-        assert_eq!(pairs[4].name, "graf 1-6");
-        assert_eq!(pairs[4].homography, dir.join("H1to6p"));
+        let dir = temp_dir("sample");
         assert!(matches!(
             opencv_sample_pair(&dir),
             Err(CliError::EvalInput { .. })
         ));
-        assert!(matches!(
-            oxford_under(&dir.join("nope")),
-            Err(CliError::EvalInput { .. })
-        ));
-        let (pairs, absent) = oxford_under(&dir).unwrap();
-        assert!(pairs.is_empty() && absent.len() == 3);
         std::fs::remove_dir_all(&dir).ok();
 
         assert!(matches!(

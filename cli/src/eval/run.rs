@@ -54,6 +54,50 @@ impl ClatchMethod {
     }
 }
 
+/// The methods run when none is asked for.
+pub const DEFAULT_METHODS: [ClatchMethod; 2] = [ClatchMethod::Clatch, ClatchMethod::ClatchOpencv];
+
+/// The methods to run, and a note when the default list was cut. OpenCV-compatible LATCH describes
+/// full-resolution (level 0) keypoints only, so with a pyramid it leaves the default list, and asking
+/// for it is refused.
+pub fn methods_to_run(
+    asked: &[ClatchMethod],
+    pyramid: bool,
+) -> Result<(Vec<ClatchMethod>, Option<String>), CliError> {
+    let opencv = ClatchMethod::ClatchOpencv;
+    if asked.is_empty() {
+        if !pyramid {
+            return Ok((DEFAULT_METHODS.to_vec(), None));
+        }
+        let kept = DEFAULT_METHODS
+            .into_iter()
+            .filter(|&m| m != opencv)
+            .collect();
+        let note = format!(
+            "{} left out: OpenCV-compatible LATCH describes full-resolution keypoints only, not \
+             the levels of --pyramid",
+            opencv.label()
+        );
+        return Ok((kept, Some(note)));
+    }
+    if pyramid && asked.contains(&opencv) {
+        return Err(CliError::OptionConflict {
+            options: "--method clatch-opencv with --pyramid".into(),
+            reason: "OpenCV-compatible LATCH describes full-resolution keypoints only, not those \
+                     of the other pyramid levels; drop --pyramid or that --method"
+                .into(),
+        });
+    }
+    // A method asked for twice is one column.
+    let mut methods = Vec::new();
+    for &m in asked {
+        if !methods.contains(&m) {
+            methods.push(m);
+        }
+    }
+    Ok((methods, None))
+}
+
 /// A pair with its images and ground truth read.
 pub struct LoadedPair {
     /// What was read.
@@ -278,6 +322,31 @@ mod tests {
         assert!(r.matches > 0);
         assert_eq!(r.correct, r.matches);
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_pyramid_leaves_the_opencv_column_out_of_the_default_list_and_refuses_it_when_asked() {
+        use ClatchMethod::{Clatch, ClatchOpencv};
+        assert_eq!(
+            methods_to_run(&[], false).unwrap(),
+            (DEFAULT_METHODS.to_vec(), None)
+        );
+        let (methods, note) = methods_to_run(&[], true).unwrap();
+        assert_eq!(methods, [Clatch]);
+        assert!(note.unwrap().contains(ClatchOpencv.label()));
+        assert_eq!(
+            methods_to_run(&[ClatchOpencv], false).unwrap(),
+            (vec![ClatchOpencv], None)
+        );
+        assert_eq!(
+            methods_to_run(&[ClatchOpencv, Clatch, ClatchOpencv], false).unwrap(),
+            (vec![ClatchOpencv, Clatch], None)
+        );
+        let e = methods_to_run(&[Clatch, ClatchOpencv], true).unwrap_err();
+        assert!(
+            matches!(e, CliError::OptionConflict { .. }) && e.to_string().contains("--pyramid"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -1,0 +1,168 @@
+//! `clatch eval --data` on homography sequences built here: one in the Oxford layout, one in the
+//! HPatches layout, read as a folder of sequences.
+
+mod common;
+
+use std::path::Path;
+
+use common::{clatch, photo, str, workdir};
+
+/// Shifts by (dx, dy): the homography B = A moved right and down.
+fn shift_text(dx: u32, dy: u32) -> String {
+    format!("1 0 {dx}\n0 1 {dy}\n0 0 1\n")
+}
+
+/// Images 1..=3 of one photo shifted by 0, 4 and 8 pixels, with the homographies from image 1.
+fn write_sequence(dir: &Path, image_name: impl Fn(u32) -> String, h_name: impl Fn(u32) -> String) {
+    std::fs::create_dir_all(dir).unwrap();
+    let base = photo(200, 160, 0);
+    for k in 1..=3u32 {
+        let d = 4 * (k - 1);
+        let shifted = image::GrayImage::from_fn(200, 160, |x, y| {
+            if x >= d && y >= d {
+                *base.get_pixel(x - d, y - d)
+            } else {
+                image::Luma([0])
+            }
+        });
+        shifted.save(dir.join(image_name(k))).unwrap();
+        if k >= 2 {
+            std::fs::write(dir.join(h_name(k)), shift_text(d, d)).unwrap();
+        }
+    }
+}
+
+/// The rows of a CSV file, split at commas, without the header.
+fn rows(path: &Path) -> Vec<Vec<String>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    text.lines()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect()
+}
+
+#[test]
+fn eval_reads_oxford_and_hpatches_sequences_named_by_folder() {
+    let dir = workdir("eval-seq", "layouts");
+    let data = dir.join("data");
+    write_sequence(
+        &data.join("oxford_tiny"),
+        |k| format!("img{k}.ppm"),
+        |k| format!("H1to{k}p"),
+    );
+    write_sequence(
+        &data.join("v_tiny"),
+        |k| format!("{k}.png"),
+        |k| format!("H_1_{k}"),
+    );
+    std::fs::create_dir_all(data.join("not_a_sequence")).unwrap();
+    let out = dir.join("out");
+    let run = clatch(&[
+        "eval",
+        "--no-synthetic",
+        "--data",
+        str(&data),
+        "--method",
+        "clatch",
+        "-o",
+        str(&out),
+    ]);
+    assert!(run.status.success(), "{}", common::stderr(&run));
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(stdout.contains("skipped"), "{stdout}");
+
+    let summary = rows(&out.join("clatch.summary.csv"));
+    let named: Vec<(&str, &str, &str)> = summary
+        .iter()
+        .map(|r| (r[0].as_str(), r[1].as_str(), r[2].as_str()))
+        .collect();
+    assert_eq!(
+        named,
+        [
+            ("clatch", "tiny 1-2", "oxford-tiny"),
+            ("clatch", "tiny 1-3", "oxford-tiny"),
+            ("clatch", "v_tiny 1-2", "hpatches-v_tiny"),
+            ("clatch", "v_tiny 1-3", "hpatches-v_tiny"),
+        ]
+    );
+    // A pure shift of a photo: clatch finds correct matches on every pair.
+    for row in &summary {
+        let (matches, correct): (usize, usize) =
+            (row[12].parse().unwrap(), row[13].parse().unwrap());
+        assert!(correct > 0 && correct <= matches, "{row:?}");
+    }
+    let manifest = rows(&out.join("pairs.csv"));
+    assert_eq!(manifest.len(), 4);
+    assert!(
+        manifest[3][3].ends_with("v_tiny/1.png"),
+        "{:?}",
+        manifest[3]
+    );
+    assert!(
+        manifest[3][5].ends_with("v_tiny/H_1_3"),
+        "{:?}",
+        manifest[3]
+    );
+
+    // The same sequence given twice: pair names would clash.
+    let twice = clatch(&[
+        "eval",
+        "--no-synthetic",
+        "--data",
+        str(&data.join("v_tiny")),
+        "--data",
+        str(&data.join("v_tiny")),
+        "--method",
+        "clatch",
+        "-o",
+        str(&dir.join("out2")),
+    ]);
+    common::assert_refused(&twice, "two pairs are named `v_tiny 1-2`");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn pyramid_runs_with_the_default_methods_and_refuses_the_opencv_column_when_asked() {
+    let dir = workdir("eval-seq", "pyramid");
+    let data = dir.join("v_tiny");
+    write_sequence(&data, |k| format!("{k}.png"), |k| format!("H_1_{k}"));
+    let out = dir.join("out");
+    let run = clatch(&[
+        "eval",
+        "--no-synthetic",
+        "--data",
+        str(&data),
+        "--pyramid",
+        "2:2",
+        "-o",
+        str(&out),
+    ]);
+    assert!(run.status.success(), "{}", common::stderr(&run));
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        stdout.contains("clatch (OpenCV-compatible) left out"),
+        "{stdout}"
+    );
+    let methods: Vec<String> = rows(&out.join("clatch.summary.csv"))
+        .into_iter()
+        .map(|r| r[0].clone())
+        .collect();
+    assert_eq!(methods, ["clatch", "clatch"]);
+
+    let asked = clatch(&[
+        "eval",
+        "--no-synthetic",
+        "--data",
+        str(&data),
+        "--pyramid",
+        "2:2",
+        "--method",
+        "clatch-opencv",
+        "-o",
+        str(&dir.join("out2")),
+    ]);
+    common::assert_refused(&asked, "--method clatch-opencv with --pyramid: ");
+    // Refused before any output is written.
+    assert!(!dir.join("out2").exists());
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -96,12 +96,13 @@ pub fn extract_opencv(
     progress: &Progress,
 ) -> Result<Extracted, CliError> {
     if extractor.config().pyramid.is_some() {
-        return Err(clatch::Error::InvalidConfig {
-            field: "pyramid",
-            value: "Some".into(),
-            reason: "OpenCV-compatible LATCH describes level 0 only; drop --pyramid",
-        }
-        .into());
+        return Err(CliError::OptionConflict {
+            options: "--opencv-latch with --pyramid".into(),
+            reason:
+                "OpenCV-compatible LATCH describes full-resolution keypoints only, not those of \
+                     the other pyramid levels; drop --pyramid or --opencv-latch"
+                    .into(),
+        });
     }
     extract_with(extractor, img, name, progress, |view, keypoints| {
         extractor.describe_opencv(latch, view, keypoints)
@@ -246,10 +247,7 @@ mod tests {
                 Path::new("a"),
                 &Progress::hidden()
             ),
-            Err(CliError::Clatch(clatch::Error::InvalidConfig {
-                field: "pyramid",
-                ..
-            }))
+            Err(CliError::OptionConflict { options, .. }) if options.contains("--pyramid")
         ));
     }
 

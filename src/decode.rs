@@ -17,7 +17,9 @@ mod jpeg_end;
 mod open;
 mod palette;
 
-pub use open::{DecodeError, DecodeLimits, ImageInfo, open_gray, open_gray_with_exif, probe};
+pub use open::{
+    DecodeError, DecodeLimits, ImageInfo, file_kind, open_gray, open_gray_with_exif, probe,
+};
 
 use crate::error::{Error, Result};
 use crate::gray_view::GrayView;

@@ -157,7 +157,7 @@ pub fn check_writable(path: &Path) -> Result<(), CliError> {
     match std::fs::metadata(path) {
         Ok(meta) if !meta.is_file() => Err(refuse(format!(
             "it is {}, not a regular file",
-            crate::text_input::file_kind(&meta)
+            clatch::decode::file_kind(&meta)
         ))),
         _ => Ok(()),
     }

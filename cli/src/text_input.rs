@@ -22,7 +22,7 @@ pub fn read_text(path: &Path, what: &'static str) -> Result<String, CliError> {
     if !meta.is_file() {
         return Err(CliError::NotAFile {
             path: path.to_path_buf(),
-            kind: file_kind(&meta),
+            kind: clatch::decode::file_kind(&meta),
         });
     }
     let file = std::fs::File::open(path).map_err(read_err)?;
@@ -40,29 +40,6 @@ pub fn read_text(path: &Path, what: &'static str) -> Result<String, CliError> {
     let text = String::from_utf8(bytes)
         .map_err(|e| read_err(std::io::Error::new(std::io::ErrorKind::InvalidData, e)))?;
     Ok(text.strip_prefix(BOM).map(str::to_owned).unwrap_or(text))
-}
-
-/// What a non-regular file is, in words.
-pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        let t = meta.file_type();
-        if t.is_fifo() {
-            return "a FIFO";
-        }
-        if t.is_char_device() || t.is_block_device() {
-            return "a device";
-        }
-        if t.is_socket() {
-            return "a socket";
-        }
-    }
-    if meta.is_dir() {
-        "a folder"
-    } else {
-        "not a regular file"
-    }
 }
 
 #[cfg(test)]

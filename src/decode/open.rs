@@ -175,8 +175,10 @@ fn regular_file(path: &Path) -> Result<std::fs::Metadata, DecodeError> {
     })
 }
 
-/// What a non-regular file is, in words.
-pub(crate) fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+/// What a path that is not a regular file is, in words ("a FIFO", "a device", "a socket", "a
+/// folder"), for messages that refuse it; the command-line tool uses it for its other inputs and
+/// outputs too.
+pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
     #[cfg(unix)]
     {
         use std::os::unix::fs::FileTypeExt;

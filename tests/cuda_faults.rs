@@ -67,9 +67,11 @@ mod gpu {
     type Call<'a> = Box<dyn Fn(Backend) -> Result<String, Error> + 'a>;
 
     /// Every public GPU path, each as a call whose result is summarised for comparison.
+    /// Matching runs `descriptors` against themselves.
     fn calls<'a>(
         view: &'a GrayView<'a>,
         keypoints: &'a [KeyPoint],
+        descriptors: &'a clatch::DescriptorSet,
     ) -> Vec<(&'static str, Call<'a>)> {
         use clatch::{MatchConfig, Matcher, OpencvLatch, Pyramid, cuda::GpuStream};
         let pyramid = ExtractorConfig {
@@ -79,15 +81,6 @@ mod gpu {
             }),
             ..ExtractorConfig::default()
         };
-        let features = Extractor::new(Backend::Cpu, ExtractorConfig::default())
-            .and_then(|e| e.detect_and_describe(view))
-            .expect("CPU features");
-        let d = features.descriptors;
-        let (q, t) = (d.clone(), d);
-        let q2 = q.clone();
-        let t2 = t.clone();
-        let q3 = q.clone();
-        let t3 = t.clone();
         vec![
             (
                 "detect_and_describe",
@@ -131,7 +124,11 @@ mod gpu {
                 Box::new(move |b| {
                     Ok(format!(
                         "{:?}",
-                        Matcher::new(b, MatchConfig::default())?.knn(&q, &t, 2)?
+                        Matcher::new(b, MatchConfig::default())?.knn(
+                            descriptors,
+                            descriptors,
+                            2
+                        )?
                     ))
                 }),
             ),
@@ -140,7 +137,8 @@ mod gpu {
                 Box::new(move |b| {
                     Ok(format!(
                         "{:?}",
-                        Matcher::new(b, MatchConfig::default())?.match_descriptors(&q2, &t2)?
+                        Matcher::new(b, MatchConfig::default())?
+                            .match_descriptors(descriptors, descriptors)?
                     ))
                 }),
             ),
@@ -153,12 +151,12 @@ mod gpu {
                         return Ok(format!(
                             "{:?} {:?}",
                             e.detect_and_describe(view)?,
-                            m.match_descriptors(&q3, &t3)?
+                            m.match_descriptors(descriptors, descriptors)?
                         ));
                     }
                     let stream = GpuStream::new(0)?;
                     let f = e.detect_and_describe_async(&stream, view)?;
-                    let p = m.match_descriptors_async(&stream, &q3, &t3)?;
+                    let p = m.match_descriptors_async(&stream, descriptors, descriptors)?;
                     Ok(format!("{:?} {:?}", f.wait()?, p.wait()?))
                 }),
             ),
@@ -181,7 +179,10 @@ mod gpu {
                 .with_angle(i as f32 * 7.0)
             })
             .collect();
-        let calls = calls(&view, &keypoints);
+        let descriptors = Extractor::new(Backend::Cpu, ExtractorConfig::default())?
+            .detect_and_describe(&view)?
+            .descriptors;
+        let calls = calls(&view, &keypoints, &descriptors);
         let mut sites_per_call = Vec::new();
         for (name, call) in &calls {
             let expected = call(Backend::Cpu)?;

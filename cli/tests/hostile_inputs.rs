@@ -239,7 +239,7 @@ fn palette_png(entries: usize, bad_index: u8) -> Vec<u8> {
         let start = out.len();
         out.extend_from_slice(kind);
         out.extend_from_slice(data);
-        let crc = common::crc32(&out[start..]);
+        let crc = crc32fast::hash(&out[start..]);
         out.extend_from_slice(&crc.to_be_bytes());
     };
     let mut ihdr = [128u32.to_be_bytes(), 128u32.to_be_bytes()].concat();

@@ -27,28 +27,67 @@ pub fn fast_score(img: &GrayView, x: usize, y: usize) -> i32 {
     best
 }
 
-/// Cheap necessary condition: nine contiguous circle pixels always include two adjacent compass pixels
-/// (0, 4, 8, 12) beyond the threshold on the same side.
+/// [`fast_score`] from the circle differences `ring` (circle pixel minus centre), by sliding minima
+/// and maxima instead of nine comparisons per arc: `min9[k] = min(min8[k], ring[k + 8])` with
+/// `min8 = min(min4[k], min4[k + 4])` and so on (indices modulo 16). Integer comparisons only: the
+/// same value as the plain loop, which a test checks on random rings.
 #[inline]
-fn may_be_corner(img: &GrayView, x: usize, y: usize, threshold: i32) -> bool {
-    let p = img.at(x, y) as i32;
-    let compass = [
-        img.at(x, y - 3) as i32,
-        img.at(x + 3, y) as i32,
-        img.at(x, y + 3) as i32,
-        img.at(x - 3, y) as i32,
-    ];
-    let bright = compass.map(|v| v - p > threshold);
-    let dark = compass.map(|v| p - v > threshold);
-    (0..4).any(|i| (bright[i] && bright[(i + 1) % 4]) || (dark[i] && dark[(i + 1) % 4]))
+fn arc_score(ring: &[i32; 16]) -> i32 {
+    let at = |a: &[i32; 16], k: usize| a[k & 15];
+    let lo2: [i32; 16] = std::array::from_fn(|k| ring[k].min(at(ring, k + 1)));
+    let hi2: [i32; 16] = std::array::from_fn(|k| ring[k].max(at(ring, k + 1)));
+    let lo4: [i32; 16] = std::array::from_fn(|k| lo2[k].min(at(&lo2, k + 2)));
+    let hi4: [i32; 16] = std::array::from_fn(|k| hi2[k].max(at(&hi2, k + 2)));
+    let mut brighter = i32::MIN;
+    let mut darker = i32::MIN;
+    for k in 0..16 {
+        let lo9 = lo4[k].min(at(&lo4, k + 4)).min(at(ring, k + 8));
+        let hi9 = hi4[k].max(at(&hi4, k + 4)).max(at(ring, k + 8));
+        brighter = brighter.max(lo9);
+        darker = darker.max(-hi9);
+    }
+    brighter.max(darker)
 }
 
-/// Score map: FAST score of each pixel inside the margin that is a corner, 0 elsewhere. Row-major,
-/// `width * height`.
+/// [`fast_score`] of a pixel known to be inside the circle margin, reading rows directly.
+#[inline]
+fn fast_score_in_rows(img: &GrayView, x: usize, y: usize) -> i32 {
+    let p = img.at(x, y) as i32;
+    let ring: [i32; 16] = std::array::from_fn(|i| {
+        let [dx, dy] = FAST_CIRCLE[i];
+        img.row((y as i32 + dy) as usize)[(x as i32 + dx) as usize] as i32 - p
+    });
+    arc_score(&ring)
+}
+
+/// Cheap necessary condition, for `xs` of row `y` at once (`out[i]` for `x = xs.start + i`): nine
+/// contiguous circle pixels always include two adjacent compass pixels (0, 4, 8, 12) beyond the
+/// threshold on the same side. Saturating `u8` differences, so the loop vectorises.
+fn may_be_corners(img: &GrayView, y: usize, xs: std::ops::Range<usize>, threshold: u8, out: &mut [bool]) {
+    let (lo, hi) = (xs.start, xs.end);
+    let centre = &img.row(y)[lo..hi];
+    let north = &img.row(y - 3)[lo..hi];
+    let south = &img.row(y + 3)[lo..hi];
+    let east = &img.row(y)[lo + 3..hi + 3];
+    let west = &img.row(y)[lo - 3..hi - 3];
+    for i in 0..hi - lo {
+        let p = centre[i];
+        let b = |v: u8| v.saturating_sub(p) > threshold;
+        let d = |v: u8| p.saturating_sub(v) > threshold;
+        let (bn, be, bs, bw) = (b(north[i]), b(east[i]), b(south[i]), b(west[i]));
+        let (dn, de, ds, dw) = (d(north[i]), d(east[i]), d(south[i]), d(west[i]));
+        out[i] = (bn & be) | (be & bs) | (bs & bw) | (bw & bn) | (dn & de) | (de & ds) | (ds & dw) | (dw & dn);
+    }
+}
+
+/// Score map: FAST score of each pixel inside the margin (at least 3) that is a corner, 0 elsewhere.
+/// Row-major, `width * height`.
 pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
     let (w, h) = (img.width(), img.height());
     let t = threshold as i32;
     let mut scores = vec![0u8; w * h];
+    // The circle reaches 3 pixels out: pixels nearer a border are never corners.
+    let margin = margin.max(3);
     if w <= 2 * margin || h <= 2 * margin {
         return scores;
     }
@@ -57,13 +96,14 @@ pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
         .enumerate()
         .skip(margin)
         .take(h - 2 * margin)
-        .for_each(|(y, row)| {
-            for (x, score) in row.iter_mut().enumerate().take(w - margin).skip(margin) {
-                if may_be_corner(img, x, y, t) {
-                    let s = fast_score(img, x, y);
-                    if s > t {
-                        *score = s as u8;
-                    }
+        .for_each_init(Vec::new, |candidates, (y, row)| {
+            candidates.resize(w - 2 * margin, false);
+            may_be_corners(img, y, margin..w - margin, threshold, candidates);
+            for (i, _) in candidates.iter().enumerate().filter(|&(_, &c)| c) {
+                let x = margin + i;
+                let s = fast_score_in_rows(img, x, y);
+                if s > t {
+                    row[x] = s as u8;
                 }
             }
         });
@@ -73,19 +113,28 @@ pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
 /// Corners that survive 3x3 non-maximum suppression (ties go to the first in raster order), as
 /// `(x, y, score)` in raster order.
 pub fn suppress_non_maxima(scores: &[u8], width: usize, height: usize) -> Vec<(u32, u32, u8)> {
+    // Score maps are mostly zeros: rows are scanned a block at a time and empty blocks skipped.
+    const BLOCK: usize = 32;
     (1..height.saturating_sub(1))
         .into_par_iter()
         .flat_map_iter(|y| {
             let above = &scores[(y - 1) * width..y * width];
             let here = &scores[y * width..(y + 1) * width];
             let below = &scores[(y + 1) * width..(y + 2) * width];
-            (1..width - 1).filter_map(move |x| {
-                let s = here[x];
-                let earlier = [above[x - 1], above[x], above[x + 1], here[x - 1]];
-                let later = [here[x + 1], below[x - 1], below[x], below[x + 1]];
-                let kept = s > 0 && earlier.iter().all(|&n| s > n) && later.iter().all(|&n| s >= n);
-                kept.then_some((x as u32, y as u32, s))
-            })
+            let inner = 1..width.saturating_sub(1);
+            inner
+                .clone()
+                .step_by(BLOCK)
+                .filter(move |&start| here[start..(start + BLOCK).min(inner.end)].iter().any(|&s| s != 0))
+                .flat_map(move |start| start..(start + BLOCK).min(width - 1))
+                .filter_map(move |x| {
+                    let s = here[x];
+                    let earlier = [above[x - 1], above[x], above[x + 1], here[x - 1]];
+                    let later = [here[x + 1], below[x - 1], below[x], below[x + 1]];
+                    let kept =
+                        s > 0 && earlier.iter().all(|&n| s > n) && later.iter().all(|&n| s >= n);
+                    kept.then_some((x as u32, y as u32, s))
+                })
         })
         .collect()
 }
@@ -135,33 +184,125 @@ pub fn centroid_moments(img: &GrayView, x: usize, y: usize) -> (i64, i64) {
     (m10, m01)
 }
 
-/// Runs the whole detector on the CPU. The image must be larger than twice the margin in both
-/// directions (checked by the caller).
-pub fn detect(img: &GrayView, config: &DetectorConfig) -> Vec<KeyPoint> {
+/// The angle of the keypoint at `(x, y)`: the intensity centroid's direction bin, in degrees.
+pub fn orientation(img: &GrayView, x: usize, y: usize) -> f32 {
+    let (m10, m01) = centroid_moments(img, x, y);
+    bin_degrees(direction_bin(m10, m01))
+}
+
+/// The detector without orientation (every `angle` 0): the strongest `max_keypoints` corners after
+/// suppression, score descending, then raster order. For callers that keep only some of them (the
+/// pyramid's selection) and orient those with [`orientation`].
+pub fn detect_unoriented(img: &GrayView, config: &DetectorConfig) -> Vec<KeyPoint> {
     let margin = config.margin();
     let scores = score_map(img, config.threshold, margin);
     let mut corners = suppress_non_maxima(&scores, img.width(), img.height());
     corners.sort_unstable_by(|a, b| b.2.cmp(&a.2).then(a.1.cmp(&b.1)).then(a.0.cmp(&b.0)));
     corners.truncate(config.max_keypoints);
     corners
-        .par_iter()
-        .map(|&(x, y, score)| {
-            let (m10, m01) = centroid_moments(img, x as usize, y as usize);
-            KeyPoint {
-                x: x as f32,
-                y: y as f32,
-                size: config.keypoint_size,
-                angle: bin_degrees(direction_bin(m10, m01)),
-                response: score as f32,
-                octave: 0,
-            }
+        .iter()
+        .map(|&(x, y, score)| KeyPoint {
+            x: x as f32,
+            y: y as f32,
+            size: config.keypoint_size,
+            angle: 0.0,
+            response: score as f32,
+            octave: 0,
         })
         .collect()
+}
+
+/// Runs the whole detector on the CPU. The image must be larger than twice the margin in both
+/// directions (checked by the caller).
+pub fn detect(img: &GrayView, config: &DetectorConfig) -> Vec<KeyPoint> {
+    let mut keypoints = detect_unoriented(img, config);
+    keypoints.par_iter_mut().for_each(|k| {
+        k.angle = orientation(img, k.x as usize, k.y as usize);
+    });
+    keypoints
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A small deterministic generator for the equivalence tests.
+    fn lcg(state: &mut u64) -> u64 {
+        *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        *state >> 33
+    }
+
+    #[test]
+    fn arc_score_equals_the_plain_arc_loop() {
+        let plain = |ring: &[i32; 16]| {
+            let mut best = i32::MIN;
+            for k in 0..16 {
+                let (mut brighter, mut darker) = (i32::MAX, i32::MAX);
+                for j in 0..FAST_ARC {
+                    brighter = brighter.min(ring[(k + j) % 16]);
+                    darker = darker.min(-ring[(k + j) % 16]);
+                }
+                best = best.max(brighter).max(darker);
+            }
+            best
+        };
+        let mut state = 7;
+        for trial in 0..200_000 {
+            // Narrow value ranges make ties and equal arcs common; wide ones reach +-255.
+            let spread = [3u64, 20, 511][trial % 3];
+            let ring: [i32; 16] =
+                std::array::from_fn(|_| (lcg(&mut state) % spread) as i32 - (spread / 2) as i32);
+            assert_eq!(arc_score(&ring), plain(&ring), "{ring:?}");
+        }
+    }
+
+    #[test]
+    fn suppression_equals_the_plain_rule_on_random_maps() {
+        let mut state = 3;
+        for (w, h) in [(1, 1), (2, 5), (3, 3), (31, 4), (33, 7), (64, 9), (100, 13)] {
+            // Sparse maps with runs of equal scores, as score maps are.
+            let scores: Vec<u8> = (0..w * h)
+                .map(|_| match lcg(&mut state) % 8 {
+                    0 => 5,
+                    1 => (lcg(&mut state) % 4) as u8 + 4,
+                    _ => 0,
+                })
+                .collect();
+            let at = |x: usize, y: usize| scores[y * w + x];
+            let mut want = Vec::new();
+            for y in 1..h.saturating_sub(1) {
+                for x in 1..w.saturating_sub(1) {
+                    let s = at(x, y);
+                    let earlier = [at(x - 1, y - 1), at(x, y - 1), at(x + 1, y - 1), at(x - 1, y)];
+                    let later = [at(x + 1, y), at(x - 1, y + 1), at(x, y + 1), at(x + 1, y + 1)];
+                    if s > 0 && earlier.iter().all(|&n| s > n) && later.iter().all(|&n| s >= n) {
+                        want.push((x as u32, y as u32, s));
+                    }
+                }
+            }
+            assert_eq!(suppress_non_maxima(&scores, w, h), want, "{w}x{h}");
+        }
+    }
+
+    #[test]
+    fn score_map_equals_fast_score_at_every_pixel() {
+        let mut state = 11;
+        for (w, h, levels, threshold, margin) in
+            [(40, 30, 4u64, 1u8, 3usize), (57, 23, 256, 20, 5), (64, 64, 30, 7, 16), (9, 9, 256, 1, 3)]
+        {
+            let pixels: Vec<u8> = (0..w * h).map(|_| (lcg(&mut state) % levels) as u8 * (255 / (levels - 1).max(1)) as u8).collect();
+            let img = GrayView::new(&pixels, w, h, w).unwrap();
+            let map = score_map(&img, threshold, margin);
+            for y in 0..h {
+                for x in 0..w {
+                    let inside = x >= margin && y >= margin && x + margin < w && y + margin < h;
+                    let s = if inside { fast_score(&img, x, y) } else { 0 };
+                    let want = if s > threshold as i32 { s as u8 } else { 0 };
+                    assert_eq!(map[y * w + x], want, "({x}, {y}) of {w}x{h}, threshold {threshold}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn harris_response_worked_by_hand() {
@@ -218,10 +359,9 @@ mod tests {
                 let img = GrayView::new(&buf, 9, 9, 9).unwrap();
                 assert_eq!(fast_score(&img, 4, 4), expected, "run {run} from {start}");
                 if run == 9 {
-                    assert!(
-                        may_be_corner(&img, 4, 4, 20),
-                        "the quick test must never reject a corner"
-                    );
+                    let mut candidate = [false];
+                    may_be_corners(&img, 4, 4..5, 20, &mut candidate);
+                    assert!(candidate[0], "the quick test must never reject a corner");
                 }
             }
         }

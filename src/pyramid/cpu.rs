@@ -104,15 +104,21 @@ fn detect_levels(
     let views: Vec<GrayView> = (0..plan.sizes.len())
         .map(|l| level_view(img, levels, plan, l))
         .collect();
+    // Orientation does not take part in the selection: only the kept keypoints are oriented.
     let per_level: Vec<_> = views
         .iter()
-        .map(|view| detect::cpu::detect(view, &candidates))
+        .map(|view| detect::cpu::detect_unoriented(view, &candidates))
         .collect();
     let rank = |level: usize, k: &crate::keypoint::KeyPoint| match config.ranking {
         Ranking::Fast => super::fast_rank(level, k),
         Ranking::Harris => detect::cpu::harris_response(&views[level], k.x as usize, k.y as usize),
     };
-    super::select(&per_level, &plan.sizes, plan.scale_factor(), config, &rank)
+    let mut selected = super::select(&per_level, &plan.sizes, plan.scale_factor(), config, &rank);
+    selected.par_iter_mut().for_each(|k| {
+        let view = &views[k.level];
+        k.keypoint.angle = detect::cpu::orientation(view, k.keypoint.x as usize, k.keypoint.y as usize);
+    });
+    selected
 }
 
 /// Multi-scale detection on the CPU: keypoints in level-0 coordinates, strongest first.

@@ -21,7 +21,9 @@ fn extractor(detector: DetectorConfig) -> Extractor {
         Backend::Cpu,
         ExtractorConfig {
             detector,
-            ..ExtractorConfig::default()
+            // Quarter turns commute with full-resolution detection only (pyramid levels sample
+            // their source off the pixel grid).
+            ..ExtractorConfig::single_scale()
         },
     )
     .unwrap()

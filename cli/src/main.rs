@@ -31,7 +31,7 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use clatch::decode::DecodeLimits;
 use clatch::{Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, ExtractorConfig};
-use clatch::{MatchConfig, OpencvLatch, PatchWeights, Pyramid};
+use clatch::{MatchConfig, OpencvLatch, Pyramid};
 
 use crate::error::CliError;
 use crate::pipeline::Settings;
@@ -357,24 +357,30 @@ pub struct DetectArgs {
     #[arg(long, default_value_t = 5000, value_name = "N", value_parser = parse_positive)]
     pub max_keypoints: usize,
     /// Side in pixels of the window each detected keypoint is described over (the 64x64 samples are
-    /// spread over it): 1 to 1024.
-    #[arg(long, default_value_t = clatch::KeyPoint::DEFAULT_SIZE, value_name = "PIXELS", value_parser = parse_keypoint_size)]
-    pub keypoint_size: f32,
+    /// spread over it): 1 to 1024. Default 40, and 64 with --single-scale.
+    #[arg(long, value_name = "PIXELS", value_parser = parse_keypoint_size)]
+    pub keypoint_size: Option<f32>,
     /// Descriptor width in bits: a multiple of 8 from 8 to 512.
     #[arg(long, default_value_t = 512, value_parser = parse_bits)]
     pub bits: usize,
     /// Detect on a scale pyramid of LEVELS levels (full resolution included), each FACTOR (in
     /// [1.05, 2], default 2) smaller than the one before; each keypoint is described on its own level.
+    /// Default 8:1.2 (the library's default); see --single-scale.
     #[arg(long, value_name = "LEVELS[:FACTOR]", value_parser = parse_pyramid)]
     pub pyramid: Option<Pyramid>,
+    /// The single-scale speed preset: full resolution only, 64-pixel windows, the strongest keypoints
+    /// anywhere (the defaults of clatch before 0.2). Fewer correct matches under scale and viewpoint
+    /// change.
+    #[arg(long, conflicts_with_all = ["pyramid", "level_budget"])]
+    pub single_scale: bool,
     /// Spread keypoints over a GRID x GRID division of each image (1: the strongest anywhere; default
     /// 1, and 8 for `colmap`, so that textured corners of a photo cannot take every keypoint).
     #[arg(long, value_name = "GRID", value_parser = clap::value_parser!(u32).range(1..=64))]
     pub grid: Option<u32>,
     /// How --max-keypoints is shared among pyramid levels: `global` (the strongest of all levels) or
-    /// `geometric` (ORB's shares, each level's in proportion to its scale).
-    #[arg(long, value_enum, default_value_t = LevelBudgetArg::Global)]
-    pub level_budget: LevelBudgetArg,
+    /// `geometric` (ORB's shares, each level's in proportion to its scale; the default).
+    #[arg(long, value_enum)]
+    pub level_budget: Option<LevelBudgetArg>,
     /// What orders corners when the strongest are kept: `fast` (the FAST score) or `harris` (ORB's
     /// Harris response over the strongest 2 x --max-keypoints).
     #[arg(long, value_enum, default_value_t = RankingArg::Fast)]
@@ -520,17 +526,36 @@ impl BackendArgs {
 }
 
 impl DetectArgs {
-    /// Detector and descriptor configuration.
+    /// Detector and descriptor configuration: the library's default (or the single-scale preset)
+    /// with the flags given on top.
     pub fn config(&self) -> Result<ExtractorConfig, CliError> {
+        self.config_from(if self.single_scale {
+            ExtractorConfig::single_scale()
+        } else {
+            ExtractorConfig::default()
+        })
+    }
+
+    /// [`DetectArgs::config`] for OpenCV-compatible LATCH, which describes full-resolution keypoints
+    /// only: the single-scale preset unless --pyramid is given (which the caller then refuses).
+    pub fn config_full_resolution(&self) -> Result<ExtractorConfig, CliError> {
+        if self.pyramid.is_some() {
+            return self.config();
+        }
+        self.config_from(ExtractorConfig::single_scale())
+    }
+
+    fn config_from(&self, base: ExtractorConfig) -> Result<ExtractorConfig, CliError> {
         Ok(ExtractorConfig {
             detector: DetectorConfig {
                 threshold: self.threshold,
                 max_keypoints: self.max_keypoints,
-                keypoint_size: self.keypoint_size,
+                keypoint_size: self.keypoint_size.unwrap_or(base.detector.keypoint_size),
                 grid: self.grid.unwrap_or(1) as usize,
                 level_budget: match self.level_budget {
-                    LevelBudgetArg::Global => clatch::LevelBudget::Global,
-                    LevelBudgetArg::Geometric => clatch::LevelBudget::Geometric,
+                    None => base.detector.level_budget,
+                    Some(LevelBudgetArg::Global) => clatch::LevelBudget::Global,
+                    Some(LevelBudgetArg::Geometric) => clatch::LevelBudget::Geometric,
                 },
                 ranking: match self.ranking {
                     RankingArg::Fast => clatch::Ranking::Fast,
@@ -539,9 +564,9 @@ impl DetectArgs {
             },
             descriptor: DescriptorConfig {
                 width: DescriptorWidth::from_bits(self.bits)?,
-                weights: PatchWeights::default(),
+                ..base.descriptor
             },
-            pyramid: self.pyramid,
+            pyramid: self.pyramid.or(base.pyramid),
         })
     }
 }

@@ -391,7 +391,10 @@ mod tests {
             }
         });
         let img = GrayView::new(&buf, 160, 160, 160).unwrap();
-        let config = DetectorConfig::default();
+        let config = DetectorConfig {
+            keypoint_size: 64.0,
+            ..DetectorConfig::default()
+        };
         assert_eq!(config.margin(), 48);
         let kps = detect(&img, &config);
         let positions: Vec<(f32, f32)> = kps.iter().map(|k| (k.x, k.y)).collect();

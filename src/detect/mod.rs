@@ -24,7 +24,6 @@ pub mod cpu;
 
 use crate::error::{Error, Result};
 use crate::gray_view::GrayView;
-use crate::keypoint::DEFAULT_KEYPOINT_SIZE;
 
 /// The 16 offsets of the FAST circle of radius 3, clockwise from the top (x right, y down).
 pub const FAST_CIRCLE: [[i32; 2]; 16] = [
@@ -64,7 +63,10 @@ pub struct DetectorConfig {
     pub threshold: u8,
     /// Keep at most this many keypoints, the strongest first. Default 5000.
     pub max_keypoints: usize,
-    /// `size` given to detected keypoints: the side of their descriptor window in pixels. Default 64.
+    /// `size` given to detected keypoints: the side of their descriptor window in pixels. Default
+    /// [`DetectorConfig::DEFAULT_KEYPOINT_SIZE`] (40): with the default pyramid, smaller windows
+    /// match more keypoints under viewpoint change than the 64 of [`crate::KeyPoint::DEFAULT_SIZE`]
+    /// (EVALUATION.md), which [`crate::ExtractorConfig::single_scale`] keeps.
     pub keypoint_size: f32,
     /// Spreading: the keypoints kept are spread over a `grid` x `grid` division of the image (of each
     /// pyramid level), so that the most textured part of a photo cannot take them all. Each cell first
@@ -72,7 +74,7 @@ pub struct DetectorConfig {
     /// left. 1 (the default) keeps the plain strongest; at most 64.
     pub grid: usize,
     /// How `max_keypoints` is shared among the levels of a [`crate::Pyramid`]. Default
-    /// [`LevelBudget::Global`].
+    /// [`LevelBudget::Geometric`] (ORB's shares).
     pub level_budget: LevelBudget,
     /// Which corners count as the strongest. Default [`Ranking::Fast`].
     pub ranking: Ranking,
@@ -97,12 +99,12 @@ pub enum Ranking {
 pub enum LevelBudget {
     /// The strongest keypoints over all levels together: a textured full-resolution level can take
     /// almost all of them.
-    #[default]
     Global,
     /// As ORB shares its features: level `l` gets a share proportional to `scale_factor^-l`
     /// (`max_keypoints · (1 - f) / (1 - f^L) · f^l` with `f = 1 / scale_factor`, rounded; the last
     /// level gets the rest), each level keeps its strongest within its share, and what levels short of
-    /// keypoints leave goes to the strongest of the others.
+    /// keypoints leave goes to the strongest of the others. The default.
+    #[default]
     Geometric,
 }
 
@@ -111,15 +113,18 @@ impl Default for DetectorConfig {
         Self {
             threshold: 20,
             max_keypoints: 5000,
-            keypoint_size: DEFAULT_KEYPOINT_SIZE,
+            keypoint_size: Self::DEFAULT_KEYPOINT_SIZE,
             grid: 1,
-            level_budget: LevelBudget::Global,
+            level_budget: LevelBudget::Geometric,
             ranking: Ranking::Fast,
         }
     }
 }
 
 impl DetectorConfig {
+    /// The default `keypoint_size` of detected keypoints.
+    pub const DEFAULT_KEYPOINT_SIZE: f32 = 40.0;
+
     /// Checks every field's range.
     pub fn validate(&self) -> Result<()> {
         if self.threshold == 0 || self.threshold == 255 {

@@ -55,7 +55,7 @@ pub const MAX_LEVELS: usize = 32;
 ///     ..ExtractorConfig::default()
 /// };
 /// let features = Extractor::new(Backend::Cpu, config)?.detect_and_describe(&image)?;
-/// assert!(features.keypoints.iter().any(|k| k.octave == 1 && k.size == 128.0));
+/// assert!(features.keypoints.iter().any(|k| k.octave == 1 && k.size == 80.0)); // 40 x 2
 /// # Ok::<(), clatch::Error>(())
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -69,6 +69,12 @@ pub struct Pyramid {
 }
 
 impl Pyramid {
+    /// The default pyramid: 8 levels, each 1.2 times smaller than the one before (as ORB's).
+    pub const DEFAULT: Pyramid = Pyramid {
+        levels: 8,
+        scale_factor: 1.2,
+    };
+
     /// The scale factor in 16.16 fixed point: `round_half_even(scale_factor · 2^16)`.
     pub(crate) fn step(&self) -> i64 {
         (self.scale_factor as f64 * (1u64 << STEP_FRAC_BITS) as f64).round_ties_even() as i64
@@ -484,7 +490,11 @@ mod tests {
         let per_level = [level0, level1];
         let sizes = [(100, 100), (50, 50)];
         let count = |s: &[LevelKeypoint], l| s.iter().filter(|k| k.level == l).count();
-        let global = select(&per_level, &sizes, 2.0, &budget(100), &fast_rank);
+        let global = DetectorConfig {
+            level_budget: LevelBudget::Global,
+            ..budget(100)
+        };
+        let global = select(&per_level, &sizes, 2.0, &global, &fast_rank);
         assert_eq!((count(&global, 0), count(&global, 1)), (100, 0));
         let geometric = DetectorConfig {
             level_budget: LevelBudget::Geometric,

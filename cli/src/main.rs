@@ -536,6 +536,7 @@ impl DetectArgs {
                     RankingArg::Fast => clatch::Ranking::Fast,
                     RankingArg::Harris => clatch::Ranking::Harris,
                 },
+                subpixel: clatch::Subpixel::None,
             },
             descriptor: DescriptorConfig {
                 width: DescriptorWidth::from_bits(self.bits)?,

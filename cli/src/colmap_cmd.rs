@@ -58,7 +58,12 @@ struct Plan {
 
 /// Runs `clatch colmap`.
 pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
-    let settings = settings(&args.backend, &args.detect, Some(&args.matching))?;
+    let settings = settings(
+        &args.backend,
+        &args.detect,
+        args.subpixel.library(),
+        Some(&args.matching),
+    )?;
     let plan = preflight(args)?;
     let mut times = Times::default();
 

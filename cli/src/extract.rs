@@ -76,7 +76,7 @@ pub fn output_paths(prefix: &Path) -> Result<[PathBuf; 3], CliError> {
 
 /// Runs `clatch extract`.
 pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
-    let settings = settings(&args.backend, &args.detect, None)?;
+    let settings = settings(&args.backend, &args.detect, args.subpixel.library(), None)?;
     let extractor = Extractor::new(settings.backend, settings.extractor)?;
     let [csv, json, npy_path] = output_paths(&args.output)?;
     check_distinct(

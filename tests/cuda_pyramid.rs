@@ -348,28 +348,21 @@ mod gpu {
                     let blocking = gpu.detect_and_describe(&view)?;
                     let queued = gpu.detect_and_describe_async(&stream, &view)?.wait()?;
                     let whole = Extractor::new(GPU, whole_config)?.detect_and_describe(&view)?;
-                    if let Some(i) = first_keypoint_difference(&cpu.keypoints, &detected) {
-                        return Err(format!(
-                            "{name} {p:?} grid {grid} {level_budget:?} (detect): keypoint {i}: cpu {:?}, gpu {:?}",
-                            cpu.keypoints.get(i),
-                            detected.get(i)
-                        )
-                        .into());
-                    }
-                    for (how, got) in [("blocking", &blocking), ("asynchronous", &queued)] {
-                        if let Some(i) = first_keypoint_difference(&cpu.keypoints, &got.keypoints) {
+                    let results = [
+                        ("detect", &detected, None),
+                        ("blocking", &blocking.keypoints, Some(&blocking.descriptors)),
+                        ("asynchronous", &queued.keypoints, Some(&queued.descriptors)),
+                    ];
+                    for (how, got, descriptors) in results {
+                        let keypoint = first_keypoint_difference(&cpu.keypoints, got);
+                        let descriptors_differ = descriptors.is_some_and(|d| {
+                            *d != cpu.descriptors || whole.descriptors != cpu.descriptors
+                        });
+                        if keypoint.is_some() || descriptors_differ {
+                            let at = keypoint.map(|i| (i, cpu.keypoints.get(i), got.get(i)));
                             return Err(format!(
-                                "{name} {p:?} grid {grid} {level_budget:?} ({how}): keypoint {i}: cpu {:?}, gpu {:?}",
-                                cpu.keypoints.get(i),
-                                got.keypoints.get(i)
-                            )
-                            .into());
-                        }
-                        if cpu.descriptors != got.descriptors
-                            || whole.descriptors != got.descriptors
-                        {
-                            return Err(format!(
-                                "{name} {p:?} grid {grid} {level_budget:?} ({how}): descriptors differ"
+                                "{name} {p:?} grid {grid} {level_budget:?} ({how}): first keypoint difference \
+                                 (index, cpu, gpu) {at:?}, descriptors differ: {descriptors_differ}"
                             )
                             .into());
                         }

@@ -58,12 +58,8 @@ struct Plan {
 
 /// Runs `clatch colmap`.
 pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
-    let settings = settings(
-        &args.backend,
-        &args.detect,
-        args.subpixel.library(),
-        Some(&args.matching),
-    )?;
+    let subpixel = args.subpixel.library();
+    let settings = settings(&args.backend, &args.detect, subpixel, Some(&args.matching))?;
     let plan = preflight(args)?;
     let mut times = Times::default();
 

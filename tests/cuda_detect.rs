@@ -33,6 +33,10 @@ fn trials() -> Vec<Trial> {
         Trial::test("detect_flat_image_finds_nothing", gpu::flat_images),
         Trial::test("detect_images_around_twice_the_margin", gpu::margin_edges),
         Trial::test("detect_widest_and_tallest_images", gpu::extreme_shapes),
+        Trial::test(
+            "subpixel_offsets_every_pixel_and_border_equal_cpu",
+            gpu::subpixel_offsets,
+        ),
     ]
 }
 
@@ -516,6 +520,68 @@ mod gpu {
             keypoints += k;
         }
         println!("widest and tallest: {runs} configurations, {keypoints} keypoints identical");
+        Ok(())
+    }
+
+    /// `clatch_subpixel` against `detect::cpu::subpixel_offset` on every pixel of small images (the
+    /// border rows and columns included, where both give 0), on random pixels of photos and noise,
+    /// and on every detected keypoint at the lowest threshold (many non-peak and tied neighbours).
+    pub fn subpixel_offsets() -> Result<(), Failed> {
+        let dev = clatch::cuda::hooks::device(0)?;
+        let mut rng = SplitMix64::new(29);
+        let (mut compared, mut nonzero) = (0usize, 0usize);
+        let mut images = vec![
+            ("astronaut", astronaut()),
+            ("rectangles 333x517", rectangles(333, 517, 2)),
+        ];
+        for (w, h) in [(9usize, 9usize), (17, 40), (64, 64), (101, 33)] {
+            let pixels = clatch::synthetic::noise(w, h, (w * h) as u64).expect("synthetic image");
+            images.push(("noise", Gray::new(pixels, w, h)));
+            // Few grey levels: many equal scores, so many ties and non-peaks.
+            let steps = (0..w * h).map(|_| 60 * rng.below(3) as u8).collect();
+            images.push(("three levels", Gray::new(steps, w, h)));
+        }
+        for (name, image) in &images {
+            let view = image.view();
+            let (w, h) = (image.width, image.height);
+            let mut points: Vec<KeyPoint> = if w * h <= 64 * 64 {
+                (0..w * h)
+                    .map(|i| KeyPoint::new((i % w) as f32, (i / w) as f32))
+                    .collect()
+            } else {
+                (0..20_000)
+                    .map(|_| KeyPoint::new(rng.below(w as u64) as f32, rng.below(h as u64) as f32))
+                    .collect()
+            };
+            if w >= 64 && h >= 64 {
+                let detected = Extractor::new(
+                    Backend::Cpu,
+                    ExtractorConfig {
+                        detector: config(1, usize::MAX, 16.0),
+                        ..ExtractorConfig::default()
+                    },
+                )?
+                .detect(&view)?;
+                points.extend(detected);
+            }
+            let gpu = clatch::cuda::hooks::debug_subpixel_offsets(&dev, &view, &points)?;
+            for (k, got) in points.iter().zip(&gpu) {
+                let cpu = clatch::detect::cpu::subpixel_offset(&view, k.x as usize, k.y as usize);
+                if cpu != *got {
+                    return Err(format!(
+                        "{name} {w}x{h} at ({}, {}): cpu {cpu:?}, gpu {got:?}",
+                        k.x, k.y
+                    )
+                    .into());
+                }
+                nonzero += usize::from(cpu != [0, 0]);
+            }
+            compared += points.len();
+        }
+        println!("{compared} sub-pixel offsets ({nonzero} non-zero), 0 differences");
+        if nonzero == 0 {
+            return Err("every offset was 0: the comparison proved nothing".into());
+        }
         Ok(())
     }
 }

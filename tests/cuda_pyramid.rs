@@ -31,6 +31,7 @@ fn trials() -> Vec<Trial> {
             gpu::async_streams,
         ),
         Trial::test("selection_grid_and_level_shares_equal_cpu", gpu::selection),
+        Trial::test("subpixel_positions_equal_cpu", gpu::subpixel),
     ]
 }
 
@@ -298,6 +299,91 @@ mod gpu {
             "{} asynchronous multi-scale extractions on 3 streams, {descriptors} descriptors, 0 differences",
             jobs.len()
         );
+        Ok(())
+    }
+
+    /// Sub-pixel positions (`Subpixel::Score`), single-scale and on pyramids, with the selection
+    /// options: keypoints bit for bit (the refined positions), descriptors equal to the CPU's and to
+    /// the unrefined run's, from `detect`, `detect_and_describe` and the asynchronous path.
+    pub fn subpixel() -> Result<(), Failed> {
+        use clatch::{LevelBudget, Subpixel};
+        let stream = clatch::cuda::GpuStream::new(0)?;
+        let (mut runs, mut keypoints, mut moved) = (0, 0, 0);
+        for (name, image) in images() {
+            for p in [
+                None,
+                Some(pyramids()[0]),
+                Some(pyramids()[1]),
+                Some(pyramids()[4]),
+            ] {
+                for (grid, level_budget, max_keypoints) in [
+                    (1, LevelBudget::Global, 5000),
+                    (1, LevelBudget::Global, usize::MAX),
+                    (4, LevelBudget::Geometric, 700),
+                ] {
+                    let detector = DetectorConfig {
+                        grid,
+                        level_budget,
+                        max_keypoints,
+                        subpixel: Subpixel::Score,
+                        ..DetectorConfig::default()
+                    };
+                    let config = ExtractorConfig {
+                        detector: detector.clone(),
+                        pyramid: p,
+                        ..ExtractorConfig::default()
+                    };
+                    let whole_config = ExtractorConfig {
+                        detector: DetectorConfig {
+                            subpixel: Subpixel::None,
+                            ..detector
+                        },
+                        ..config.clone()
+                    };
+                    let view = image.view();
+                    let cpu =
+                        Extractor::new(Backend::Cpu, config.clone())?.detect_and_describe(&view)?;
+                    let gpu = Extractor::new(GPU, config.clone())?;
+                    let detected = gpu.detect(&view)?;
+                    let blocking = gpu.detect_and_describe(&view)?;
+                    let queued = gpu.detect_and_describe_async(&stream, &view)?.wait()?;
+                    let whole = Extractor::new(GPU, whole_config)?.detect_and_describe(&view)?;
+                    let results = [
+                        ("detect", &detected, None),
+                        ("blocking", &blocking.keypoints, Some(&blocking.descriptors)),
+                        ("asynchronous", &queued.keypoints, Some(&queued.descriptors)),
+                    ];
+                    for (how, got, descriptors) in results {
+                        let keypoint = first_keypoint_difference(&cpu.keypoints, got);
+                        let descriptors_differ = descriptors.is_some_and(|d| {
+                            *d != cpu.descriptors || whole.descriptors != cpu.descriptors
+                        });
+                        if keypoint.is_some() || descriptors_differ {
+                            let at = keypoint.map(|i| (i, cpu.keypoints.get(i), got.get(i)));
+                            return Err(format!(
+                                "{name} {p:?} grid {grid} {level_budget:?} ({how}): first keypoint difference \
+                                 (index, cpu, gpu) {at:?}, descriptors differ: {descriptors_differ}"
+                            )
+                            .into());
+                        }
+                    }
+                    runs += 1;
+                    keypoints += cpu.keypoints.len();
+                    moved += cpu
+                        .keypoints
+                        .iter()
+                        .zip(&whole.keypoints)
+                        .filter(|(r, w)| (r.x, r.y) != (w.x, w.y))
+                        .count();
+                }
+            }
+        }
+        println!(
+            "{runs} sub-pixel extractions, {keypoints} keypoints ({moved} moved off the whole pixel), 0 differences"
+        );
+        if moved == 0 {
+            return Err("no keypoint moved: the comparison proved nothing".into());
+        }
         Ok(())
     }
 }

@@ -31,7 +31,7 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use clatch::decode::DecodeLimits;
 use clatch::{Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, ExtractorConfig};
-use clatch::{MatchConfig, OpencvLatch, Pyramid};
+use clatch::{MatchConfig, OpencvLatch, Pyramid, Subpixel};
 
 use crate::error::CliError;
 use crate::pipeline::Settings;
@@ -138,6 +138,8 @@ pub struct EvalArgs {
     #[command(flatten)]
     pub detect: DetectArgs,
     #[command(flatten)]
+    pub subpixel: SubpixelArgs,
+    #[command(flatten)]
     pub matching: MatchingArgs,
     #[command(flatten)]
     pub check: CheckArgs,
@@ -153,6 +155,8 @@ pub struct DemoArgs {
     pub backend: BackendArgs,
     #[command(flatten)]
     pub detect: DetectArgs,
+    #[command(flatten)]
+    pub subpixel: SubpixelArgs,
     #[command(flatten)]
     pub matching: MatchingArgs,
     #[command(flatten)]
@@ -184,6 +188,8 @@ pub struct MatchArgs {
     #[command(flatten)]
     pub detect: DetectArgs,
     #[command(flatten)]
+    pub subpixel: SubpixelArgs,
+    #[command(flatten)]
     pub matching: MatchingArgs,
     #[command(flatten)]
     pub check: CheckArgs,
@@ -205,6 +211,8 @@ pub struct ExtractArgs {
     pub backend: BackendArgs,
     #[command(flatten)]
     pub detect: DetectArgs,
+    #[command(flatten)]
+    pub subpixel: SubpixelArgs,
     #[command(flatten)]
     pub opencv: OpencvLatchArgs,
 }
@@ -278,7 +286,8 @@ pub struct ColmapArgs {
     #[arg(long, value_name = "DIR")]
     pub workspace: Option<PathBuf>,
     /// How the keypoint positions written to COLMAP are refined below a pixel (descriptors and
-    /// matches do not change).
+    /// matches do not change): `score` is the library's (as `--subpixel score` of the other
+    /// commands, on every pyramid level), `corner` a least-squares corner over a window of the photo.
     #[arg(long, value_enum, default_value_t = subpixel::Subpixel::Score)]
     pub subpixel: subpixel::Subpixel,
     /// Half side of the window of --subpixel corner.
@@ -385,6 +394,36 @@ pub struct DetectArgs {
     /// Harris response over the strongest 2 x --max-keypoints).
     #[arg(long, value_enum, default_value_t = RankingArg::Fast)]
     pub ranking: RankingArg,
+}
+
+/// `--subpixel` (every command but `colmap`, which adds its `corner` method).
+#[derive(Debug, Args)]
+pub struct SubpixelArgs {
+    /// Sub-pixel keypoint positions: `none` (whole pixels of each keypoint's pyramid level) or `score`
+    /// (per axis, the peak of the parabola through the FAST scores of the keypoint and its 4
+    /// neighbours, on every level; descriptors do not change). Default `score`, and `none` with
+    /// --single-scale.
+    #[arg(long, value_enum)]
+    pub subpixel: Option<SubpixelArg>,
+}
+
+/// `--subpixel`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SubpixelArg {
+    /// Whole pixels.
+    None,
+    /// The peak of the FAST score, per axis.
+    Score,
+}
+
+impl SubpixelArgs {
+    /// The library's setting, when given.
+    pub fn library(&self) -> Option<Subpixel> {
+        self.subpixel.map(|s| match s {
+            SubpixelArg::None => Subpixel::None,
+            SubpixelArg::Score => Subpixel::Score,
+        })
+    }
 }
 
 /// `--ranking`.
@@ -561,6 +600,7 @@ impl DetectArgs {
                     RankingArg::Fast => clatch::Ranking::Fast,
                     RankingArg::Harris => clatch::Ranking::Harris,
                 },
+                subpixel: base.detector.subpixel,
             },
             descriptor: DescriptorConfig {
                 width: DescriptorWidth::from_bits(self.bits)?,
@@ -582,15 +622,20 @@ impl MatchingArgs {
     }
 }
 
-/// Everything the pipeline needs, from the shared flags.
+/// Everything the pipeline needs, from the shared flags and the sub-pixel setting.
 pub fn settings(
     backend: &BackendArgs,
     detect: &DetectArgs,
+    subpixel: Option<Subpixel>,
     matching: Option<&MatchingArgs>,
 ) -> Result<Settings, CliError> {
+    let mut extractor = detect.config()?;
+    if let Some(subpixel) = subpixel {
+        extractor.detector.subpixel = subpixel;
+    }
     Ok(Settings {
         backend: backend.resolve()?,
-        extractor: detect.config()?,
+        extractor,
         matching: matching.map(MatchingArgs::config).unwrap_or_default(),
         opencv_latch: None,
     })
@@ -736,5 +781,52 @@ mod tests {
             args.resolve(),
             Err(CliError::Clatch(clatch::Error::BackendUnavailable { .. }))
         ));
+    }
+
+    #[test]
+    fn subpixel_reaches_the_library_and_colmap_keeps_score() {
+        let extract = |extra: &[&str]| {
+            let args = [&["clatch", "extract", "a.png", "-o", "a"][..], extra].concat();
+            match Cli::try_parse_from(args).map(|c| c.command) {
+                Ok(Command::Extract(e)) => Ok(e.subpixel.library()),
+                Ok(_) => panic!("parsed the wrong subcommand"),
+                Err(e) => Err(e),
+            }
+        };
+        assert_eq!(extract(&[]).unwrap(), Subpixel::None);
+        assert_eq!(extract(&["--subpixel", "score"]).unwrap(), Subpixel::Score);
+        assert!(extract(&["--subpixel", "corner"]).is_err());
+        for command in ["match", "eval", "demo"] {
+            let mut args = vec!["clatch", command];
+            if command == "match" {
+                args.extend(["a.png", "b.png"]);
+            }
+            args.extend(["--subpixel", "score"]);
+            assert!(Cli::try_parse_from(&args).is_ok(), "{args:?}");
+        }
+        let colmap = |extra: &[&str]| {
+            let args = [
+                &["clatch", "colmap", "--images", "d", "--database", "d.db"][..],
+                extra,
+            ]
+            .concat();
+            let Command::Colmap(c) = Cli::try_parse_from(args).unwrap().command else {
+                panic!("parsed the wrong subcommand")
+            };
+            c.subpixel
+        };
+        assert_eq!(colmap(&[]), subpixel::Subpixel::Score);
+        assert_eq!(colmap(&[]).library(), Subpixel::Score);
+        assert_eq!(colmap(&["--subpixel", "corner"]).library(), Subpixel::None);
+        assert_eq!(colmap(&["--subpixel", "none"]).library(), Subpixel::None);
+        let backend = BackendArgs {
+            backend: BackendChoice::Cpu,
+            device: 0,
+        };
+        let Command::Demo(demo) = Cli::try_parse_from(["clatch", "demo"]).unwrap().command else {
+            panic!("parsed the wrong subcommand")
+        };
+        let s = settings(&backend, &demo.detect, Some(Subpixel::Score), None).unwrap();
+        assert_eq!(s.extractor.detector.subpixel, Subpixel::Score);
     }
 }

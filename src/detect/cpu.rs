@@ -2,7 +2,7 @@
 
 use crate::parallel::*;
 
-use super::{DetectorConfig, FAST_ARC, FAST_CIRCLE, ORIENTATION_RADIUS};
+use super::{DetectorConfig, FAST_ARC, FAST_CIRCLE, ORIENTATION_RADIUS, SUBPIXEL_FRAC_BITS};
 use crate::angle::{bin_degrees, direction_bin};
 use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
@@ -25,6 +25,41 @@ pub fn fast_score(img: &GrayView, x: usize, y: usize) -> i32 {
         best = best.max(brighter).max(darker);
     }
     best
+}
+
+/// The peak of the parabola through `(-1, l)`, `(0, c)`, `(1, r)` in 1/65536 pixel:
+/// `(l - r) / (2 (l - 2c + r)) · 2^16` rounded to the nearest integer (half away from zero), by integer
+/// division only; 0 unless `c` is a strict peak (`c > l` and `c > r`: ties and slopes give 0).
+///
+/// With `a = c - l > 0` and `b = c - r > 0` the offset is `(a - b) · 2^15 / (a + b)`, so
+/// `|offset| < 2^15` (less than half a pixel), positive towards `r`. Scores are FAST scores
+/// (`|s| ≤ 255`), so `a + b < 2^10` and the quotient is never exactly half an integer: the rounding
+/// direction of halves never decides a bit.
+pub fn parabola_offset(l: i32, c: i32, r: i32) -> i32 {
+    if c <= l || c <= r {
+        return 0;
+    }
+    let (a, b) = (c - l, c - r);
+    let numerator = (a - b) << (SUBPIXEL_FRAC_BITS - 1);
+    let denominator = a + b;
+    numerator.signum() * ((2 * numerator.abs() + denominator) / (2 * denominator))
+}
+
+/// The sub-pixel offset `[dx, dy]` (1/65536 pixel) of the keypoint at `(x, y)` under
+/// [`super::Subpixel::Score`]: [`parabola_offset`] of the FAST scores ([`fast_score`], whatever their
+/// value, threshold or margin) of the left neighbour, the pixel and the right neighbour, and likewise
+/// of the one above, the pixel and the one below. `[0, 0]` when a neighbour's circle would leave the
+/// image (`(x, y)` closer than 4 pixels to a border; detected keypoints never are).
+pub fn subpixel_offset(img: &GrayView, x: usize, y: usize) -> [i32; 2] {
+    let inside = x >= 4 && y >= 4 && x + 4 < img.width() && y + 4 < img.height();
+    if !inside {
+        return [0, 0];
+    }
+    let c = fast_score(img, x, y);
+    [
+        parabola_offset(fast_score(img, x - 1, y), c, fast_score(img, x + 1, y)),
+        parabola_offset(fast_score(img, x, y - 1), c, fast_score(img, x, y + 1)),
+    ]
 }
 
 /// [`fast_score`] from the circle differences `ring` (circle pixel minus centre), by sliding minima
@@ -325,6 +360,107 @@ mod tests {
         let transposed: Vec<u8> = (0..400).map(|i| corner[(i % 20) * 20 + i / 20]).collect();
         let t = GrayView::new(&transposed, 20, 20, 20).unwrap();
         assert_eq!(harris_response(&t, 10, 10), r);
+    }
+
+    #[test]
+    fn parabola_offsets_worked_by_hand() {
+        // f(-1) = 0, f(0) = 10, f(1) = 5: f = -7.5 x² + 2.5 x + 10, peak at 2.5 / 15 = 1/6 px towards
+        // the right: 65536 / 6 = 10922.67 -> 10923. Mirrored: -10923.
+        assert_eq!(parabola_offset(0, 10, 5), 10_923);
+        assert_eq!(parabola_offset(5, 10, 0), -10_923);
+        // Negative scores (FAST scores below the threshold can be): -3, -1, -2 is 0, 2, 1 shifted,
+        // the same parabola as 0, 10, 5 up to scale: 1/6 px towards the higher neighbour, r.
+        assert_eq!(parabola_offset(-3, -1, -2), 10_923);
+        // Symmetric: 0. Ties and slopes are no strict peak: 0.
+        assert_eq!(parabola_offset(5, 10, 5), 0);
+        for (l, c, r) in [(10, 10, 5), (5, 10, 10), (12, 10, 5), (5, 10, 12), (7, 7, 7), (1, 2, 3)] {
+            assert_eq!(parabola_offset(l, c, r), 0, "{l} {c} {r}");
+        }
+        // The largest offsets stay below half a pixel: a = 510, b = 1: 509 · 32768 / 511 = 32639.7.
+        assert_eq!(parabola_offset(-255, 255, 254), 32_640);
+        assert_eq!(parabola_offset(254, 255, -255), -32_640);
+    }
+
+    #[test]
+    fn parabola_offsets_are_the_rounded_real_peak() {
+        // Against the real-valued peak (l - r) / (2 (l - 2c + r)) in f64 (exact to far below 1/65536
+        // here): never more than half a unit away, never half a pixel or more.
+        for c in (-255..=255).step_by(17) {
+            for l in (-255..=255).step_by(7) {
+                for r in (-255..=255).step_by(11) {
+                    let got = parabola_offset(l, c, r);
+                    if c <= l || c <= r {
+                        assert_eq!(got, 0);
+                        continue;
+                    }
+                    let (l, c, r) = (l as f64, c as f64, r as f64);
+                    let exact = (l - r) / (2.0 * (l - 2.0 * c + r)) * 65536.0;
+                    assert!((got as f64 - exact).abs() < 0.5, "{l} {c} {r}: {got} vs {exact}");
+                    assert!(got.abs() < 32_768);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn subpixel_offset_of_a_two_pixel_blob_worked_by_hand() {
+        // 100 at (8, 8), 60 at (9, 8), 0 elsewhere. Neither blob pixel lies on the other's circle
+        // (offsets (±1, 0) are not on it), so: c = score(8, 8) = 100 (every circle pixel 100 darker),
+        // r = score(9, 8) = 60, l = score(7, 8) = 0 (centre and circle all 0), and above and below
+        // are 0 too. Horizontal peak: (0 - 60) / (2 (0 - 200 + 60)) = 3/14 px = 14043.4 -> 14043.
+        let blob = |x0: usize, w: usize| {
+            image(w, 17, |x, y| match (x, y) {
+                (x, 8) if x == x0 => 100,
+                (x, 8) if x == x0 + 1 => 60,
+                _ => 0,
+            })
+        };
+        let buf = blob(8, 17);
+        let img = GrayView::new(&buf, 17, 17, 17).unwrap();
+        assert_eq!(fast_score(&img, 8, 8), 100);
+        assert_eq!(subpixel_offset(&img, 8, 8), [14_043, 0]);
+        // Transposed: the offset moves to y.
+        let t: Vec<u8> = (0..17 * 17).map(|i| buf[(i % 17) * 17 + i / 17]).collect();
+        let img = GrayView::new(&t, 17, 17, 17).unwrap();
+        assert_eq!(subpixel_offset(&img, 8, 8), [0, 14_043]);
+        // A lone dot is symmetric: no offset.
+        let dot = image(17, 17, |x, y| if (x, y) == (8, 8) { 100 } else { 0 });
+        let img = GrayView::new(&dot, 17, 17, 17).unwrap();
+        assert_eq!(subpixel_offset(&img, 8, 8), [0, 0]);
+    }
+
+    #[test]
+    fn subpixel_offset_at_the_borders() {
+        // The same blob as close to the left border as the neighbours' circles allow (x = 4: the left
+        // neighbour's circle reaches column 0), and one pixel closer, where it is left whole.
+        for (x0, expected) in [(4usize, [14_043, 0]), (3, [0, 0])] {
+            let buf = image(17, 17, |x, y| match (x, y) {
+                (x, 8) if x == x0 => 100,
+                (x, 8) if x == x0 + 1 => 60,
+                _ => 0,
+            });
+            let img = GrayView::new(&buf, 17, 17, 17).unwrap();
+            assert_eq!(subpixel_offset(&img, x0, 8), expected, "x = {x0}");
+        }
+        // Right border: x + 4 must stay inside (x = 12 of 17 columns), even where the keypoint's own
+        // circle would fit (x = 13).
+        for (x0, expected) in [(11usize, [14_043, 0]), (12, [-14_043, 0]), (13, [0, 0])] {
+            // The 60 goes to the left of the 100 when there is no room on the right.
+            let buf = image(17, 17, |x, y| match (x, y) {
+                (x, 8) if x == x0 => 100,
+                (x, 8) if x0 < 12 && x == x0 + 1 => 60,
+                (x, 8) if x0 >= 12 && x + 1 == x0 => 60,
+                _ => 0,
+            });
+            let img = GrayView::new(&buf, 17, 17, 17).unwrap();
+            assert_eq!(subpixel_offset(&img, x0, 8), expected, "x = {x0}");
+        }
+        // Top and bottom likewise.
+        let buf = vec![9u8; 17 * 17];
+        let img = GrayView::new(&buf, 17, 17, 17).unwrap();
+        for (x, y) in [(8, 3), (8, 13), (0, 0), (16, 16)] {
+            assert_eq!(subpixel_offset(&img, x, y), [0, 0]);
+        }
     }
 
     fn image(w: usize, h: usize, f: impl Fn(usize, usize) -> u8) -> Vec<u8> {

@@ -59,6 +59,7 @@ impl ExtractorConfig {
             detector: DetectorConfig {
                 keypoint_size: crate::KeyPoint::DEFAULT_SIZE,
                 level_budget: crate::LevelBudget::Global,
+                subpixel: crate::Subpixel::None,
                 ..DetectorConfig::default()
             },
             descriptor: DescriptorConfig::default(),

@@ -259,7 +259,8 @@ fn write_text(path: &std::path::Path, text: &str) -> Result<(), CliError> {
 
 /// Runs `clatch eval`.
 pub fn main(args: &EvalArgs) -> Result<(), CliError> {
-    let from_flags = settings(&args.backend, &args.detect, Some(&args.matching))?;
+    let subpixel = args.subpixel.library();
+    let from_flags = settings(&args.backend, &args.detect, subpixel, Some(&args.matching))?;
     let (methods_run, methods_note) =
         run::methods_to_run(&args.methods, args.detect.pyramid.is_some())?;
     std::fs::create_dir_all(&args.out).map_err(CliError::write(&args.out))?;

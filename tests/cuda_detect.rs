@@ -47,7 +47,7 @@ mod gpu {
     use libtest_mimic::Failed;
 
     use super::common::golden::{golden_path, render};
-    use super::common::{Gray, astronaut, first_keypoint_difference, rectangles};
+    use super::common::{Gray, astronaut, first_keypoint_difference, rectangles, scale};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
     const THRESHOLDS: [u8; 5] = [1, 5, 20, 80, 254];
@@ -107,6 +107,10 @@ mod gpu {
         sizes: &[f32],
     ) -> Result<(usize, usize), Failed> {
         let (mut runs, mut keypoints) = (0, 0);
+        // CLATCH_TEST_SCALE=sanitizer: every other value of each list, the first and last kept.
+        let thresholds = &scale::thin(thresholds.to_vec(), 2)[..];
+        let limits = &scale::thin(limits.to_vec(), 2)[..];
+        let sizes = &scale::thin(sizes.to_vec(), 2)[..];
         for &t in thresholds {
             for &n in limits {
                 for &s in sizes {
@@ -385,7 +389,7 @@ mod gpu {
     }
 
     pub fn hd_images() -> Result<(), Failed> {
-        let (w, h) = (1920, 1080);
+        let (w, h) = scale::pick((1920, 1080), (384, 216));
         let (mut runs, mut keypoints) = (0, 0);
         for (what, image) in [
             ("noise", noise(w, h, 7)),
@@ -400,12 +404,12 @@ mod gpu {
             runs += r + r2;
             keypoints += k + k2;
         }
-        println!("1920x1080: {runs} configurations, {keypoints} keypoints identical");
+        println!("{w}x{h}: {runs} configurations, {keypoints} keypoints identical");
         Ok(())
     }
 
     pub fn full_frame() -> Result<(), Failed> {
-        let (w, h) = (5616, 3744);
+        let (w, h) = scale::pick((5616, 3744), (702, 468));
         let (mut runs, mut keypoints) = (0, 0);
         let rect = rectangles(w, h, 11);
         for (t, n, s) in [
@@ -425,7 +429,7 @@ mod gpu {
         let image = tiled(w, h, 13);
         keypoints += compare("tiled", &image.view(), &config(20, 50_000, 64.0))?.len();
         runs += 1;
-        println!("5616x3744: {runs} configurations, {keypoints} keypoints identical");
+        println!("{w}x{h}: {runs} configurations, {keypoints} keypoints identical");
         Ok(())
     }
 
@@ -441,7 +445,7 @@ mod gpu {
             ("rectangles", rectangles(300, 260, 3)),
         ] {
             let view = image.view();
-            for &(t, s) in &[(20u8, 64.0f32), (1, 16.0), (254, 16.0)] {
+            for &(t, s) in &scale::thin([(20u8, 64.0f32), (1, 16.0), (254, 16.0)], 2) {
                 let all = compare(what, &view, &config(t, usize::MAX, s))?;
                 keypoints += all.len();
                 runs += 1;
@@ -453,7 +457,7 @@ mod gpu {
                 cuts.extend((0..12).map(|_| 1 + rng.below(all.len().max(1) as u64) as usize));
                 cuts.sort_unstable();
                 cuts.dedup();
-                for &n in cuts.iter().filter(|&&n| n >= 1).take(60) {
+                for &n in cuts.iter().filter(|&&n| n >= 1).take(scale::pick(60, 6)) {
                     let few = compare(what, &view, &config(t, n, s))?;
                     if few[..] != all[..n.min(all.len())] {
                         return Err(format!("{what}: the first {n} are not a prefix").into());
@@ -469,11 +473,15 @@ mod gpu {
 
     pub fn flat_images() -> Result<(), Failed> {
         let mut runs = 0;
-        for (w, h) in [(64usize, 64usize), (100, 97), (1920, 1080)] {
+        for (w, h) in [
+            (64usize, 64usize),
+            (100, 97),
+            scale::pick((1920, 1080), (384, 216)),
+        ] {
             for level in [0u8, 128, 255] {
                 let image = from_fn(w, h, |_, _| level);
-                for &t in &THRESHOLDS {
-                    for &s in &SIZES {
+                for &t in &scale::thin(THRESHOLDS, 2) {
+                    for &s in &scale::thin(SIZES, 2) {
                         let found = compare("flat", &image.view(), &config(t, usize::MAX, s))?;
                         if !found.is_empty() {
                             return Err(format!("{w}x{h} flat {level}: {found:?}").into());
@@ -493,10 +501,10 @@ mod gpu {
         let (mut runs, mut keypoints) = (0, 0);
         for (s, m) in [(16.0f32, 16usize), (64.0, 48), (200.0, 144)] {
             assert_eq!(config(20, 1, s).margin(), m);
-            for extra in 0..6 {
+            for extra in (0..6).step_by(scale::pick(1, 2)) {
                 for (w, h) in [(2 * m + extra, 2 * m + 5), (2 * m + 7, 2 * m + extra)] {
                     let (w, h) = (w.max(64), h.max(64));
-                    for seed in 0..3 {
+                    for seed in 0..scale::pick(3, 1) {
                         let image = noise(w, h, seed * 100 + extra as u64);
                         let (r, k) =
                             grid("noise", &image.view(), &[1, 20], &[1, usize::MAX], &[s])?;
@@ -513,9 +521,15 @@ mod gpu {
     pub fn extreme_shapes() -> Result<(), Failed> {
         let max = clatch::MAX_IMAGE_SIDE;
         let (mut runs, mut keypoints) = (0, 0);
-        for (w, h) in [(max, 64), (64, max), (max, 300)] {
+        // CLATCH_TEST_SCALE=sanitizer: the widest and the tallest, one limit.
+        let shapes = scale::pick(
+            vec![(max, 64), (64, max), (max, 300)],
+            vec![(max, 64), (64, max)],
+        );
+        for (w, h) in shapes {
             let image = noise(w, h, (w * 3 + h) as u64);
-            let (r, k) = grid("noise", &image.view(), &[20], &[1000, usize::MAX], &[16.0])?;
+            let limits = scale::pick(&[1000, usize::MAX][..], &[1000]);
+            let (r, k) = grid("noise", &image.view(), &[20], limits, &[16.0])?;
             runs += r;
             keypoints += k;
         }

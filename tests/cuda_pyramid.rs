@@ -41,12 +41,13 @@ mod gpu {
     use clatch::{Backend, DetectorConfig, Extractor, ExtractorConfig, GrayView, Pyramid};
     use libtest_mimic::Failed;
 
-    use super::common::{Gray, astronaut, first_keypoint_difference, rectangles};
+    use super::common::{Gray, astronaut, first_keypoint_difference, rectangles, scale};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
 
+    /// Under CLATCH_TEST_SCALE=sanitizer, the photograph and the odd-sized rectangles only.
     fn images() -> Vec<(&'static str, Gray)> {
-        vec![
+        let mut images = vec![
             ("astronaut", astronaut()),
             ("rectangles 1920x1080", rectangles(1920, 1080, 8)),
             ("rectangles 333x517", rectangles(333, 517, 2)),
@@ -58,7 +59,11 @@ mod gpu {
                     769,
                 ),
             ),
-        ]
+        ];
+        if scale::sanitizer() {
+            images.retain(|(name, _)| *name == "astronaut" || *name == "rectangles 333x517");
+        }
+        images
     }
 
     fn pyramids() -> Vec<Pyramid> {
@@ -132,8 +137,8 @@ mod gpu {
     pub fn detect() -> Result<(), Failed> {
         let (mut runs, mut keypoints) = (0, 0);
         for (name, image) in images() {
-            for p in pyramids() {
-                for detector in detectors() {
+            for p in scale::thin(pyramids(), 2) {
+                for detector in scale::thin(detectors(), 5) {
                     let view: GrayView = image.view();
                     let cpu = extractor(Backend::Cpu, &detector, p).detect(&view)?;
                     let gpu = extractor(GPU, &detector, p).detect(&view)?;
@@ -159,7 +164,7 @@ mod gpu {
     pub fn detect_and_describe() -> Result<(), Failed> {
         let (mut runs, mut descriptors, mut upper) = (0, 0, 0);
         for (name, image) in images() {
-            for p in pyramids() {
+            for p in scale::thin(pyramids(), 2) {
                 for detector in [DetectorConfig::default(), detectors()[0].clone()] {
                     let view = image.view();
                     let cpu = extractor(Backend::Cpu, &detector, p).detect_and_describe(&view)?;
@@ -214,7 +219,10 @@ mod gpu {
                     levels: 8,
                     scale_factor: 1.2,
                 }),
-            ] {
+            ]
+            .into_iter()
+            .take(scale::pick(3, 2))
+            {
                 for (grid, level_budget, ranking) in [
                     (8, LevelBudget::Global, Ranking::Fast),
                     (1, LevelBudget::Geometric, Ranking::Fast),
@@ -226,7 +234,7 @@ mod gpu {
                         grid,
                         level_budget,
                         ranking,
-                        max_keypoints: 700,
+                        max_keypoints: scale::pick(700, 150),
                         ..DetectorConfig::default()
                     };
                     let config = ExtractorConfig {

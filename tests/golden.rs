@@ -25,8 +25,8 @@
 
 mod common;
 
-use clatch::describe::triplets::TRIPLETS;
 use clatch::Backend;
+use clatch::describe::triplets::TRIPLETS;
 use common::golden::{golden_path, keypoint_list, parse_hex_row, render, sections};
 use common::{Gray, astronaut};
 

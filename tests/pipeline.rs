@@ -19,6 +19,7 @@ fn extractor_with(keypoint_size: f32) -> Extractor {
         ExtractorConfig {
             detector: DetectorConfig {
                 keypoint_size,
+                subpixel: clatch::Subpixel::None,
                 ..DetectorConfig::default()
             },
             // Full resolution only: these tests describe detected keypoints on the input itself.

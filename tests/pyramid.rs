@@ -14,6 +14,11 @@ fn extractor(pyramid: Option<Pyramid>) -> Extractor {
         Backend::Cpu,
         ExtractorConfig {
             pyramid,
+            // Whole pixels: these tests compare positions and descriptors with full-resolution ones.
+            detector: DetectorConfig {
+                subpixel: clatch::Subpixel::None,
+                ..DetectorConfig::default()
+            },
             ..ExtractorConfig::default()
         },
     )
@@ -87,6 +92,7 @@ fn levels_report_octave_size_and_level0_positions() {
     // The global budget: the strongest of all levels, so that a smaller budget keeps a prefix.
     let config = DetectorConfig {
         level_budget: clatch::LevelBudget::Global,
+        subpixel: clatch::Subpixel::None,
         ..DetectorConfig::default()
     };
     let e = Extractor::new(

@@ -20,7 +20,10 @@ fn extractor(detector: DetectorConfig) -> Extractor {
     Extractor::new(
         Backend::Cpu,
         ExtractorConfig {
-            detector,
+            detector: DetectorConfig {
+                subpixel: clatch::Subpixel::None,
+                ..detector
+            },
             // Quarter turns commute with full-resolution detection only (pyramid levels sample
             // their source off the pixel grid).
             ..ExtractorConfig::single_scale()

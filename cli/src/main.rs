@@ -793,8 +793,16 @@ mod tests {
                 Err(e) => Err(e),
             }
         };
-        assert_eq!(extract(&[]).unwrap(), Subpixel::None);
-        assert_eq!(extract(&["--subpixel", "score"]).unwrap(), Subpixel::Score);
+        // Not given: the library's default (or the single-scale preset's) stays.
+        assert_eq!(extract(&[]).unwrap(), None);
+        assert_eq!(
+            extract(&["--subpixel", "score"]).unwrap(),
+            Some(Subpixel::Score)
+        );
+        assert_eq!(
+            extract(&["--subpixel", "none"]).unwrap(),
+            Some(Subpixel::None)
+        );
         assert!(extract(&["--subpixel", "corner"]).is_err());
         for command in ["match", "eval", "demo"] {
             let mut args = vec!["clatch", command];

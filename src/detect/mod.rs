@@ -115,7 +115,9 @@ pub struct DetectorConfig {
 /// let refined = Extractor::new(Backend::Cpu, config(Subpixel::Score))?.detect_and_describe(&image)?;
 /// assert_eq!(whole.descriptors, refined.descriptors);
 /// for (w, r) in whole.keypoints.iter().zip(&refined.keypoints) {
-///     assert!((w.x - r.x).abs() <= 0.5 && (w.y - r.y).abs() <= 0.5);
+///     // Less than half a pixel of the keypoint's level.
+///     let level_pixel = 1.2f32.powi(w.octave);
+///     assert!((w.x - r.x).abs() <= 0.5 * level_pixel && (w.y - r.y).abs() <= 0.5 * level_pixel);
 /// }
 /// # Ok::<(), clatch::Error>(())
 /// ```

@@ -193,7 +193,7 @@ mod tests {
             Pyramid { levels: 4, scale_factor: 1.5 },
             Pyramid { levels: 1, scale_factor: 2.0 },
         ] {
-            let whole_config = DetectorConfig::default();
+            let whole_config = DetectorConfig { subpixel: Subpixel::None, ..DetectorConfig::default() };
             let refined_config = DetectorConfig { subpixel: Subpixel::Score, ..whole_config.clone() };
             let descriptor = DescriptorConfig::default();
             let whole = detect_and_describe(&img, &whole_config, &descriptor, &pyramid).unwrap();

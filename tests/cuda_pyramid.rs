@@ -32,6 +32,10 @@ fn trials() -> Vec<Trial> {
         ),
         Trial::test("selection_grid_and_level_shares_equal_cpu", gpu::selection),
         Trial::test("subpixel_positions_equal_cpu", gpu::subpixel),
+        Trial::test(
+            "pyramid_smoothed_description_equals_cpu",
+            gpu::smoothed_description,
+        ),
     ]
 }
 
@@ -266,6 +270,90 @@ mod gpu {
         println!(
             "{runs} selections (grid, level shares, Harris ranking), {keypoints} keypoints, 0 differences"
         );
+        Ok(())
+    }
+
+    /// Each level smoothed before its keypoints are described, blocking and asynchronous, with plain
+    /// pyramids and with ORB's level shares: keypoints (found on the unsmoothed levels) and
+    /// descriptors equal the CPU's, and the smoothing changed the descriptors.
+    pub fn smoothed_description() -> Result<(), Failed> {
+        use clatch::{DescriptorConfig, LevelBudget, Smoothing};
+        let stream = clatch::cuda::GpuStream::new(0)?;
+        let (mut runs, mut descriptors, mut upper) = (0, 0, 0);
+        for (name, image) in images() {
+            for p in [pyramids()[0], pyramids()[1], pyramids()[2]] {
+                for level_budget in [LevelBudget::Global, LevelBudget::Geometric] {
+                    let detector = DetectorConfig {
+                        level_budget,
+                        max_keypoints: 3000,
+                        ..DetectorConfig::default()
+                    };
+                    let view = image.view();
+                    let plain = extractor(Backend::Cpu, &detector, p).detect_and_describe(&view)?;
+                    for smoothing in [Smoothing::Binomial3, Smoothing::Binomial5] {
+                        let config = ExtractorConfig {
+                            detector: detector.clone(),
+                            descriptor: DescriptorConfig {
+                                smoothing,
+                                ..DescriptorConfig::default()
+                            },
+                            pyramid: Some(p),
+                        };
+                        let cpu = Extractor::new(Backend::Cpu, config.clone())?
+                            .detect_and_describe(&view)?;
+                        let gpu = Extractor::new(GPU, config)?;
+                        let blocking = gpu.detect_and_describe(&view)?;
+                        let queued = gpu.detect_and_describe_async(&stream, &view)?.wait()?;
+                        for (how, got) in [("blocking", &blocking), ("asynchronous", &queued)] {
+                            if let Some(i) =
+                                first_keypoint_difference(&cpu.keypoints, &got.keypoints)
+                            {
+                                return Err(format!(
+                                    "{name} {p:?} {level_budget:?} {smoothing:?} ({how}): keypoint {i} differs"
+                                )
+                                .into());
+                            }
+                            if let Some(i) = (0..cpu.descriptors.len())
+                                .find(|&i| cpu.descriptors.get(i) != got.descriptors.get(i))
+                            {
+                                return Err(format!(
+                                    "{name} {p:?} {level_budget:?} {smoothing:?} ({how}): descriptor {i} of {} differs (keypoint {:?})",
+                                    cpu.descriptors.len(),
+                                    cpu.keypoints[i]
+                                )
+                                .into());
+                            }
+                            if cpu.descriptors.len() != got.descriptors.len() {
+                                return Err(format!(
+                                    "{name} {p:?} ({how}): descriptor counts differ"
+                                )
+                                .into());
+                            }
+                        }
+                        if first_keypoint_difference(&cpu.keypoints, &plain.keypoints).is_some() {
+                            return Err(
+                                format!("{name} {p:?}: smoothing moved the keypoints").into()
+                            );
+                        }
+                        if !cpu.descriptors.is_empty() && cpu.descriptors == plain.descriptors {
+                            return Err(format!(
+                                "{name} {p:?}: {smoothing:?} changed no descriptor"
+                            )
+                            .into());
+                        }
+                        runs += 1;
+                        descriptors += cpu.descriptors.len();
+                        upper += cpu.keypoints.iter().filter(|k| k.octave > 0).count();
+                    }
+                }
+            }
+        }
+        println!(
+            "{runs} smoothed multi-scale extractions, {descriptors} descriptors ({upper} above level 0), 0 differences"
+        );
+        if upper == 0 {
+            return Err("no keypoint above level 0: the comparison proved nothing".into());
+        }
         Ok(())
     }
 

@@ -307,24 +307,23 @@ mod gpu {
     /// Description of given keypoints with smoothing: sub-pixel positions, every angle, sizes up to
     /// the borders, several widths and weightings. Also checks that smoothing changed the bits.
     pub fn describe_smoothed() -> Result<(), Failed> {
-        let mut rng = SplitMix64::new(23);
         let mut total = 0;
-        for image in [
-            astronaut(),
-            rectangles(700, 500, 3),
-            noise_image(640, 480, 9),
+        for (seed, image) in [
+            (23, astronaut()),
+            (24, rectangles(700, 500, 3)),
+            (25, noise_image(640, 480, 9)),
         ] {
-            let (w, h) = (image.width as u64, image.height as u64);
-            let keypoints: Vec<KeyPoint> = (0..20_000)
-                .map(|_| {
-                    KeyPoint::new(
-                        rng.below((w - 1) * 256) as f32 / 256.0,
-                        rng.below((h - 1) * 256) as f32 / 256.0,
-                    )
-                    .with_size(4.0 + rng.below(200) as f32)
-                    .with_angle(rng.below(3_600_000) as f32 / 10_000.0)
-                })
-                .collect();
+            // Sizes 4..204: from windows far inside the image to many that do not fit.
+            let keypoints: Vec<KeyPoint> = super::common::random_subpixel_keypoints(
+                image.width - 1,
+                image.height - 1,
+                20_000,
+                seed,
+            )
+            .into_iter()
+            .enumerate()
+            .map(|(i, k)| k.with_size(4.0 + (i % 200) as f32))
+            .collect();
             let view = image.view();
             for smoothing in SMOOTHINGS {
                 for (bits, weights) in [

@@ -165,6 +165,45 @@ mod gpu {
         Ok(())
     }
 
+    /// Demands the same keypoints and descriptors from the CPU and the GPU; `label` names the case.
+    fn same_features(
+        label: &str,
+        cpu: &clatch::Features,
+        gpu: &clatch::Features,
+    ) -> Result<(), Failed> {
+        if let Some(i) = first_keypoint_difference(&cpu.keypoints, &gpu.keypoints) {
+            return Err(format!(
+                "{label}: keypoints differ at {i}: cpu {:?}, gpu {:?}",
+                cpu.keypoints.get(i),
+                gpu.keypoints.get(i)
+            )
+            .into());
+        }
+        if let Some(i) =
+            (0..cpu.descriptors.len()).find(|&i| cpu.descriptors.get(i) != gpu.descriptors.get(i))
+        {
+            return Err(format!(
+                "{label}: descriptor {i} of {} differs (keypoint {:?})",
+                cpu.descriptors.len(),
+                cpu.keypoints[i]
+            )
+            .into());
+        }
+        if cpu.descriptors.len() != gpu.descriptors.len() {
+            return Err(format!("{label}: descriptor counts differ").into());
+        }
+        Ok(())
+    }
+
+    /// Prints what a multi-scale comparison covered; an error if no keypoint came from above level 0.
+    fn covered(what: &str, runs: usize, descriptors: usize, upper: usize) -> Result<(), Failed> {
+        println!("{runs} {what}, {descriptors} descriptors ({upper} above level 0), 0 differences");
+        if upper == 0 {
+            return Err("no keypoint above level 0: the comparison proved nothing".into());
+        }
+        Ok(())
+    }
+
     pub fn detect_and_describe() -> Result<(), Failed> {
         let (mut runs, mut descriptors, mut upper) = (0, 0, 0);
         for (name, image) in images() {
@@ -173,40 +212,14 @@ mod gpu {
                     let view = image.view();
                     let cpu = extractor(Backend::Cpu, &detector, p).detect_and_describe(&view)?;
                     let gpu = extractor(GPU, &detector, p).detect_and_describe(&view)?;
-                    if let Some(i) = first_keypoint_difference(&cpu.keypoints, &gpu.keypoints) {
-                        return Err(format!(
-                            "{name} {p:?} {detector:?}: keypoints differ at {i}: cpu {:?}, gpu {:?}",
-                            cpu.keypoints.get(i),
-                            gpu.keypoints.get(i)
-                        )
-                        .into());
-                    }
-                    if let Some(i) = (0..cpu.descriptors.len())
-                        .find(|&i| cpu.descriptors.get(i) != gpu.descriptors.get(i))
-                    {
-                        return Err(format!(
-                            "{name} {p:?} {detector:?}: descriptor {i} of {} differs (keypoint {:?})",
-                            cpu.descriptors.len(),
-                            cpu.keypoints[i]
-                        )
-                        .into());
-                    }
-                    if cpu.descriptors.len() != gpu.descriptors.len() {
-                        return Err(format!("{name} {p:?}: descriptor counts differ").into());
-                    }
+                    same_features(&format!("{name} {p:?} {detector:?}"), &cpu, &gpu)?;
                     runs += 1;
                     descriptors += cpu.descriptors.len();
                     upper += cpu.keypoints.iter().filter(|k| k.octave > 0).count();
                 }
             }
         }
-        println!(
-            "{runs} multi-scale extractions, {descriptors} descriptors ({upper} above level 0), 0 differences"
-        );
-        if upper == 0 {
-            return Err("no keypoint above level 0: the comparison proved nothing".into());
-        }
-        Ok(())
+        covered("multi-scale extractions", runs, descriptors, upper)
     }
 
     /// Spreading over a grid and ORB's level shares (host selection over the device's candidates,
@@ -305,30 +318,9 @@ mod gpu {
                         let blocking = gpu.detect_and_describe(&view)?;
                         let queued = gpu.detect_and_describe_async(&stream, &view)?.wait()?;
                         for (how, got) in [("blocking", &blocking), ("asynchronous", &queued)] {
-                            if let Some(i) =
-                                first_keypoint_difference(&cpu.keypoints, &got.keypoints)
-                            {
-                                return Err(format!(
-                                    "{name} {p:?} {level_budget:?} {smoothing:?} ({how}): keypoint {i} differs"
-                                )
-                                .into());
-                            }
-                            if let Some(i) = (0..cpu.descriptors.len())
-                                .find(|&i| cpu.descriptors.get(i) != got.descriptors.get(i))
-                            {
-                                return Err(format!(
-                                    "{name} {p:?} {level_budget:?} {smoothing:?} ({how}): descriptor {i} of {} differs (keypoint {:?})",
-                                    cpu.descriptors.len(),
-                                    cpu.keypoints[i]
-                                )
-                                .into());
-                            }
-                            if cpu.descriptors.len() != got.descriptors.len() {
-                                return Err(format!(
-                                    "{name} {p:?} ({how}): descriptor counts differ"
-                                )
-                                .into());
-                            }
+                            let label =
+                                format!("{name} {p:?} {level_budget:?} {smoothing:?} ({how})");
+                            same_features(&label, &cpu, got)?;
                         }
                         if first_keypoint_difference(&cpu.keypoints, &plain.keypoints).is_some() {
                             return Err(
@@ -348,13 +340,7 @@ mod gpu {
                 }
             }
         }
-        println!(
-            "{runs} smoothed multi-scale extractions, {descriptors} descriptors ({upper} above level 0), 0 differences"
-        );
-        if upper == 0 {
-            return Err("no keypoint above level 0: the comparison proved nothing".into());
-        }
-        Ok(())
+        covered("smoothed multi-scale extractions", runs, descriptors, upper)
     }
 
     pub fn async_streams() -> Result<(), Failed> {

@@ -732,16 +732,6 @@ mod tests {
                 "--bits",
                 "256",
             ],
-            &[
-                "clatch",
-                "extract",
-                "a.png",
-                "-o",
-                "a",
-                "--opencv-latch",
-                "--smoothing",
-                "binomial3",
-            ],
             &["clatch", "demo", "--smoothing", "gaussian"],
         ] {
             assert!(Cli::try_parse_from(args).is_err(), "{args:?} should fail");
@@ -821,6 +811,15 @@ mod tests {
             smoothing(&extract),
             clatch::DescriptorConfig::default().smoothing,
             "the library's default"
+        );
+        let opencv = [
+            &extract[..],
+            &["--opencv-latch", "--smoothing", "binomial3"],
+        ]
+        .concat();
+        assert!(
+            Cli::try_parse_from(opencv).is_err(),
+            "OpenCV LATCH has its own blur"
         );
         for (arg, expected) in [
             ("none", Smoothing::None),

@@ -271,7 +271,7 @@ mod gpu {
             (33, 1, 3),
             (31, 7, 4),
             (65, 17, 5),
-            (1023, 769, 6),
+            scale::pick((1023, 769, 6), (129, 67, 6)),
         ] {
             images.push(noise_image(w, h, seed));
         }
@@ -317,7 +317,7 @@ mod gpu {
             let keypoints: Vec<KeyPoint> = super::common::random_subpixel_keypoints(
                 image.width - 1,
                 image.height - 1,
-                20_000,
+                scale::pick(20_000, 500),
                 seed,
             )
             .into_iter()
@@ -353,11 +353,14 @@ mod gpu {
     pub fn detect_and_describe_smoothed() -> Result<(), Failed> {
         let stream = clatch::cuda::GpuStream::new(0)?;
         let mut total = 0;
-        for image in [
-            astronaut(),
-            rectangles(1920, 1080, 22),
-            noise_image(1023, 769, 6),
-        ] {
+        for image in scale::thin(
+            [
+                astronaut(),
+                rectangles(1920, 1080, 22),
+                noise_image(1023, 769, 6),
+            ],
+            3,
+        ) {
             let view = image.view();
             let plain = extractor(Backend::Cpu, 512, PatchWeights::default(), Smoothing::None)
                 .detect_and_describe(&view)?;

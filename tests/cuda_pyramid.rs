@@ -294,11 +294,11 @@ mod gpu {
         let stream = clatch::cuda::GpuStream::new(0)?;
         let (mut runs, mut descriptors, mut upper) = (0, 0, 0);
         for (name, image) in images() {
-            for p in [pyramids()[0], pyramids()[1], pyramids()[2]] {
+            for p in scale::thin(pyramids().into_iter().take(3), 2) {
                 for level_budget in [LevelBudget::Global, LevelBudget::Geometric] {
                     let detector = DetectorConfig {
                         level_budget,
-                        max_keypoints: 3000,
+                        max_keypoints: scale::pick(3000, 300),
                         ..DetectorConfig::default()
                     };
                     let view = image.view();

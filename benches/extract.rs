@@ -2,7 +2,8 @@
 //! (throughput in keypoints = descriptors per second), detection alone, detection + description
 //! with and without the pyramid option, and the CPU describe on one thread and on all threads, same
 //! photograph and keypoints (`assets/astronaut.png` enlarged to 1024x768, 5000 detected keypoints: the
-//! image `tools/cpu_vs_opencv.py` compares with OpenCV).
+//! image `tools/cpu_vs_opencv.py` compares with OpenCV), and the smoothing before description alone on
+//! a 2832x2128 image (a 6-megapixel photo).
 //!
 //! `cargo bench --bench extract`
 
@@ -10,7 +11,7 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use clatch::synthetic::SplitMix64;
-use clatch::{Backend, DetectorConfig, Extractor, ExtractorConfig, GrayView, KeyPoint};
+use clatch::{Backend, DetectorConfig, Extractor, ExtractorConfig, GrayView, KeyPoint, Smoothing};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 
 const WIDTH: usize = 1024;
@@ -147,5 +148,23 @@ fn describe_threads(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, extraction, describe_threads);
+/// `describe::cpu::smooth` of a 2832x2128 image (the whole image, as description smooths it).
+fn smoothing(c: &mut Criterion) {
+    let (w, h) = (2832, 2128);
+    let pixels = clatch::synthetic::noise(w, h, 3).expect("synthetic image");
+    let image = GrayView::new(&pixels, w, h, w).unwrap();
+    let mut group = c.benchmark_group("smooth 2832x2128");
+    group
+        .measurement_time(Duration::from_secs(4))
+        .sample_size(20)
+        .throughput(Throughput::Elements((w * h) as u64));
+    for smoothing in [Smoothing::Binomial3, Smoothing::Binomial5] {
+        group.bench_function(BenchmarkId::from_parameter(format!("{smoothing:?}")), |b| {
+            b.iter(|| clatch::describe::cpu::smooth(black_box(&image), smoothing))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, extraction, describe_threads, smoothing);
 criterion_main!(benches);

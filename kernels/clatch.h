@@ -47,6 +47,10 @@
 #define CLATCH_SUBPIXEL_THREADS 128  /* clatch_subpixel: one thread per keypoint */
 #define CLATCH_SUBPIXEL_FRAC_BITS 16 /* sub-pixel offsets are in 1/65536 pixel */
 
+/* Smoothing before description (kernels/describe.cu, clatch_smooth_binomial3/5). */
+#define CLATCH_SMOOTH_TILE_X 32 /* one thread per output pixel of a 32x8 tile */
+#define CLATCH_SMOOTH_TILE_Y 8
+
 /* Pyramid levels (kernels/pyramid.cu). */
 #define CLATCH_PYRAMID_STEP_FRAC_BITS 16 /* the scale step is 16.16 fixed point */
 #define CLATCH_PYRAMID_TILE_X 32         /* clatch_downscale: one thread per output pixel of a 32x8 tile */

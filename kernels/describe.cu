@@ -95,6 +95,62 @@ extern "C" __global__ void clatch_build_quads(const unsigned char* __restrict__ 
     quads[(size_t)Y * quad_pitch + X] = q;
 }
 
+// Smoothing before description: reproduces src/describe/cpu/smooth.rs::smooth bit for bit
+// (docs/numerics.md, section 4, step 0). With the binomial taps k of radius R ([1 2 1] or [1 4 6 4 1]),
+// dst(x, y) = (sum_{i,j} k[i] k[j] src(clamp(x + j - R), clamp(y + i - R)) + 2^(4R - 1)) >> 4R: exact
+// integer sums (below 2^16), one rounding. A block of CLATCH_SMOOTH_TILE_X x CLATCH_SMOOTH_TILE_Y threads
+// loads its tile and an R-pixel apron (coordinates clamped to the image, which is the border rule) into
+// shared memory, sums each apron column over 2R + 1 rows, then each output pixel over 2R + 1 column sums.
+__device__ __forceinline__ constexpr unsigned int binomial_tap(int radius, int k) {
+    return radius == 1 ? (k == 1 ? 2u : 1u) : (k == 2 ? 6u : ((k & 1) ? 4u : 1u));
+}
+
+template <int R>
+__device__ __forceinline__ void smooth_tile(const unsigned char* __restrict__ src, int src_pitch, int width,
+                                            int height, unsigned char* __restrict__ dst, int dst_pitch) {
+    constexpr int TX = CLATCH_SMOOTH_TILE_X, TY = CLATCH_SMOOTH_TILE_Y;
+    constexpr int AW = TX + 2 * R, AH = TY + 2 * R;  // the tile with its apron
+    __shared__ unsigned char tile[AH][AW];
+    __shared__ unsigned int columns[TY][AW];
+    const int left = (int)blockIdx.x * TX - R, top = (int)blockIdx.y * TY - R;
+    const int t = threadIdx.y * TX + threadIdx.x;
+    for (int i = t; i < AW * AH; i += TX * TY) {
+        const int ax = i % AW, ay = i / AW;
+        const int sx = min(max(left + ax, 0), width - 1);
+        const int sy = min(max(top + ay, 0), height - 1);
+        tile[ay][ax] = src[(size_t)sy * src_pitch + sx];
+    }
+    __syncthreads();
+    for (int i = t; i < AW * TY; i += TX * TY) {
+        const int ax = i % AW, ty = i / AW;
+        unsigned int sum = 0;
+#pragma unroll
+        for (int k = 0; k <= 2 * R; ++k) sum += binomial_tap(R, k) * tile[ty + k][ax];
+        columns[ty][ax] = sum;
+    }
+    __syncthreads();
+    const int x = (int)blockIdx.x * TX + threadIdx.x, y = (int)blockIdx.y * TY + threadIdx.y;
+    if (x >= width || y >= height) return;
+    unsigned int sum = 0;
+#pragma unroll
+    for (int k = 0; k <= 2 * R; ++k) sum += binomial_tap(R, k) * columns[threadIdx.y][threadIdx.x + k];
+    dst[(size_t)y * dst_pitch + x] = (unsigned char)((sum + (1u << (4 * R - 1))) >> (4 * R));
+}
+
+// Smoothing::Binomial3: [1 2 1] on both axes.
+extern "C" __global__ void clatch_smooth_binomial3(const unsigned char* __restrict__ src, int src_pitch,
+                                                   int width, int height, unsigned char* __restrict__ dst,
+                                                   int dst_pitch) {
+    smooth_tile<1>(src, src_pitch, width, height, dst, dst_pitch);
+}
+
+// Smoothing::Binomial5: [1 4 6 4 1] on both axes.
+extern "C" __global__ void clatch_smooth_binomial5(const unsigned char* __restrict__ src, int src_pitch,
+                                                   int width, int height, unsigned char* __restrict__ dst,
+                                                   int dst_pitch) {
+    smooth_tile<2>(src, src_pitch, width, height, dst, dst_pitch);
+}
+
 // The count may come from a kernel queued earlier on the same stream (GPU detection), so it is read on
 // the device rather than passed by the host: no round trip between detection and description.
 __device__ __forceinline__ int keypoint_count(const unsigned int* __restrict__ total, int capacity) {

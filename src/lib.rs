@@ -49,7 +49,7 @@ pub mod opencv_compat {}
 
 pub use backend::Backend;
 pub use describe::opencv::OpencvLatch;
-pub use describe::{DescriptorConfig, PatchWeights, SkipReason, Skipped, WINDOW};
+pub use describe::{DescriptorConfig, PatchWeights, SkipReason, Skipped, Smoothing, WINDOW};
 pub use descriptor::{Descriptor, DescriptorSet, DescriptorWidth};
 pub use detect::{DetectorConfig, LevelBudget, Ranking, Subpixel, fast_score};
 pub use error::{Error, Result};

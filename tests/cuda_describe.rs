@@ -27,6 +27,12 @@ fn trials() -> Vec<Trial> {
             gpu::sizes_subpixel_and_borders,
         ),
         Trial::test("describe_a_million_random_keypoints", gpu::million_random),
+        Trial::test("smoothed_pixels_equal_cpu", gpu::smoothed_pixels),
+        Trial::test("describe_smoothed_equals_cpu", gpu::describe_smoothed),
+        Trial::test(
+            "detect_and_describe_smoothed_equals_cpu",
+            gpu::detect_and_describe_smoothed,
+        ),
     ]
 }
 
@@ -35,7 +41,7 @@ mod gpu {
     use clatch::synthetic::SplitMix64;
     use clatch::{
         Backend, DescriptorConfig, DescriptorWidth, Extractor, ExtractorConfig, GrayView, KeyPoint,
-        PatchWeights,
+        PatchWeights, Smoothing,
     };
     use libtest_mimic::Failed;
 
@@ -44,11 +50,17 @@ mod gpu {
 
     const GPU: Backend = Backend::Cuda { device: 0 };
 
-    fn extractor(backend: Backend, bits: usize, weights: PatchWeights) -> Extractor {
+    fn extractor(
+        backend: Backend,
+        bits: usize,
+        weights: PatchWeights,
+        smoothing: Smoothing,
+    ) -> Extractor {
         let config = ExtractorConfig {
             descriptor: DescriptorConfig {
                 width: DescriptorWidth::from_bits(bits).unwrap(),
                 weights,
+                smoothing,
             },
             ..ExtractorConfig::default()
         };
@@ -63,8 +75,20 @@ mod gpu {
         bits: usize,
         weights: PatchWeights,
     ) -> Result<usize, Failed> {
-        let cpu = extractor(Backend::Cpu, bits, weights.clone()).describe(image, keypoints)?;
-        let gpu = extractor(GPU, bits, weights).describe(image, keypoints)?;
+        compare_smoothed(image, keypoints, bits, weights, Smoothing::None)
+    }
+
+    /// [`compare`] with `smoothing` before description.
+    fn compare_smoothed(
+        image: &GrayView,
+        keypoints: &[KeyPoint],
+        bits: usize,
+        weights: PatchWeights,
+        smoothing: Smoothing,
+    ) -> Result<usize, Failed> {
+        let cpu =
+            extractor(Backend::Cpu, bits, weights.clone(), smoothing).describe(image, keypoints)?;
+        let gpu = extractor(GPU, bits, weights, smoothing).describe(image, keypoints)?;
         if cpu.keypoint_index != gpu.keypoint_index || cpu.skipped != gpu.skipped {
             return Err(format!(
                 "different keypoints described: cpu {} (skipped {}), gpu {} (skipped {})",
@@ -81,7 +105,7 @@ mod gpu {
         if let Some(&first) = differing.first() {
             let kp = keypoints[cpu.keypoint_index[first]];
             return Err(format!(
-                "{} of {} descriptors differ ({bits} bits); first: keypoint {:?}\n cpu {:x?}\n gpu {:x?}",
+                "{} of {} descriptors differ ({bits} bits, {smoothing:?}); first: keypoint {:?}\n cpu {:x?}\n gpu {:x?}",
                 differing.len(),
                 cpu.descriptors.len(),
                 kp,
@@ -231,6 +255,142 @@ mod gpu {
             )
             .into());
         }
+        Ok(())
+    }
+
+    const SMOOTHINGS: [Smoothing; 2] = [Smoothing::Binomial3, Smoothing::Binomial5];
+
+    /// The GPU's smoothed copy of an image against `clatch::describe::cpu::smooth`, pixel for pixel,
+    /// on sizes that do and do not fill the 32x8 tiles, down to one pixel.
+    pub fn smoothed_pixels() -> Result<(), Failed> {
+        let dev = clatch::cuda::hooks::device(0)?;
+        let mut images = vec![astronaut(), rectangles(700, 500, 3)];
+        for (w, h, seed) in [
+            (1, 1, 1),
+            (1, 9, 2),
+            (33, 1, 3),
+            (31, 7, 4),
+            (65, 17, 5),
+            scale::pick((1023, 769, 6), (129, 67, 6)),
+        ] {
+            images.push(noise_image(w, h, seed));
+        }
+        let mut pixels = 0;
+        for image in &images {
+            for smoothing in [Smoothing::None, Smoothing::Binomial3, Smoothing::Binomial5] {
+                let cpu = clatch::describe::cpu::smooth(&image.view(), smoothing);
+                let gpu = clatch::cuda::hooks::debug_smoothed(&dev, &image.view(), smoothing)?;
+                if let Some(i) = (0..cpu.len()).find(|&i| cpu.get(i) != gpu.get(i)) {
+                    return Err(format!(
+                        "{}x{} {smoothing:?}: pixel ({}, {}) cpu {:?} gpu {:?} ({} cpu pixels, {} gpu)",
+                        image.width,
+                        image.height,
+                        i % image.width,
+                        i / image.width,
+                        cpu.get(i),
+                        gpu.get(i),
+                        cpu.len(),
+                        gpu.len()
+                    )
+                    .into());
+                }
+                if cpu.len() != gpu.len() {
+                    return Err(format!("{}x{}: sizes differ", image.width, image.height).into());
+                }
+                pixels += cpu.len();
+            }
+        }
+        println!("smoothed images: {pixels} pixels, 0 differences");
+        Ok(())
+    }
+
+    /// Description of given keypoints with smoothing: sub-pixel positions, every angle, sizes up to
+    /// the borders, several widths and weightings. Also checks that smoothing changed the bits.
+    pub fn describe_smoothed() -> Result<(), Failed> {
+        let mut total = 0;
+        for (seed, image) in [
+            (23, astronaut()),
+            (24, rectangles(700, 500, 3)),
+            (25, noise_image(640, 480, 9)),
+        ] {
+            // Sizes 4..204: from windows far inside the image to many that do not fit.
+            let keypoints: Vec<KeyPoint> = super::common::random_subpixel_keypoints(
+                image.width - 1,
+                image.height - 1,
+                scale::pick(20_000, 500),
+                seed,
+            )
+            .into_iter()
+            .enumerate()
+            .map(|(i, k)| k.with_size(4.0 + (i % 200) as f32))
+            .collect();
+            let view = image.view();
+            for smoothing in SMOOTHINGS {
+                for (bits, weights) in [
+                    (512, PatchWeights::default()),
+                    (136, PatchWeights::default()),
+                    (512, PatchWeights::uniform()),
+                ] {
+                    total += compare_smoothed(&view, &keypoints, bits, weights, smoothing)?;
+                }
+                let plain = extractor(GPU, 512, PatchWeights::default(), Smoothing::None)
+                    .describe(&view, &keypoints)?;
+                let smoothed = extractor(GPU, 512, PatchWeights::default(), smoothing)
+                    .describe(&view, &keypoints)?;
+                if plain.descriptors == smoothed.descriptors {
+                    return Err(
+                        format!("{smoothing:?} did not change the GPU's descriptors").into(),
+                    );
+                }
+            }
+        }
+        println!("smoothed description: {total} descriptors, 0 differences");
+        Ok(())
+    }
+
+    /// Single-scale detection and description with smoothing, blocking and queued on a stream:
+    /// keypoints (detected on the unsmoothed image) and descriptors equal the CPU's.
+    pub fn detect_and_describe_smoothed() -> Result<(), Failed> {
+        let stream = clatch::cuda::GpuStream::new(0)?;
+        let mut total = 0;
+        for image in scale::thin(
+            [
+                astronaut(),
+                rectangles(1920, 1080, 22),
+                noise_image(1023, 769, 6),
+            ],
+            3,
+        ) {
+            let view = image.view();
+            let plain = extractor(Backend::Cpu, 512, PatchWeights::default(), Smoothing::None)
+                .detect_and_describe(&view)?;
+            for smoothing in SMOOTHINGS {
+                let cpu = extractor(Backend::Cpu, 512, PatchWeights::default(), smoothing)
+                    .detect_and_describe(&view)?;
+                let gpu = extractor(GPU, 512, PatchWeights::default(), smoothing);
+                let blocking = gpu.detect_and_describe(&view)?;
+                let queued = gpu.detect_and_describe_async(&stream, &view)?.wait()?;
+                for (how, got) in [("blocking", &blocking), ("asynchronous", &queued)] {
+                    if super::common::first_keypoint_difference(&cpu.keypoints, &got.keypoints)
+                        .is_some()
+                        || cpu.descriptors != got.descriptors
+                    {
+                        return Err(format!(
+                            "{}x{} {smoothing:?} ({how}): differs from the CPU",
+                            image.width, image.height
+                        )
+                        .into());
+                    }
+                }
+                if super::common::first_keypoint_difference(&cpu.keypoints, &plain.keypoints)
+                    .is_some()
+                {
+                    return Err("smoothing moved the detected keypoints".into());
+                }
+                total += cpu.descriptors.len();
+            }
+        }
+        println!("smoothed detect and describe: {total} descriptors, 0 differences");
         Ok(())
     }
 

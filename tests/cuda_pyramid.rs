@@ -32,6 +32,10 @@ fn trials() -> Vec<Trial> {
         ),
         Trial::test("selection_grid_and_level_shares_equal_cpu", gpu::selection),
         Trial::test("subpixel_positions_equal_cpu", gpu::subpixel),
+        Trial::test(
+            "pyramid_smoothed_description_equals_cpu",
+            gpu::smoothed_description,
+        ),
     ]
 }
 
@@ -161,6 +165,45 @@ mod gpu {
         Ok(())
     }
 
+    /// Demands the same keypoints and descriptors from the CPU and the GPU; `label` names the case.
+    fn same_features(
+        label: &str,
+        cpu: &clatch::Features,
+        gpu: &clatch::Features,
+    ) -> Result<(), Failed> {
+        if let Some(i) = first_keypoint_difference(&cpu.keypoints, &gpu.keypoints) {
+            return Err(format!(
+                "{label}: keypoints differ at {i}: cpu {:?}, gpu {:?}",
+                cpu.keypoints.get(i),
+                gpu.keypoints.get(i)
+            )
+            .into());
+        }
+        if let Some(i) =
+            (0..cpu.descriptors.len()).find(|&i| cpu.descriptors.get(i) != gpu.descriptors.get(i))
+        {
+            return Err(format!(
+                "{label}: descriptor {i} of {} differs (keypoint {:?})",
+                cpu.descriptors.len(),
+                cpu.keypoints[i]
+            )
+            .into());
+        }
+        if cpu.descriptors.len() != gpu.descriptors.len() {
+            return Err(format!("{label}: descriptor counts differ").into());
+        }
+        Ok(())
+    }
+
+    /// Prints what a multi-scale comparison covered; an error if no keypoint came from above level 0.
+    fn covered(what: &str, runs: usize, descriptors: usize, upper: usize) -> Result<(), Failed> {
+        println!("{runs} {what}, {descriptors} descriptors ({upper} above level 0), 0 differences");
+        if upper == 0 {
+            return Err("no keypoint above level 0: the comparison proved nothing".into());
+        }
+        Ok(())
+    }
+
     pub fn detect_and_describe() -> Result<(), Failed> {
         let (mut runs, mut descriptors, mut upper) = (0, 0, 0);
         for (name, image) in images() {
@@ -169,40 +212,14 @@ mod gpu {
                     let view = image.view();
                     let cpu = extractor(Backend::Cpu, &detector, p).detect_and_describe(&view)?;
                     let gpu = extractor(GPU, &detector, p).detect_and_describe(&view)?;
-                    if let Some(i) = first_keypoint_difference(&cpu.keypoints, &gpu.keypoints) {
-                        return Err(format!(
-                            "{name} {p:?} {detector:?}: keypoints differ at {i}: cpu {:?}, gpu {:?}",
-                            cpu.keypoints.get(i),
-                            gpu.keypoints.get(i)
-                        )
-                        .into());
-                    }
-                    if let Some(i) = (0..cpu.descriptors.len())
-                        .find(|&i| cpu.descriptors.get(i) != gpu.descriptors.get(i))
-                    {
-                        return Err(format!(
-                            "{name} {p:?} {detector:?}: descriptor {i} of {} differs (keypoint {:?})",
-                            cpu.descriptors.len(),
-                            cpu.keypoints[i]
-                        )
-                        .into());
-                    }
-                    if cpu.descriptors.len() != gpu.descriptors.len() {
-                        return Err(format!("{name} {p:?}: descriptor counts differ").into());
-                    }
+                    same_features(&format!("{name} {p:?} {detector:?}"), &cpu, &gpu)?;
                     runs += 1;
                     descriptors += cpu.descriptors.len();
                     upper += cpu.keypoints.iter().filter(|k| k.octave > 0).count();
                 }
             }
         }
-        println!(
-            "{runs} multi-scale extractions, {descriptors} descriptors ({upper} above level 0), 0 differences"
-        );
-        if upper == 0 {
-            return Err("no keypoint above level 0: the comparison proved nothing".into());
-        }
-        Ok(())
+        covered("multi-scale extractions", runs, descriptors, upper)
     }
 
     /// Spreading over a grid and ORB's level shares (host selection over the device's candidates,
@@ -267,6 +284,63 @@ mod gpu {
             "{runs} selections (grid, level shares, Harris ranking), {keypoints} keypoints, 0 differences"
         );
         Ok(())
+    }
+
+    /// Each level smoothed before its keypoints are described, blocking and asynchronous, with plain
+    /// pyramids and with ORB's level shares: keypoints (found on the unsmoothed levels) and
+    /// descriptors equal the CPU's, and the smoothing changed the descriptors.
+    pub fn smoothed_description() -> Result<(), Failed> {
+        use clatch::{DescriptorConfig, LevelBudget, Smoothing};
+        let stream = clatch::cuda::GpuStream::new(0)?;
+        let (mut runs, mut descriptors, mut upper) = (0, 0, 0);
+        for (name, image) in images() {
+            for p in scale::thin(pyramids().into_iter().take(3), 2) {
+                for level_budget in [LevelBudget::Global, LevelBudget::Geometric] {
+                    let detector = DetectorConfig {
+                        level_budget,
+                        max_keypoints: scale::pick(3000, 300),
+                        ..DetectorConfig::default()
+                    };
+                    let view = image.view();
+                    let plain = extractor(Backend::Cpu, &detector, p).detect_and_describe(&view)?;
+                    for smoothing in [Smoothing::Binomial3, Smoothing::Binomial5] {
+                        let config = ExtractorConfig {
+                            detector: detector.clone(),
+                            descriptor: DescriptorConfig {
+                                smoothing,
+                                ..DescriptorConfig::default()
+                            },
+                            pyramid: Some(p),
+                        };
+                        let cpu = Extractor::new(Backend::Cpu, config.clone())?
+                            .detect_and_describe(&view)?;
+                        let gpu = Extractor::new(GPU, config)?;
+                        let blocking = gpu.detect_and_describe(&view)?;
+                        let queued = gpu.detect_and_describe_async(&stream, &view)?.wait()?;
+                        for (how, got) in [("blocking", &blocking), ("asynchronous", &queued)] {
+                            let label =
+                                format!("{name} {p:?} {level_budget:?} {smoothing:?} ({how})");
+                            same_features(&label, &cpu, got)?;
+                        }
+                        if first_keypoint_difference(&cpu.keypoints, &plain.keypoints).is_some() {
+                            return Err(
+                                format!("{name} {p:?}: smoothing moved the keypoints").into()
+                            );
+                        }
+                        if !cpu.descriptors.is_empty() && cpu.descriptors == plain.descriptors {
+                            return Err(format!(
+                                "{name} {p:?}: {smoothing:?} changed no descriptor"
+                            )
+                            .into());
+                        }
+                        runs += 1;
+                        descriptors += cpu.descriptors.len();
+                        upper += cpu.keypoints.iter().filter(|k| k.octave > 0).count();
+                    }
+                }
+            }
+        }
+        covered("smoothed multi-scale extractions", runs, descriptors, upper)
     }
 
     pub fn async_streams() -> Result<(), Failed> {

@@ -157,6 +157,7 @@ fn random_config(rng: &mut SplitMix64) -> ExtractorConfig {
         descriptor: DescriptorConfig {
             width: DescriptorWidth::from_bits(bits).unwrap_or_default(),
             weights: weights.unwrap_or_default(),
+            ..DescriptorConfig::default()
         },
         pyramid,
     }

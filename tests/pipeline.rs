@@ -309,6 +309,7 @@ fn run_everything(image: &Gray) -> (Features, Features, Vec<clatch::Match>, clat
         descriptor: DescriptorConfig {
             width: DescriptorWidth::from_bits(256).unwrap(),
             weights: PatchWeights::uniform(),
+            ..DescriptorConfig::default()
         },
         ..ExtractorConfig::single_scale()
     };

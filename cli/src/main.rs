@@ -222,7 +222,7 @@ pub struct ExtractArgs {
 pub struct OpencvLatchArgs {
     /// Describe with OpenCV's LATCH: the descriptors equal
     /// `cv2.xfeatures2d.LATCH_create(BYTES, rotation, HALF, SIGMA).compute` on the same keypoints.
-    #[arg(long, conflicts_with = "bits")]
+    #[arg(long, conflicts_with_all = ["bits", "smoothing"])]
     pub opencv_latch: bool,
     /// OpenCV LATCH descriptor bytes: 1, 2, 4, 8, 16, 32 or 64.
     #[arg(
@@ -394,6 +394,22 @@ pub struct DetectArgs {
     /// Harris response over the strongest 2 x --max-keypoints).
     #[arg(long, value_enum, default_value_t = RankingArg::Fast)]
     pub ranking: RankingArg,
+    /// Smooth the image the descriptor samples (each pyramid level's, before its keypoints are
+    /// described; detection still sees the unsmoothed image) with an integer binomial kernel.
+    /// Default: the library's (`none`).
+    #[arg(long, value_enum)]
+    pub smoothing: Option<SmoothingArg>,
+}
+
+/// `--smoothing`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SmoothingArg {
+    /// No smoothing.
+    None,
+    /// [1 2 1] on both axes (3x3).
+    Binomial3,
+    /// [1 4 6 4 1] on both axes (5x5, about a Gaussian of sigma 1 pixel).
+    Binomial5,
 }
 
 /// `--subpixel` (every command but `colmap`, which adds its `corner` method).
@@ -604,6 +620,12 @@ impl DetectArgs {
             },
             descriptor: DescriptorConfig {
                 width: DescriptorWidth::from_bits(self.bits)?,
+                smoothing: match self.smoothing {
+                    None => base.descriptor.smoothing,
+                    Some(SmoothingArg::None) => clatch::Smoothing::None,
+                    Some(SmoothingArg::Binomial3) => clatch::Smoothing::Binomial3,
+                    Some(SmoothingArg::Binomial5) => clatch::Smoothing::Binomial5,
+                },
                 ..base.descriptor
             },
             pyramid: self.pyramid.or(base.pyramid),
@@ -710,6 +732,7 @@ mod tests {
                 "--bits",
                 "256",
             ],
+            &["clatch", "demo", "--smoothing", "gaussian"],
         ] {
             assert!(Cli::try_parse_from(args).is_err(), "{args:?} should fail");
         }
@@ -768,6 +791,52 @@ mod tests {
             Some(OpencvLatch::new(64, false, 3, 0.0).unwrap())
         );
         assert!(parse(&["--opencv-latch", "--latch-bytes", "3"]).is_err());
+    }
+
+    #[test]
+    fn smoothing_maps_to_the_descriptor_option_on_every_command() {
+        use clatch::Smoothing;
+        let smoothing = |args: &[&str]| {
+            let detect = match Cli::try_parse_from(args).unwrap().command {
+                Command::Extract(a) => a.detect,
+                Command::Match(a) => a.detect,
+                Command::Eval(a) => a.detect,
+                Command::Colmap(a) => a.detect,
+                Command::Demo(a) => a.detect,
+            };
+            detect.config().unwrap().descriptor.smoothing
+        };
+        let extract = ["clatch", "extract", "a.png", "-o", "a"];
+        assert_eq!(
+            smoothing(&extract),
+            clatch::DescriptorConfig::default().smoothing,
+            "the library's default"
+        );
+        let opencv = [
+            &extract[..],
+            &["--opencv-latch", "--smoothing", "binomial3"],
+        ]
+        .concat();
+        assert!(
+            Cli::try_parse_from(opencv).is_err(),
+            "OpenCV LATCH has its own blur"
+        );
+        for (arg, expected) in [
+            ("none", Smoothing::None),
+            ("binomial3", Smoothing::Binomial3),
+            ("binomial5", Smoothing::Binomial5),
+        ] {
+            for command in [
+                &extract[..],
+                &["clatch", "match", "a.png", "b.png"],
+                &["clatch", "eval"],
+                &["clatch", "colmap", "--images", "i", "--database", "d.db"],
+                &["clatch", "demo"],
+            ] {
+                let args = [command, &["--smoothing", arg]].concat();
+                assert_eq!(smoothing(&args), expected, "{args:?}");
+            }
+        }
     }
 
     #[cfg(not(feature = "cuda"))]

@@ -81,7 +81,7 @@ impl Job {
     ) -> Result<Self> {
         let stream = dev.new_stream()?;
         let mut device_image = DeviceImage::upload(dev, &stream, image)?;
-        device_image.build_quads(dev, &stream)?;
+        device_image.build_quads(dev, &stream, config.smoothing)?;
         Ok(Self {
             keypoints: upload(&stream, keypoints, "keypoint upload")?,
             count: upload(&stream, &[keypoints.len() as u32], "keypoint count upload")?,

@@ -33,6 +33,8 @@ const KERNELS: &[KernelFile] = &[
             "clatch_describe",
             "clatch_describe_binary",
             "clatch_build_quads",
+            "clatch_smooth_binomial3",
+            "clatch_smooth_binomial5",
         ],
         needs_tensor_cores: false,
     },

@@ -159,7 +159,7 @@ impl QueuedPyramid {
                 offsets.push(None);
                 continue;
             }
-            level.build_quads(dev, stream)?;
+            level.build_quads(dev, stream, descriptor.smoothing)?;
             let on_device = upload(stream, &keypoints, "pyramid keypoint upload")?;
             let count = upload(stream, &[keypoints.len() as u32], "pyramid keypoint count")?;
             let mut out = alloc_zeros(

@@ -168,7 +168,7 @@ pub(crate) fn detect_and_describe_async(
     }
     let mut device_image = DeviceImage::upload(dev, s, image)?;
     let keypoints = detect_on_device(dev, s, &device_image, detector)?;
-    device_image.build_quads(dev, s)?;
+    device_image.build_quads(dev, s, descriptor.smoothing)?;
     let width = descriptor.width;
     let weights = upload_weights(s, descriptor)?;
     let mut descriptors = alloc_zeros(

@@ -7,9 +7,12 @@ use crate::parallel::*;
 use cudarc::driver::{CudaSlice, CudaStream, DevicePtr, LaunchConfig, PushKernelArg, sys};
 
 use super::device::{GpuDevice, driver_error};
-use super::header::{CLATCH_PYRAMID_TILE_X, CLATCH_PYRAMID_TILE_Y};
+use super::header::{
+    CLATCH_PYRAMID_TILE_X, CLATCH_PYRAMID_TILE_Y, CLATCH_SMOOTH_TILE_X, CLATCH_SMOOTH_TILE_Y,
+};
 use super::memory::{alloc_zeros, upload_staged};
-use crate::error::Result;
+use crate::describe::Smoothing;
+use crate::error::{Error, Result};
 use crate::gray_view::GrayView;
 
 /// A texture object; destroyed on drop.
@@ -69,7 +72,8 @@ fn texture_object(
 
 /// A gray image uploaded once, read by kernels through `texture` (one byte per texel, see
 /// [`texture_object`]), and, for description, through the quad texture built by
-/// `clatch_build_quads` (kernels/describe.cu): four bilinear neighbours per texel.
+/// `clatch_build_quads` (kernels/describe.cu): four bilinear neighbours per texel, of the pixels
+/// themselves or of their smoothed copy ([`Smoothing`]).
 #[derive(Debug)]
 pub struct DeviceImage {
     // Textures are declared before the buffers they read, so they are destroyed first.
@@ -79,6 +83,8 @@ pub struct DeviceImage {
     pixels: CudaSlice<u8>,
     #[allow(dead_code)]
     quad_texels: Option<CudaSlice<u8>>,
+    /// The smoothing the quad texture was built with.
+    quads_smoothing: Smoothing,
     pitch: usize,
     width: usize,
     height: usize,
@@ -116,6 +122,7 @@ impl DeviceImage {
             quads: None,
             pixels,
             quad_texels: None,
+            quads_smoothing: Smoothing::None,
             pitch,
             width,
             height,
@@ -166,11 +173,72 @@ impl DeviceImage {
         Self::from_pixels(pixels, stream, (width, height, pitch))
     }
 
-    /// Queues the build of the quad texture the describe kernels read (once per image).
-    pub fn build_quads(&mut self, dev: &GpuDevice, stream: &Arc<CudaStream>) -> Result<()> {
+    /// Queues a smoothed copy of the pixels (same size and pitch) on `stream`:
+    /// `clatch_smooth_binomial3` or `clatch_smooth_binomial5` (kernels/describe.cu), reproducing
+    /// [`crate::describe::cpu::smooth`]. `None` for [`Smoothing::None`] (the pixels themselves).
+    pub(crate) fn smoothed(
+        &self,
+        dev: &GpuDevice,
+        stream: &Arc<CudaStream>,
+        smoothing: Smoothing,
+    ) -> Result<Option<CudaSlice<u8>>> {
+        let kernel = match smoothing {
+            Smoothing::None => return Ok(None),
+            Smoothing::Binomial3 => "clatch_smooth_binomial3",
+            Smoothing::Binomial5 => "clatch_smooth_binomial5",
+        };
+        let mut smoothed = alloc_zeros::<u8>(stream, self.pitch * self.height, "smoothed image")?;
+        let (pitch, width, height) = (self.pitch as i32, self.width as i32, self.height as i32);
+        let mut launch = stream.launch_builder(dev.kernel(kernel));
+        launch
+            .arg(&self.pixels)
+            .arg(&pitch)
+            .arg(&width)
+            .arg(&height)
+            .arg(&mut smoothed)
+            .arg(&pitch);
+        let tile = (CLATCH_SMOOTH_TILE_X as usize, CLATCH_SMOOTH_TILE_Y as usize);
+        let config = LaunchConfig {
+            grid_dim: (
+                self.width.div_ceil(tile.0) as u32,
+                self.height.div_ceil(tile.1) as u32,
+                1,
+            ),
+            block_dim: (tile.0 as u32, tile.1 as u32, 1),
+            shared_mem_bytes: 0,
+        };
+        // SAFETY: matches the kernel's signature (source, pitch, width, height, destination, pitch);
+        // both buffers hold `height` rows of `pitch` bytes; every read is clamped inside the image and
+        // only pixels with x < width, y < height are written.
+        unsafe { launch.launch(config) }.map_err(driver_error(kernel))?;
+        Ok(Some(smoothed))
+    }
+
+    /// Queues the build of the quad texture the describe kernels read (once per image), from the
+    /// pixels smoothed by `smoothing` ([`Self::smoothed`]). Asking again with the same smoothing does
+    /// nothing; with another one is an internal error (kernels queued earlier may still read it).
+    pub fn build_quads(
+        &mut self,
+        dev: &GpuDevice,
+        stream: &Arc<CudaStream>,
+        smoothing: Smoothing,
+    ) -> Result<()> {
         if self.quads.is_some() {
-            return Ok(());
+            if self.quads_smoothing == smoothing {
+                return Ok(());
+            }
+            return Err(Error::Internal {
+                operation: "describe",
+                message: format!(
+                    "the quad texture was built with {:?}, not {smoothing:?}",
+                    self.quads_smoothing
+                ),
+            });
         }
+        // The smoothed copy is freed when it goes out of scope below, in stream order (cudarc frees
+        // on the stream, after clatch_build_quads has read it).
+        let smoothed = self.smoothed(dev, stream, smoothing)?;
+        let source = smoothed.as_ref().unwrap_or(&self.pixels);
         let (qw, qh) = (self.width + 1, self.height + 1);
         let row_bytes = qw * 4;
         let pitch = row_bytes.div_ceil(dev.pitch_alignment) * dev.pitch_alignment;
@@ -179,7 +247,7 @@ impl DeviceImage {
         let quad_pitch = (pitch / 4) as i32;
         let mut launch = stream.launch_builder(dev.kernel("clatch_build_quads"));
         launch
-            .arg(&self.pixels)
+            .arg(source)
             .arg(&pitch_i)
             .arg(&width)
             .arg(&height)
@@ -190,19 +258,30 @@ impl DeviceImage {
             block_dim: (32, 8, 1),
             shared_mem_bytes: 0,
         };
-        // SAFETY: matches clatch_build_quads's signature; `pixels` holds height rows of `pitch`
+        // SAFETY: matches clatch_build_quads's signature; `source` holds height rows of `pitch`
         // bytes, `texels` (height + 1) rows of `quad_pitch` 4-byte texels, of which width + 1 are
         // written per row (pitch is a multiple of the texture pitch alignment, itself of 4).
         unsafe { launch.launch(config) }.map_err(driver_error("clatch_build_quads"))?;
         self.quads = Some(texture_object(&texels, stream, (qw, qh, pitch), 4)?);
         self.quad_texels = Some(texels);
+        self.quads_smoothing = smoothing;
         Ok(())
     }
 
     /// The pixels read back, row-major with stride = width (waits for the stream).
     pub(crate) fn download(&self, stream: &Arc<CudaStream>) -> Result<Vec<u8>> {
+        self.download_like(stream, &self.pixels)
+    }
+
+    /// `buffer`, laid out as this image's pixels (such as [`Self::smoothed`]'s), read back row-major
+    /// with stride = width (waits for the stream).
+    pub(crate) fn download_like(
+        &self,
+        stream: &Arc<CudaStream>,
+        buffer: &CudaSlice<u8>,
+    ) -> Result<Vec<u8>> {
         let pitched = stream
-            .clone_dtoh(&self.pixels)
+            .clone_dtoh(buffer)
             .map_err(driver_error("reading an image back"))?;
         Ok(pitched
             .chunks_exact(self.pitch)

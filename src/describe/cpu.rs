@@ -9,11 +9,16 @@
 mod avx2;
 mod optimized;
 mod portable;
+mod smooth;
+
+pub use smooth::smooth;
 
 use crate::parallel::*;
 
 use super::triplets::TRIPLETS;
-use super::{Described, DescriptorConfig, PATCH, SamplingFrame, SkipReason, Skipped, WINDOW};
+use super::{
+    Described, DescriptorConfig, PATCH, SamplingFrame, SkipReason, Skipped, Smoothing, WINDOW,
+};
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
@@ -83,9 +88,11 @@ pub fn window_bits(
 
 /// Describes validated keypoints on the CPU, in parallel over keypoints.
 ///
-/// Each keypoint goes through the fast kernels of `cpu/optimized.rs` (the same integers as
-/// [`sample_window`] and [`window_bits`], tested equal), into one window buffer per worker; weights
-/// other than 0/1 use [`window_bits`] itself.
+/// With [`DescriptorConfig::smoothing`], the windows sample [`smooth`]`(img)` instead of `img` (which
+/// frames fit does not change: the smoothed image has the same size). Each keypoint goes through the
+/// fast kernels of `cpu/optimized.rs` (the same integers as [`sample_window`] and [`window_bits`],
+/// tested equal), into one window buffer per worker; weights other than 0/1 use [`window_bits`]
+/// itself.
 pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfig) -> Described {
     let width = config.width;
     let per = width.words();
@@ -106,6 +113,12 @@ pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfi
             reason: SkipReason::WindowOutsideImage,
         })
         .collect();
+    let smoothed = (config.smoothing != Smoothing::None && !keypoint_index.is_empty())
+        .then(|| smooth(img, config.smoothing));
+    let smoothed_view = smoothed.as_ref().map(|pixels| {
+        GrayView::new(pixels, img.width(), img.height(), img.width()).expect("the input's geometry")
+    });
+    let img = smoothed_view.as_ref().unwrap_or(img);
     let mut words = vec![0u64; keypoint_index.len() * per];
     words
         .par_chunks_mut(per)
@@ -302,6 +315,7 @@ mod tests {
             let config = DescriptorConfig {
                 width: DescriptorWidth::from_bits(bits).unwrap(),
                 weights,
+                smoothing: Smoothing::None,
             };
             let described = describe(&img, &keypoints, &config);
             assert!(described.keypoint_index.len() > 100 && !described.skipped.is_empty());
@@ -317,6 +331,47 @@ mod tests {
                     "{i}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn smoothing_describes_the_smoothed_image() {
+        // Describing with smoothing = describing the smoothed image without; and on noise, smoothing
+        // changes bits (so the option is not ignored).
+        let (w, h) = (200, 150);
+        let buf = crate::synthetic::noise(w, h, 4).expect("synthetic image");
+        let img = GrayView::new(&buf, w, h, w).unwrap();
+        let mut rng = crate::synthetic::SplitMix64::new(8);
+        let keypoints: Vec<KeyPoint> = (0..200)
+            .map(|_| {
+                KeyPoint::new(
+                    rng.below(256 * (w as u64 - 1)) as f32 / 256.0,
+                    rng.below(256 * (h as u64 - 1)) as f32 / 256.0,
+                )
+                .with_angle(rng.below(2880) as f32 / 8.0)
+                .with_size(8.0 + rng.below(100) as f32)
+            })
+            .collect();
+        let plain = describe(&img, &keypoints, &DescriptorConfig::default());
+        for smoothing in [Smoothing::Binomial3, Smoothing::Binomial5] {
+            let config = DescriptorConfig {
+                smoothing,
+                ..DescriptorConfig::default()
+            };
+            let described = describe(&img, &keypoints, &config);
+            let pixels = smooth(&img, smoothing);
+            let smoothed = GrayView::new(&pixels, w, h, w).unwrap();
+            let expected = describe(&smoothed, &keypoints, &DescriptorConfig::default());
+            assert_eq!(described, expected, "{smoothing:?}");
+            assert_eq!(described.keypoint_index, plain.keypoint_index);
+            assert!(!described.keypoint_index.is_empty() && !described.skipped.is_empty());
+            let differing = (0..plain.descriptors.len())
+                .filter(|&i| plain.descriptors.get(i) != described.descriptors.get(i))
+                .count();
+            assert!(
+                differing * 2 > plain.descriptors.len(),
+                "{smoothing:?}: only {differing} descriptors changed"
+            );
         }
     }
 }

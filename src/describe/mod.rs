@@ -3,6 +3,9 @@
 //!
 //! The numeric contract (every backend reproduces it bit for bit; `docs/numerics.md` has the whole
 //! pipeline):
+//! 0. **Smoothing** (optional, [`DescriptorConfig::smoothing`]): the image the windows sample is
+//!    first replaced by its integer binomial smoothing ([`Smoothing`], [`cpu::smooth`]); everything
+//!    below reads that image. Detection never does.
 //! 1. **Frame.** `angle` → bin `k` ([`crate::angle::angle_bin`]); `(C, S)` = rotation table entry `k`
 //!    (16 fractional bits). `q = round_half_even(size · 256)`. Window steps in 16.16 pixels:
 //!    `eu = ((q·C + 2^13) >> 14, (q·S + 2^13) >> 14)` along the window's rows, `ev = (-eu.y, eu.x)`
@@ -107,6 +110,46 @@ pub struct DescriptorConfig {
     pub width: DescriptorWidth,
     /// Patch weights. Default [`PatchWeights::latch_7x7`].
     pub weights: PatchWeights,
+    /// Integer smoothing of the image the windows are sampled from (with a pyramid: of each level
+    /// before its keypoints are described); detection and orientation always see the unsmoothed
+    /// image. Default [`Smoothing::None`].
+    pub smoothing: Smoothing,
+}
+
+/// An integer low-pass filter applied to the image before description samples it
+/// ([`crate::numerics`], section 4, step 0).
+///
+/// Each is a separable binomial kernel `k` of `2r + 1` taps summing to `2^(2r)`; pixel `(x, y)` becomes
+/// `(Σ_{i,j} k[i] k[j] I(clamp(x + j - r), clamp(y + i - r)) + 2^(4r - 1)) >> 4r`: one rounding, half
+/// up, of the exact sum; coordinates past an edge are clamped to it (the edge pixel is repeated).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum Smoothing {
+    /// No smoothing: windows sample the image itself.
+    #[default]
+    None,
+    /// `[1 2 1] / 4` on both axes (3x3, `r = 1`, `(Σ + 8) >> 4`).
+    Binomial3,
+    /// `[1 4 6 4 1] / 16` on both axes (5x5, `r = 2`, `(Σ + 128) >> 8`), close to a Gaussian of
+    /// σ = 1 pixel.
+    Binomial5,
+}
+
+impl Smoothing {
+    /// The one-dimensional kernel: binomial coefficients, `2r + 1` taps summing to `2^(2r)` (empty for
+    /// [`Smoothing::None`]).
+    pub fn taps(self) -> &'static [u16] {
+        match self {
+            Smoothing::None => &[],
+            Smoothing::Binomial3 => &[1, 2, 1],
+            Smoothing::Binomial5 => &[1, 4, 6, 4, 1],
+        }
+    }
+
+    /// The kernel radius `r` (0 for [`Smoothing::None`]).
+    pub fn radius(self) -> usize {
+        self.taps().len() / 2
+    }
 }
 
 /// Why a keypoint got no descriptor.

@@ -5,6 +5,7 @@ use std::fmt::Write as _;
 use clatch::synthetic::SplitMix64;
 use clatch::{
     Backend, DescriptorConfig, DescriptorWidth, Extractor, ExtractorConfig, KeyPoint, PatchWeights,
+    Smoothing,
 };
 
 use super::Gray;
@@ -154,6 +155,8 @@ pub fn render(image: &Gray, backend: Backend) -> String {
             descriptor: DescriptorConfig {
                 width: DescriptorWidth::from_bits(bits).unwrap(),
                 weights,
+                // The golden file holds the unsmoothed bits.
+                smoothing: Smoothing::None,
             },
             ..ExtractorConfig::default()
         };

@@ -17,3 +17,19 @@ pub fn time_describe_kernel(
     let stream = job.stream.clone();
     time_launches(dev, &stream, warmup, repeats, || job.launch(dev))
 }
+
+/// `image` smoothed by `smoothing` as the GPU smooths it before description
+/// (`clatch_smooth_binomial*`; `Smoothing::None`: the uploaded pixels), row-major with
+/// stride = width: for comparing with [`crate::describe::cpu::smooth`].
+pub fn debug_smoothed(
+    dev: &GpuDevice,
+    image: &GrayView,
+    smoothing: crate::describe::Smoothing,
+) -> Result<Vec<u8>> {
+    let stream = dev.new_stream()?;
+    let device_image = DeviceImage::upload(dev, &stream, image)?;
+    match device_image.smoothed(dev, &stream, smoothing)? {
+        Some(smoothed) => device_image.download_like(&stream, &smoothed),
+        None => device_image.download(&stream),
+    }
+}

@@ -44,6 +44,8 @@
 #define CLATCH_SCAN_THREADS 256    /* clatch_scan_reduce / clatch_scan_apply */
 #define CLATCH_SCAN_CHUNK 4096     /* counts per block of the scan (16 per thread) */
 #define CLATCH_SCAN_TOP_THREADS 1024 /* clatch_scan_partials: one block */
+#define CLATCH_SUBPIXEL_THREADS 128  /* clatch_subpixel: one thread per keypoint */
+#define CLATCH_SUBPIXEL_FRAC_BITS 16 /* sub-pixel offsets are in 1/65536 pixel */
 
 /* Pyramid levels (kernels/pyramid.cu). */
 #define CLATCH_PYRAMID_STEP_FRAC_BITS 16 /* the scale step is 16.16 fixed point */

@@ -19,6 +19,10 @@
 // 4. clatch_detect_orient: one warp per output keypoint, n = min(*total, capacity): integer moments over
 //    the radius-15 disc (lane = dx, loop over dy), a shuffle reduction, then the bin by exact quadrant
 //    turns and a binary search over the host's 720 half-bin directions with 64-bit cross products.
+//
+// clatch_subpixel (after selection, for the kept keypoints of a level): one thread per keypoint, the
+// parabola through the FAST scores of the keypoint and its 4 neighbours (Subpixel::Score), as
+// src/detect/cpu.rs::subpixel_offset.
 #include "clatch.h"
 
 typedef long long i64;
@@ -370,4 +374,54 @@ clatch_detect_orient(cudaTextureObject_t image, const u32* __restrict__ total, u
             out[k].angle = (float)bin / (float)CLATCH_BINS_PER_DEGREE;
         }
     }
+}
+
+// Texel (x, y) of `image` (inside the image: callers check).
+__device__ __forceinline__ int texel(cudaTextureObject_t image, int x, int y) {
+    return tex2D<unsigned char>(image, (float)x + 0.5f, (float)y + 0.5f);
+}
+
+// The FAST-9 score of pixel (x, y) whatever its value, as crate::detect::cpu::fast_score (at or below
+// any threshold, possibly negative): max(max_k min9(d), max_k min9(-d)), each side by arc_score from
+// -255, where every arc qualifies (|d| <= 255). (x, y) must be at least 3 pixels from every border.
+// Circle as detect::FAST_CIRCLE: clockwise from the top.
+__device__ __forceinline__ int full_fast_score(cudaTextureObject_t image, int x, int y) {
+    const int cx[16] = {0, 1, 2, 3, 3, 3, 2, 1, 0, -1, -2, -3, -3, -3, -2, -1};
+    const int cy[16] = {-3, -3, -2, -1, 0, 1, 2, 3, 3, 3, 2, 1, 0, -1, -2, -3};
+    const int p = texel(image, x, y);
+    int d[16];
+#pragma unroll
+    for (int i = 0; i < 16; ++i) d[i] = texel(image, x + cx[i], y + cy[i]) - p;
+    return max(arc_score(d, 1, -255), arc_score(d, -1, -255));
+}
+
+// As crate::detect::cpu::parabola_offset: the peak of the parabola through (-1, l), (0, c), (1, r) in
+// 1/65536 pixel, (a - b) 2^15 / (a + b) with a = c - l, b = c - r, rounded half away from zero by
+// integer division; 0 unless c > l and c > r. |values| < 2^26: 32-bit arithmetic is exact.
+__device__ __forceinline__ int parabola_offset(int l, int c, int r) {
+    if (c <= l || c <= r) return 0;
+    const int a = c - l, b = c - r;
+    const int numerator = (a - b) * (1 << (CLATCH_SUBPIXEL_FRAC_BITS - 1));
+    const int denominator = a + b;
+    const int magnitude = (2 * abs(numerator) + denominator) / (2 * denominator);
+    return numerator < 0 ? -magnitude : magnitude;
+}
+
+// offsets[2k], offsets[2k + 1] = the sub-pixel offset (dx, dy) of keypoint k < n (whole position on
+// `image`), as crate::detect::cpu::subpixel_offset: 0 for both when a neighbour's circle would leave
+// the image.
+extern "C" __global__ void __launch_bounds__(CLATCH_SUBPIXEL_THREADS)
+clatch_subpixel(cudaTextureObject_t image, int width, int height,
+                const clatch_keypoint* __restrict__ keypoints, u32 n, int* __restrict__ offsets) {
+    const u32 k = blockIdx.x * blockDim.x + threadIdx.x;
+    if (k >= n) return;
+    const int x = (int)keypoints[k].x, y = (int)keypoints[k].y;
+    int dx = 0, dy = 0;
+    if (x >= 4 && y >= 4 && x + 4 < width && y + 4 < height) {
+        const int c = full_fast_score(image, x, y);
+        dx = parabola_offset(full_fast_score(image, x - 1, y), c, full_fast_score(image, x + 1, y));
+        dy = parabola_offset(full_fast_score(image, x, y - 1), c, full_fast_score(image, x, y + 1));
+    }
+    offsets[2 * (size_t)k] = dx;
+    offsets[2 * (size_t)k + 1] = dy;
 }

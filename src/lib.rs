@@ -51,7 +51,7 @@ pub use backend::Backend;
 pub use describe::opencv::OpencvLatch;
 pub use describe::{DescriptorConfig, PatchWeights, SkipReason, Skipped, WINDOW};
 pub use descriptor::{Descriptor, DescriptorSet, DescriptorWidth};
-pub use detect::{DetectorConfig, LevelBudget, Ranking, fast_score};
+pub use detect::{DetectorConfig, LevelBudget, Ranking, Subpixel, fast_score};
 pub use error::{Error, Result};
 pub use facade::{Extractor, ExtractorConfig, Matcher};
 pub use features::Features;

@@ -34,7 +34,8 @@ fn temp_db(name: &str) -> PathBuf {
 
 fn features() -> Vec<Features> {
     let photo = astronaut();
-    let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
+    // Full resolution: whole-pixel keypoints, so matches between crops shift by whole pixels.
+    let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::single_scale()).unwrap();
     OFFSETS
         .iter()
         .map(|&o| {

@@ -40,7 +40,7 @@ mod gpu {
     use libtest_mimic::Failed;
 
     use super::common::golden::{golden_path, render};
-    use super::common::{Gray, astronaut, rectangles};
+    use super::common::{Gray, astronaut, rectangles, scale};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
 
@@ -120,7 +120,7 @@ mod gpu {
             keypoints.push(KeyPoint::new(x + 0.37, y - 0.81).with_angle(bin as f32 / 8.0 + 0.0625));
         }
         let mut rng = SplitMix64::new(11);
-        for _ in 0..20_000 {
+        for _ in 0..scale::pick(20_000, 1_000) {
             let x = 100.0 + (rng.below(312_000) as f32) / 1000.0;
             let y = 100.0 + (rng.below(312_000) as f32) / 1000.0;
             let angle = (rng.below(2_000_000) as f32) / 1000.0 - 1000.0;
@@ -134,7 +134,7 @@ mod gpu {
     pub fn every_width() -> Result<(), Failed> {
         let image = astronaut();
         let mut rng = SplitMix64::new(5);
-        let keypoints: Vec<KeyPoint> = (0..2000)
+        let keypoints: Vec<KeyPoint> = (0..scale::pick(2000, 200))
             .map(|_| {
                 KeyPoint::new(
                     60.0 + rng.below(392_000) as f32 / 1000.0,
@@ -170,7 +170,7 @@ mod gpu {
         let mut rng = SplitMix64::new(17);
         let mut keypoints = Vec::new();
         for size in [1.0f32, 7.5, 16.0, 31.0, 64.0, 100.0, 200.0, 333.3, 1024.0] {
-            for _ in 0..3000 {
+            for _ in 0..scale::pick(3000, 300) {
                 // Anywhere in the image, borders included: many windows do not fit and are skipped.
                 let x = rng.below(699_000) as f32 / 1000.0;
                 let y = rng.below(499_000) as f32 / 1000.0;
@@ -210,7 +210,7 @@ mod gpu {
         ] {
             let mut rng = SplitMix64::new(seed);
             let (w, h) = (image.width as u64, image.height as u64);
-            let keypoints: Vec<KeyPoint> = (0..700_000)
+            let keypoints: Vec<KeyPoint> = (0..scale::pick(700_000, 5_000))
                 .map(|_| {
                     KeyPoint::new(
                         rng.below((w - 1) * 256) as f32 / 256.0,
@@ -223,9 +223,11 @@ mod gpu {
             total += compare(&image.view(), &keypoints, 512, PatchWeights::default())?;
         }
         println!("random images: {total} descriptors, 0 differences");
-        if total < 1_000_000 {
+        // Under CLATCH_TEST_SCALE=sanitizer, 10^4 keypoints instead of 1.4 * 10^6.
+        let promised = scale::pick(1_000_000, 7_000);
+        if total < promised {
             return Err(format!(
-                "only {total} descriptors compared; the suite promises at least 10^6"
+                "only {total} descriptors compared; the suite promises at least {promised}"
             )
             .into());
         }

@@ -40,7 +40,7 @@ mod gpu {
     use clatch::{Backend, Extractor, ExtractorConfig, GrayView, KeyPoint, OpencvLatch};
     use libtest_mimic::Failed;
 
-    use super::common::{Gray, astronaut, rectangles};
+    use super::common::{Gray, astronaut, rectangles, scale};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
 
@@ -103,7 +103,7 @@ mod gpu {
         ];
         let mut total = 0;
         for (n, image) in images.iter().enumerate() {
-            let keypoints = random_keypoints(image, 5000, 10 + n as u64);
+            let keypoints = random_keypoints(image, scale::pick(5000, 500), 10 + n as u64);
             for bytes in OPENCV_BYTES {
                 for rotation in [true, false] {
                     for sigma in [0.0, 2.0] {
@@ -122,8 +122,10 @@ mod gpu {
     pub fn many_angles() -> Result<(), Failed> {
         let image = astronaut();
         let mut rng = SplitMix64::new(3);
-        // Every 0.01 degree in [-720, 720], plus random float angles (any mantissa) up to ±10^4 degrees.
+        // Every 0.01 degree in [-720, 720], plus random float angles (any mantissa) up to ±10^4 degrees
+        // (under CLATCH_TEST_SCALE=sanitizer every 0.1 degree, a tenth of the random angles).
         let mut keypoints: Vec<KeyPoint> = (-72_000..=72_000)
+            .step_by(scale::pick(1, 10))
             .map(|i| {
                 KeyPoint::new(
                     60.0 + rng.below(390 * 8) as f32 / 8.0,
@@ -132,7 +134,7 @@ mod gpu {
                 .with_angle(i as f32 / 100.0)
             })
             .collect();
-        for _ in 0..100_000 {
+        for _ in 0..scale::pick(100_000, 10_000) {
             let angle = f32::from_bits(rng.next_u64() as u32 & 0x7fff_ffff);
             if angle.is_finite() && angle < 1e4 {
                 let sign = if rng.below(2) == 0 { -1.0 } else { 1.0 };
@@ -197,7 +199,7 @@ mod gpu {
 
     pub fn half_a_million() -> Result<(), Failed> {
         let image = rectangles(1920, 1080, 6);
-        let keypoints = random_keypoints(&image, 500_000, 7);
+        let keypoints = random_keypoints(&image, scale::pick(500_000, 20_000), 7);
         let n = compare(&image.view(), &keypoints, &latch(64, true, 3, 2.0))?;
         println!("1920x1080: {n} descriptors, 0 differences");
         Ok(())

@@ -33,6 +33,10 @@ fn trials() -> Vec<Trial> {
         Trial::test("detect_flat_image_finds_nothing", gpu::flat_images),
         Trial::test("detect_images_around_twice_the_margin", gpu::margin_edges),
         Trial::test("detect_widest_and_tallest_images", gpu::extreme_shapes),
+        Trial::test(
+            "subpixel_offsets_every_pixel_and_border_equal_cpu",
+            gpu::subpixel_offsets,
+        ),
     ]
 }
 
@@ -43,7 +47,7 @@ mod gpu {
     use libtest_mimic::Failed;
 
     use super::common::golden::{golden_path, render};
-    use super::common::{Gray, astronaut, first_keypoint_difference, rectangles};
+    use super::common::{Gray, astronaut, first_keypoint_difference, rectangles, scale};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
     const THRESHOLDS: [u8; 5] = [1, 5, 20, 80, 254];
@@ -103,6 +107,10 @@ mod gpu {
         sizes: &[f32],
     ) -> Result<(usize, usize), Failed> {
         let (mut runs, mut keypoints) = (0, 0);
+        // CLATCH_TEST_SCALE=sanitizer: every other value of each list, the first and last kept.
+        let thresholds = &scale::thin(thresholds.to_vec(), 2)[..];
+        let limits = &scale::thin(limits.to_vec(), 2)[..];
+        let sizes = &scale::thin(sizes.to_vec(), 2)[..];
         for &t in thresholds {
             for &n in limits {
                 for &s in sizes {
@@ -381,7 +389,7 @@ mod gpu {
     }
 
     pub fn hd_images() -> Result<(), Failed> {
-        let (w, h) = (1920, 1080);
+        let (w, h) = scale::pick((1920, 1080), (384, 216));
         let (mut runs, mut keypoints) = (0, 0);
         for (what, image) in [
             ("noise", noise(w, h, 7)),
@@ -396,12 +404,12 @@ mod gpu {
             runs += r + r2;
             keypoints += k + k2;
         }
-        println!("1920x1080: {runs} configurations, {keypoints} keypoints identical");
+        println!("{w}x{h}: {runs} configurations, {keypoints} keypoints identical");
         Ok(())
     }
 
     pub fn full_frame() -> Result<(), Failed> {
-        let (w, h) = (5616, 3744);
+        let (w, h) = scale::pick((5616, 3744), (702, 468));
         let (mut runs, mut keypoints) = (0, 0);
         let rect = rectangles(w, h, 11);
         for (t, n, s) in [
@@ -421,7 +429,7 @@ mod gpu {
         let image = tiled(w, h, 13);
         keypoints += compare("tiled", &image.view(), &config(20, 50_000, 64.0))?.len();
         runs += 1;
-        println!("5616x3744: {runs} configurations, {keypoints} keypoints identical");
+        println!("{w}x{h}: {runs} configurations, {keypoints} keypoints identical");
         Ok(())
     }
 
@@ -437,7 +445,7 @@ mod gpu {
             ("rectangles", rectangles(300, 260, 3)),
         ] {
             let view = image.view();
-            for &(t, s) in &[(20u8, 64.0f32), (1, 16.0), (254, 16.0)] {
+            for &(t, s) in &scale::thin([(20u8, 64.0f32), (1, 16.0), (254, 16.0)], 2) {
                 let all = compare(what, &view, &config(t, usize::MAX, s))?;
                 keypoints += all.len();
                 runs += 1;
@@ -449,7 +457,7 @@ mod gpu {
                 cuts.extend((0..12).map(|_| 1 + rng.below(all.len().max(1) as u64) as usize));
                 cuts.sort_unstable();
                 cuts.dedup();
-                for &n in cuts.iter().filter(|&&n| n >= 1).take(60) {
+                for &n in cuts.iter().filter(|&&n| n >= 1).take(scale::pick(60, 6)) {
                     let few = compare(what, &view, &config(t, n, s))?;
                     if few[..] != all[..n.min(all.len())] {
                         return Err(format!("{what}: the first {n} are not a prefix").into());
@@ -465,11 +473,15 @@ mod gpu {
 
     pub fn flat_images() -> Result<(), Failed> {
         let mut runs = 0;
-        for (w, h) in [(64usize, 64usize), (100, 97), (1920, 1080)] {
+        for (w, h) in [
+            (64usize, 64usize),
+            (100, 97),
+            scale::pick((1920, 1080), (384, 216)),
+        ] {
             for level in [0u8, 128, 255] {
                 let image = from_fn(w, h, |_, _| level);
-                for &t in &THRESHOLDS {
-                    for &s in &SIZES {
+                for &t in &scale::thin(THRESHOLDS, 2) {
+                    for &s in &scale::thin(SIZES, 2) {
                         let found = compare("flat", &image.view(), &config(t, usize::MAX, s))?;
                         if !found.is_empty() {
                             return Err(format!("{w}x{h} flat {level}: {found:?}").into());
@@ -489,10 +501,10 @@ mod gpu {
         let (mut runs, mut keypoints) = (0, 0);
         for (s, m) in [(16.0f32, 16usize), (64.0, 48), (200.0, 144)] {
             assert_eq!(config(20, 1, s).margin(), m);
-            for extra in 0..6 {
+            for extra in (0..6).step_by(scale::pick(1, 2)) {
                 for (w, h) in [(2 * m + extra, 2 * m + 5), (2 * m + 7, 2 * m + extra)] {
                     let (w, h) = (w.max(64), h.max(64));
-                    for seed in 0..3 {
+                    for seed in 0..scale::pick(3, 1) {
                         let image = noise(w, h, seed * 100 + extra as u64);
                         let (r, k) =
                             grid("noise", &image.view(), &[1, 20], &[1, usize::MAX], &[s])?;
@@ -509,13 +521,81 @@ mod gpu {
     pub fn extreme_shapes() -> Result<(), Failed> {
         let max = clatch::MAX_IMAGE_SIDE;
         let (mut runs, mut keypoints) = (0, 0);
-        for (w, h) in [(max, 64), (64, max), (max, 300)] {
+        // CLATCH_TEST_SCALE=sanitizer: the widest and the tallest, one limit.
+        let shapes = scale::pick(
+            vec![(max, 64), (64, max), (max, 300)],
+            vec![(max, 64), (64, max)],
+        );
+        for (w, h) in shapes {
             let image = noise(w, h, (w * 3 + h) as u64);
-            let (r, k) = grid("noise", &image.view(), &[20], &[1000, usize::MAX], &[16.0])?;
+            let limits = scale::pick(&[1000, usize::MAX][..], &[1000]);
+            let (r, k) = grid("noise", &image.view(), &[20], limits, &[16.0])?;
             runs += r;
             keypoints += k;
         }
         println!("widest and tallest: {runs} configurations, {keypoints} keypoints identical");
+        Ok(())
+    }
+
+    /// `clatch_subpixel` against `detect::cpu::subpixel_offset` on every pixel of small images (the
+    /// border rows and columns included, where both give 0), on random pixels of photos and noise,
+    /// and on every detected keypoint at the lowest threshold (many non-peak and tied neighbours).
+    pub fn subpixel_offsets() -> Result<(), Failed> {
+        let dev = clatch::cuda::hooks::device(0)?;
+        let mut rng = SplitMix64::new(29);
+        let (mut compared, mut nonzero) = (0usize, 0usize);
+        let mut images = vec![
+            ("astronaut", astronaut()),
+            ("rectangles 333x517", rectangles(333, 517, 2)),
+        ];
+        for (w, h) in [(9usize, 9usize), (17, 40), (64, 64), (101, 33)] {
+            let pixels = clatch::synthetic::noise(w, h, (w * h) as u64).expect("synthetic image");
+            images.push(("noise", Gray::new(pixels, w, h)));
+            // Few grey levels: many equal scores, so many ties and non-peaks.
+            let steps = (0..w * h).map(|_| 60 * rng.below(3) as u8).collect();
+            images.push(("three levels", Gray::new(steps, w, h)));
+        }
+        for (name, image) in &images {
+            let view = image.view();
+            let (w, h) = (image.width, image.height);
+            let mut points: Vec<KeyPoint> = if w * h <= 64 * 64 {
+                (0..w * h)
+                    .map(|i| KeyPoint::new((i % w) as f32, (i / w) as f32))
+                    .collect()
+            } else {
+                (0..20_000)
+                    .map(|_| KeyPoint::new(rng.below(w as u64) as f32, rng.below(h as u64) as f32))
+                    .collect()
+            };
+            if w >= 64 && h >= 64 {
+                let detected = Extractor::new(
+                    Backend::Cpu,
+                    ExtractorConfig {
+                        detector: config(1, usize::MAX, 16.0),
+                        ..ExtractorConfig::default()
+                    },
+                )?
+                .detect(&view)?;
+                points.extend(detected);
+            }
+            let gpu = clatch::cuda::hooks::debug_subpixel_offsets(&dev, &view, &points)?;
+            for (k, got) in points.iter().zip(&gpu) {
+                let cpu = clatch::detect::cpu::subpixel_offset(&view, k.x as usize, k.y as usize);
+                if cpu != *got {
+                    return Err(format!(
+                        "{name} {w}x{h} at ({}, {}): cpu {cpu:?}, gpu {got:?}",
+                        k.x, k.y
+                    )
+                    .into());
+                }
+                nonzero += usize::from(cpu != [0, 0]);
+            }
+            compared += points.len();
+        }
+        println!("{compared} sub-pixel offsets ({nonzero} non-zero), 0 differences");
+        if nonzero == 0 {
+            return Err("every offset was 0: the comparison proved nothing".into());
+        }
         Ok(())
     }
 }

@@ -4,6 +4,8 @@
 //! Runs only with the `cuda` feature and a device; otherwise every test is reported as ignored with
 //! `skipped: no CUDA device`, never as passed. The trials named `small_*` are the subset meant for
 //! compute-sanitizer (`cuda_match small_`); `sanitizer_subset` is smaller still, for racecheck.
+//! `CLATCH_TEST_SCALE=sanitizer` shrinks every trial (fewer widths, k values, configurations, smaller
+//! sets, see `tests/common/scale.rs`) so that the whole binary runs under racecheck.
 
 mod common;
 
@@ -45,12 +47,31 @@ mod gpu {
     };
     use libtest_mimic::Failed;
 
-    use super::common::{astronaut, flip_bits, match_configs, random_set};
+    use super::common::{astronaut, flip_bits, match_configs, random_set, scale};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
     const WIDTHS: [usize; 7] = [8, 64, 72, 136, 256, 504, 512];
     /// Segment lengths forced on the kNN, in tiles: one block per tile, an odd count, one segment.
     const SEGMENTS: [usize; 3] = [1, 3, usize::MAX];
+
+    /// The widths of [`WIDTHS`], every `n`-th one (and the last) under `CLATCH_TEST_SCALE=sanitizer`.
+    fn widths(n: usize) -> Vec<usize> {
+        scale::thin(WIDTHS, n)
+    }
+
+    /// k = 1..=`max`; under `CLATCH_TEST_SCALE=sanitizer` 1, 2, 3 and 8 (lists of 1, 2, 4 and 8).
+    fn ks(max: usize) -> Vec<usize> {
+        scale::pick((1..=8).collect(), vec![1, 2, 3, 8])
+            .into_iter()
+            .filter(|&k| k <= max)
+            .collect()
+    }
+
+    /// Every filter combination; under `CLATCH_TEST_SCALE=sanitizer` every fifth (each ratio, each
+    /// cross-check setting and each distance limit still among them).
+    fn configs() -> Vec<MatchConfig> {
+        scale::thin(match_configs(), 5)
+    }
 
     /// The kNN kernel families the device runs for k neighbours: the popcount kernels always, the
     /// tensor-core kernels where the device has them and k <= 2.
@@ -224,11 +245,11 @@ mod gpu {
         let mut rng = SplitMix64::new(1);
         let mut pairs = 0;
         let mut runs = 0;
-        for bits in WIDTHS {
-            for (nq, nt) in [(1, 1), (1, 2), (7, 300), (130, 64), (257, 129)] {
+        for bits in widths(3) {
+            for (nq, nt) in scale::thin([(1, 1), (1, 2), (7, 300), (130, 64), (257, 129)], 2) {
                 let query = random_set(width(bits), nq, &mut rng);
                 let train = random_set(width(bits), nt, &mut rng);
-                for k in 1..=8.min(nt) {
+                for k in ks(nt) {
                     pairs +=
                         compare_knn(&format!("{bits} bits, {nq}x{nt}"), &query, &train, k, true)?;
                     runs += 1;
@@ -243,7 +264,7 @@ mod gpu {
 
     pub fn small_ties() -> Result<(), Failed> {
         let (mut pairs, mut ties) = (0, 0);
-        for (i, bits) in WIDTHS.into_iter().enumerate() {
+        for (i, bits) in widths(2).into_iter().enumerate() {
             let (query, train) = tied_sets(bits, 200, 150, 40 + i as u64);
             for k in [1, 2, 3, 8] {
                 ties += ties_at_cut(&query, &train, k);
@@ -268,7 +289,7 @@ mod gpu {
         train: &DescriptorSet,
     ) -> Result<(usize, usize), Failed> {
         let (mut queries, mut kept) = (0, 0);
-        for config in match_configs() {
+        for config in configs() {
             if config.ratio.is_some() && train.len() < 2 {
                 continue;
             }
@@ -305,12 +326,12 @@ mod gpu {
     pub fn small_match() -> Result<(), Failed> {
         let (mut queries, mut kept) = (0, 0);
         let mut rng = SplitMix64::new(2);
-        for (i, bits) in WIDTHS.into_iter().enumerate() {
+        for (i, bits) in widths(3).into_iter().enumerate() {
             let (query, train) = tied_sets(bits, 300, 250, 70 + i as u64);
             let (q, k) = compare_match(&format!("tied {bits} bits"), &query, &train)?;
             queries += q;
             kept += k;
-            for (nq, nt) in [(1, 1), (1, 2), (7, 300), (300, 7)] {
+            for (nq, nt) in scale::thin([(1, 1), (1, 2), (7, 300), (300, 7)], 3) {
                 let query = random_set(width(bits), nq, &mut rng);
                 let train = random_set(width(bits), nt, &mut rng);
                 let (q, k) = compare_match(&format!("{bits} bits, {nq}x{nt}"), &query, &train)?;
@@ -362,7 +383,7 @@ mod gpu {
         let row = random_set(width(256), 1, &mut rng);
         let same = DescriptorSet::from_words(width(256), row.as_words().repeat(700)).unwrap();
         let query = random_set(width(256), 333, &mut rng);
-        for k in 1..=8 {
+        for k in ks(8) {
             compare_knn("all-equal gallery", &query, &same, k, true)?;
         }
         println!(
@@ -374,12 +395,13 @@ mod gpu {
     pub fn knn_random() -> Result<(), Failed> {
         let mut rng = SplitMix64::new(4);
         let mut pairs = 0;
-        for bits in WIDTHS {
-            for (nq, nt) in [(1000, 1000), (4097, 3001)] {
+        let shapes = scale::pick([(1000, 1000), (4097, 3001)], [(100, 100), (257, 301)]);
+        for bits in widths(2) {
+            for (nq, nt) in shapes {
                 let query = random_set(width(bits), nq, &mut rng);
                 let train = random_set(width(bits), nt, &mut rng);
-                for k in 1..=8 {
-                    let segmented = nq == 1000 && (k == 1 || k == 8);
+                for k in ks(8) {
+                    let segmented = (nq, nt) == shapes[0] && (k == 1 || k == 8);
                     pairs += compare_knn(
                         &format!("{bits} bits, {nq}x{nt}"),
                         &query,
@@ -391,22 +413,25 @@ mod gpu {
             }
         }
         println!(
-            "random descriptors, 7 widths, k = 1..8, 1000x1000 and 4097x3001: {pairs} pairs: identical"
+            "random descriptors, {} widths, k in {:?}, {shapes:?}: {pairs} pairs: identical",
+            widths(2).len(),
+            ks(8)
         );
         Ok(())
     }
 
     pub fn knn_ties() -> Result<(), Failed> {
         let (mut pairs, mut ties) = (0, 0);
-        for (i, bits) in WIDTHS.into_iter().enumerate() {
-            let (query, train) = tied_sets(bits, 3000, 2500, 90 + i as u64);
+        let (nq, nt) = scale::pick((3000, 2500), (300, 250));
+        for (i, bits) in widths(2).into_iter().enumerate() {
+            let (query, train) = tied_sets(bits, nq, nt, 90 + i as u64);
             for k in [1, 2, 4, 5, 8] {
                 ties += ties_at_cut(&query, &train, k);
                 pairs += compare_knn(&format!("tied {bits} bits"), &query, &train, k, k == 2)?;
             }
         }
         println!(
-            "tied sets 3000x2500: {pairs} pairs, {ties} queries with a tie at the k-th neighbour: identical"
+            "tied sets {nq}x{nt}: {pairs} pairs, {ties} queries with a tie at the k-th neighbour: identical"
         );
         Ok(())
     }
@@ -414,15 +439,25 @@ mod gpu {
     pub fn knn_large() -> Result<(), Failed> {
         let mut rng = SplitMix64::new(5);
         let mut pairs = 0;
-        let big_query = random_set(width(512), 20_000, &mut rng);
-        let big_train = random_set(width(512), 20_000, &mut rng);
-        pairs += compare_knn("512 bits, 20000x20000", &big_query, &big_train, 2, false)?;
-        let (query, train) = tied_sets(136, 20_000, 20_000, 6);
-        pairs += compare_knn("tied 136 bits, 20000x20000", &query, &train, 8, false)?;
+        // CLATCH_TEST_SCALE=sanitizer: 1000x1000 for the large sets, and one gallery row, k = 1, for
+        // the grid limit.
+        let n = scale::pick(20_000, 1_000);
+        let big_query = random_set(width(512), n, &mut rng);
+        let big_train = random_set(width(512), n, &mut rng);
+        pairs += compare_knn(
+            &format!("512 bits, {n}x{n}"),
+            &big_query,
+            &big_train,
+            2,
+            false,
+        )?;
+        let (query, train) = tied_sets(136, n, n, 6);
+        pairs += compare_knn(&format!("tied 136 bits, {n}x{n}"), &query, &train, 8, false)?;
         // More queries than a grid of 65535 blocks of one query per thread could hold.
+        let (n_few, k) = scale::pick((5, 3), (1, 1));
         let many = random_set(width(8), 65_535 * 128 + 3, &mut rng);
-        let few = random_set(width(8), 5, &mut rng);
-        pairs += compare_knn("8 bits, 8388483x5", &many, &few, 3, false)?;
+        let few = random_set(width(8), n_few, &mut rng);
+        pairs += compare_knn(&format!("8 bits, 8388483x{n_few}"), &many, &few, k, false)?;
         // One query against a long gallery: many segments, merged.
         let one = random_set(width(512), 1, &mut rng);
         let long = random_set(width(512), 200_003, &mut rng);
@@ -435,19 +470,24 @@ mod gpu {
     pub fn every_config() -> Result<(), Failed> {
         let (mut queries, mut kept) = (0, 0);
         let mut rng = SplitMix64::new(7);
-        for (i, bits) in WIDTHS.into_iter().enumerate() {
-            let (query, train) = tied_sets(bits, 3000, 2000, 200 + i as u64);
-            let (q, k) = compare_match(&format!("tied {bits} bits 3000x2000"), &query, &train)?;
+        // CLATCH_TEST_SCALE=sanitizer: a tenth of each set, three widths.
+        let (tied, random, large) = scale::pick(
+            ((3000, 2000), (4097, 3001), 20_000),
+            ((300, 200), (257, 301), 1_000),
+        );
+        for (i, bits) in widths(3).into_iter().enumerate() {
+            let (query, train) = tied_sets(bits, tied.0, tied.1, 200 + i as u64);
+            let (q, k) = compare_match(&format!("tied {bits} bits {tied:?}"), &query, &train)?;
             queries += q;
             kept += k;
-            let query = random_set(width(bits), 4097, &mut rng);
-            let train = random_set(width(bits), 3001, &mut rng);
-            let (q, k) = compare_match(&format!("{bits} bits 4097x3001"), &query, &train)?;
+            let query = random_set(width(bits), random.0, &mut rng);
+            let train = random_set(width(bits), random.1, &mut rng);
+            let (q, k) = compare_match(&format!("{bits} bits {random:?}"), &query, &train)?;
             queries += q;
             kept += k;
         }
         // Large and tie-heavy: many blocks fold the reverse 1-NN of the same gallery rows.
-        let (query, train) = tied_sets(512, 20_000, 20_000, 300);
+        let (query, train) = tied_sets(512, large, large, 300);
         for config in [
             MatchConfig::default(),
             MatchConfig {
@@ -463,7 +503,7 @@ mod gpu {
                 )?;
                 if cpu != gpu {
                     return Err(format!(
-                        "tied 512 bits 20000x20000, {config:?}, {family:?}: cpu kept {}, gpu {}",
+                        "tied 512 bits {large}x{large}, {config:?}, {family:?}: cpu kept {}, gpu {}",
                         cpu.len(),
                         gpu.len()
                     )
@@ -486,15 +526,20 @@ mod gpu {
         let ones = |n: u32| if n == 64 { u64::MAX } else { (1u64 << n) - 1 };
         let query = DescriptorSet::from_words(w, vec![0]).unwrap();
         let mut cases = 0;
-        for ratio in [0.8f32, 0.75, 0.7, 0.9, 1.0, 0.3] {
+        // CLATCH_TEST_SCALE=sanitizer: four ratios, every ninth d2, and only the d1 next to the
+        // boundary (and the extremes).
+        for ratio in scale::thin([0.8f32, 0.75, 0.7, 0.9, 1.0, 0.3], 2) {
             let config = MatchConfig {
                 ratio: Some(ratio),
                 cross_check: false,
                 max_distance: None,
             };
             let (cpu, gpu) = (matcher(Backend::Cpu, config.clone()), matcher(GPU, config));
-            for d2 in 1..=64u32 {
-                for d1 in 0..d2 {
+            for d2 in (1..=64u32).step_by(scale::pick(1, 9)) {
+                let edge = (ratio * d2 as f32) as u32;
+                for d1 in (0..d2).filter(|&d1| {
+                    !scale::sanitizer() || d1 == 0 || d1 + 1 == d2 || d1.abs_diff(edge) <= 1
+                }) {
                     let train = DescriptorSet::from_words(w, vec![ones(d1), ones(d2)]).unwrap();
                     let (c, g) = (
                         cpu.match_descriptors(&query, &train)?,
@@ -520,9 +565,17 @@ mod gpu {
         let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
         let a = extractor.detect_and_describe(&image.view())?;
         let b = extractor.detect_and_describe(&rotated.view())?;
-        let (query, train) = (&a.descriptors, &b.descriptors);
+        // CLATCH_TEST_SCALE=sanitizer: the first 300 descriptors of each.
+        let first = |set: &DescriptorSet| {
+            let n = scale::pick(set.len(), set.len().min(300));
+            DescriptorSet::from_words(
+                set.width(),
+                set.as_words()[..n * set.width().words()].to_vec(),
+            )
+        };
+        let (query, train) = (&first(&a.descriptors)?, &first(&b.descriptors)?);
         let mut pairs = 0;
-        for k in 1..=8 {
+        for k in ks(8) {
             pairs += compare_knn("astronaut vs rotated", query, train, k, k <= 2)?;
         }
         let (q, kept) = compare_match("astronaut vs rotated", query, train)?;

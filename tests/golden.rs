@@ -8,7 +8,7 @@
 //! # File format (text, one record per line, `#` starts a comment line)
 //!
 //! ```text
-//! detect <n>                            n keypoints of the default DetectorConfig, in output order:
+//! detect <n>                            n keypoints of ExtractorConfig::single_scale(), in output order:
 //! <x> <y> <angle> <response>            f32 values printed by Rust's `Display` (shortest exact form)
 //! describe <section> <bits> <n>         n = length of the keypoint list (the same list in every section)
 //! <i> <x> <y> <size> <angle> <result>   keypoint i of the list; result is `skipped`, or the descriptor:
@@ -25,8 +25,8 @@
 
 mod common;
 
+use clatch::Backend;
 use clatch::describe::triplets::TRIPLETS;
-use clatch::{Backend, DetectorConfig};
 use common::golden::{golden_path, keypoint_list, parse_hex_row, render, sections};
 use common::{Gray, astronaut};
 
@@ -196,7 +196,7 @@ fn golden_file() {
 
 fn check_plausible(image: &Gray, golden: &Golden) {
     // ---- detection ----
-    let config = DetectorConfig::default();
+    let config = clatch::ExtractorConfig::single_scale().detector;
     let m = config.margin();
     assert!(
         golden.detected.len() > 200,

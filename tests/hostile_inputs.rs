@@ -121,6 +121,11 @@ fn random_config(rng: &mut SplitMix64) -> ExtractorConfig {
         } else {
             clatch::Ranking::Harris
         },
+        subpixel: if rng.below(2) == 0 {
+            clatch::Subpixel::None
+        } else {
+            clatch::Subpixel::Score
+        },
     };
     let bits = match rng.below(6) {
         0 => rng.below(600) as usize,

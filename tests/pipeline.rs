@@ -19,9 +19,11 @@ fn extractor_with(keypoint_size: f32) -> Extractor {
         ExtractorConfig {
             detector: DetectorConfig {
                 keypoint_size,
+                subpixel: clatch::Subpixel::None,
                 ..DetectorConfig::default()
             },
-            ..ExtractorConfig::default()
+            // Full resolution only: these tests describe detected keypoints on the input itself.
+            ..ExtractorConfig::single_scale()
         },
     )
     .unwrap()
@@ -308,7 +310,7 @@ fn run_everything(image: &Gray) -> (Features, Features, Vec<clatch::Match>, clat
             width: DescriptorWidth::from_bits(256).unwrap(),
             weights: PatchWeights::uniform(),
         },
-        ..ExtractorConfig::default()
+        ..ExtractorConfig::single_scale()
     };
     let e = Extractor::new(Backend::Cpu, config).unwrap();
     let features = e.detect_and_describe(&image.view()).unwrap();

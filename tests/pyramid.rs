@@ -14,6 +14,11 @@ fn extractor(pyramid: Option<Pyramid>) -> Extractor {
         Backend::Cpu,
         ExtractorConfig {
             pyramid,
+            // Whole pixels: these tests compare positions and descriptors with full-resolution ones.
+            detector: DetectorConfig {
+                subpixel: clatch::Subpixel::None,
+                ..DetectorConfig::default()
+            },
             ..ExtractorConfig::default()
         },
     )
@@ -84,18 +89,31 @@ fn a_one_level_pyramid_is_the_plain_detector() {
 #[test]
 fn levels_report_octave_size_and_level0_positions() {
     let image = rectangles(800, 600, 5);
-    let config = DetectorConfig::default();
-    let e = extractor(Some(Pyramid {
-        levels: 4,
-        scale_factor: 1.5,
-    }));
+    // The global budget: the strongest of all levels, so that a smaller budget keeps a prefix.
+    let config = DetectorConfig {
+        level_budget: clatch::LevelBudget::Global,
+        subpixel: clatch::Subpixel::None,
+        ..DetectorConfig::default()
+    };
+    let e = Extractor::new(
+        Backend::Cpu,
+        ExtractorConfig {
+            detector: config.clone(),
+            pyramid: Some(Pyramid {
+                levels: 4,
+                scale_factor: 1.5,
+            }),
+            ..ExtractorConfig::default()
+        },
+    )
+    .unwrap();
     let features = e.detect_and_describe(&image.view()).unwrap();
     assert_eq!(features.keypoints.len(), features.descriptors.len());
     assert_eq!(features.keypoints, e.detect(&image.view()).unwrap());
     let mut per_octave = [0usize; 4];
     for k in &features.keypoints {
         per_octave[k.octave as usize] += 1;
-        assert_eq!(k.size, 64.0 * 1.5f32.powi(k.octave));
+        assert_eq!(k.size, config.keypoint_size * 1.5f32.powi(k.octave));
         // The window the size stands for fits level 0, like every detected keypoint's.
         assert!(
             SamplingFrame::of(k).fits(image.width, image.height),

@@ -20,8 +20,13 @@ fn extractor(detector: DetectorConfig) -> Extractor {
     Extractor::new(
         Backend::Cpu,
         ExtractorConfig {
-            detector,
-            ..ExtractorConfig::default()
+            detector: DetectorConfig {
+                subpixel: clatch::Subpixel::None,
+                ..detector
+            },
+            // Quarter turns commute with full-resolution detection only (pyramid levels sample
+            // their source off the pixel grid).
+            ..ExtractorConfig::single_scale()
         },
     )
     .unwrap()

@@ -7,7 +7,18 @@
 #     bash tools/gpu_suite.sh soak [SECONDS]            (tests/cuda_soak.rs for SECONDS, default 570)
 #     bash tools/gpu_suite.sh sanitize-all [TOOL...]    (every GPU test binary, whole, under each tool;
 #                                                       default memcheck racecheck initcheck synccheck;
-#                                                       SAN_TIMEOUT=S bounds each binary's run, default 590)
+#                                                       SAN_TIMEOUT=S bounds each binary's run, default 590;
+#                                                       racecheck runs with CLATCH_TEST_SCALE=sanitizer)
+#     bash tools/gpu_suite.sh racecheck-parallel [BIN...]
+#                                                      (every GPU test binary but the soak, or the BINs named,
+#                                                       whole, under racecheck with CLATCH_TEST_SCALE=sanitizer,
+#                                                       all at once; SAN_TIMEOUT=S bounds each, default 300;
+#                                                       full logs' tails in $OUT/racecheck_BIN.txt)
+# CLATCH_TEST_SCALE=sanitizer (tests/common/scale.rs) shrinks the GPU tests' workload (fewer trials,
+# smaller images and sets, fewer launches; every kernel and path still compared with the CPU) so that
+# racecheck, which tracks every shared-memory access, gets through a whole binary in a few minutes.
+# memcheck, initcheck and synccheck run the full workload. Under any sanitizer, cuda_faults reports but
+# does not judge the device's free memory after its failed calls (the sanitizer's allocations move it).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 O=${OUT:-/tmp/out}; mkdir -p "$O" .gpu/bin
@@ -66,14 +77,38 @@ if [ "$part" = sanitize-all ]; then
     shift
     tools=${*:-memcheck racecheck initcheck synccheck}
     for tool in $tools; do
+        # racecheck is far slower than the others: the GPU tests shrink their workload for it.
+        scale=full
+        [ "$tool" = racecheck ] && scale=sanitizer
         # Cheapest first, so a short call still covers the most binaries; SAN_TIMEOUT bounds each run.
         for t in cuda_async cuda_faults cuda_match cuda_pyramid cuda_detect cuda_describe cuda_describe_opencv; do
             start=$(date +%s)
-            echo "== $tool $t (whole)" >> "$O/sanitize.txt"
-            timeout "${SAN_TIMEOUT:-590}" compute-sanitizer --tool "$tool" "$B/$t" > /tmp/san.txt 2>&1; rc=$?
+            echo "== $tool $t (whole, CLATCH_TEST_SCALE=$scale)" >> "$O/sanitize.txt"
+            CLATCH_TEST_SCALE=$scale timeout "${SAN_TIMEOUT:-590}" compute-sanitizer --tool "$tool" "$B/$t" > /tmp/san.txt 2>&1; rc=$?
             grep -E "^test result|SUMMARY" /tmp/san.txt >> "$O/sanitize.txt"
-            summary+=("sanitizer $tool $t (whole) rc=$rc $(( $(date +%s) - start ))s: $(grep -E '^test result' /tmp/san.txt | tail -1 | cut -c1-60) $(grep -E 'ERROR SUMMARY|RACECHECK SUMMARY' /tmp/san.txt | tail -1)")
+            summary+=("sanitizer $tool $t (whole, $scale) rc=$rc $(( $(date +%s) - start ))s: $(grep -E '^test result' /tmp/san.txt | tail -1 | cut -c1-60) $(grep -E 'ERROR SUMMARY|RACECHECK SUMMARY' /tmp/san.txt | tail -1)")
         done
+    done
+fi
+if [ "$part" = racecheck-parallel ]; then
+    shift
+    bins=${*:-cuda_async cuda_faults cuda_match cuda_pyramid cuda_detect cuda_describe cuda_describe_opencv}
+    mkdir -p /tmp/racecheck
+    for t in $bins; do
+        (
+            start=$(date +%s)
+            CLATCH_TEST_SCALE=sanitizer timeout "${SAN_TIMEOUT:-300}" \
+                compute-sanitizer --tool racecheck "$B/$t" > "/tmp/racecheck/$t.txt" 2>&1
+            echo "rc=$? $(( $(date +%s) - start ))s" > "/tmp/racecheck/$t.rc"
+        ) &
+    done
+    wait
+    for t in $bins; do
+        log=/tmp/racecheck/$t.txt
+        tail -n 400 "$log" > "$O/racecheck_$t.txt"
+        echo "== racecheck $t (whole, CLATCH_TEST_SCALE=sanitizer, in parallel) $(cat "/tmp/racecheck/$t.rc")" >> "$O/sanitize.txt"
+        grep -E "^test result|SUMMARY" "$log" >> "$O/sanitize.txt"
+        summary+=("racecheck $t (whole, scaled, in parallel) $(cat "/tmp/racecheck/$t.rc"): $(grep -E '^test result' "$log" | tail -1 | cut -c1-60) $(grep -E 'RACECHECK SUMMARY|ERROR SUMMARY' "$log" | tail -1)")
     done
 fi
 printf '%s\n' "${summary[@]}" | tee "$O/summary.txt"

@@ -58,7 +58,13 @@ struct Plan {
 
 /// Runs `clatch colmap`.
 pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
-    let settings = settings(&args.backend, &args.detect, Some(&args.matching))?;
+    let subpixel = args.subpixel.library();
+    let settings = settings(
+        &args.backend,
+        &args.detect,
+        Some(subpixel),
+        Some(&args.matching),
+    )?;
     let plan = preflight(args)?;
     let mut times = Times::default();
 

@@ -86,7 +86,8 @@ pub fn run_demo(
 
 /// Runs `clatch demo`.
 pub fn main(args: &DemoArgs) -> Result<(), CliError> {
-    let settings = settings(&args.backend, &args.detect, Some(&args.matching))?;
+    let subpixel = args.subpixel.library();
+    let settings = settings(&args.backend, &args.detect, subpixel, Some(&args.matching))?;
     check_picture_path(&args.output)?;
     let progress = Progress::new(DEMO_STAGES + 1);
     let demo = run_demo(&settings, args.check.inlier_px, &progress)?;

@@ -76,8 +76,17 @@ pub fn output_paths(prefix: &Path) -> Result<[PathBuf; 3], CliError> {
 
 /// Runs `clatch extract`.
 pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
-    let settings = settings(&args.backend, &args.detect, None)?;
-    let extractor = Extractor::new(settings.backend, settings.extractor)?;
+    let settings = settings(&args.backend, &args.detect, args.subpixel.library(), None)?;
+    // OpenCV-compatible LATCH describes full-resolution keypoints: single scale unless --pyramid
+    // is asked for, which extract_opencv then refuses.
+    let config = if args.opencv.opencv_latch {
+        let mut config = args.detect.config_full_resolution()?;
+        config.detector.subpixel = settings.extractor.detector.subpixel;
+        config
+    } else {
+        settings.extractor
+    };
+    let extractor = Extractor::new(settings.backend, config)?;
     let [csv, json, npy_path] = output_paths(&args.output)?;
     check_distinct(
         &[("image", &args.image)],

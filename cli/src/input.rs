@@ -34,10 +34,11 @@ pub fn probe_detectable(path: &Path, limits: &DecodeLimits) -> Result<ImageInfo,
 }
 
 /// Refuses an image in which the detector cannot score a single pixel: it scores only pixels at least
-/// [`DetectorConfig::margin`] from every border, so a side needs `2 margin + 1` pixels.
+/// [`DetectorConfig::margin`] from every border, so a side needs `2 margin + 1` pixels, and never
+/// less than the library's 64x64 minimum.
 pub fn check_detectable(path: &Path, width: u32, height: u32) -> Result<(), CliError> {
     let margin = DetectorConfig::default().margin();
-    let min = 2 * margin + 1;
+    let min = (2 * margin + 1).max(WINDOW);
     if (width as usize) < min || (height as usize) < min {
         return Err(CliError::ImageTooSmall {
             path: path.to_path_buf(),
@@ -74,22 +75,23 @@ mod tests {
 
     #[test]
     fn the_detectable_minimum_follows_the_detector_margin() {
-        // The default 64-pixel keypoints: margin ceil(64 / sqrt 2) + 2 = 48, so 97 pixels.
+        // The default 40-pixel keypoints: margin ceil(40 / sqrt 2) + 2 = 31, so 63 pixels, raised to
+        // the library's 64.
         let path = Path::new("img.png");
-        assert!(check_detectable(path, 97, 97).is_ok());
-        let e = check_detectable(path, 96, 500).unwrap_err();
+        assert!(check_detectable(path, 64, 64).is_ok());
+        let e = check_detectable(path, 63, 500).unwrap_err();
         assert!(
             matches!(
                 e,
                 CliError::ImageTooSmall {
-                    min: 97,
-                    margin: 48,
+                    min: 64,
+                    margin: 31,
                     ..
                 }
             ),
             "{e}"
         );
-        assert!(check_detectable(path, 500, 64).is_err());
+        assert!(check_detectable(path, 500, 63).is_err());
     }
 
     fn temp_path(name: &str) -> std::path::PathBuf {

@@ -31,7 +31,7 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use clatch::decode::DecodeLimits;
 use clatch::{Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, ExtractorConfig};
-use clatch::{MatchConfig, OpencvLatch, PatchWeights, Pyramid};
+use clatch::{MatchConfig, OpencvLatch, Pyramid, Subpixel};
 
 use crate::error::CliError;
 use crate::pipeline::Settings;
@@ -138,6 +138,8 @@ pub struct EvalArgs {
     #[command(flatten)]
     pub detect: DetectArgs,
     #[command(flatten)]
+    pub subpixel: SubpixelArgs,
+    #[command(flatten)]
     pub matching: MatchingArgs,
     #[command(flatten)]
     pub check: CheckArgs,
@@ -153,6 +155,8 @@ pub struct DemoArgs {
     pub backend: BackendArgs,
     #[command(flatten)]
     pub detect: DetectArgs,
+    #[command(flatten)]
+    pub subpixel: SubpixelArgs,
     #[command(flatten)]
     pub matching: MatchingArgs,
     #[command(flatten)]
@@ -184,6 +188,8 @@ pub struct MatchArgs {
     #[command(flatten)]
     pub detect: DetectArgs,
     #[command(flatten)]
+    pub subpixel: SubpixelArgs,
+    #[command(flatten)]
     pub matching: MatchingArgs,
     #[command(flatten)]
     pub check: CheckArgs,
@@ -205,6 +211,8 @@ pub struct ExtractArgs {
     pub backend: BackendArgs,
     #[command(flatten)]
     pub detect: DetectArgs,
+    #[command(flatten)]
+    pub subpixel: SubpixelArgs,
     #[command(flatten)]
     pub opencv: OpencvLatchArgs,
 }
@@ -278,7 +286,8 @@ pub struct ColmapArgs {
     #[arg(long, value_name = "DIR")]
     pub workspace: Option<PathBuf>,
     /// How the keypoint positions written to COLMAP are refined below a pixel (descriptors and
-    /// matches do not change).
+    /// matches do not change): `score` is the library's (as `--subpixel score` of the other
+    /// commands, on every pyramid level), `corner` a least-squares corner over a window of the photo.
     #[arg(long, value_enum, default_value_t = subpixel::Subpixel::Score)]
     pub subpixel: subpixel::Subpixel,
     /// Half side of the window of --subpixel corner.
@@ -357,28 +366,64 @@ pub struct DetectArgs {
     #[arg(long, default_value_t = 5000, value_name = "N", value_parser = parse_positive)]
     pub max_keypoints: usize,
     /// Side in pixels of the window each detected keypoint is described over (the 64x64 samples are
-    /// spread over it): 1 to 1024.
-    #[arg(long, default_value_t = clatch::KeyPoint::DEFAULT_SIZE, value_name = "PIXELS", value_parser = parse_keypoint_size)]
-    pub keypoint_size: f32,
+    /// spread over it): 1 to 1024. Default 40, and 64 with --single-scale.
+    #[arg(long, value_name = "PIXELS", value_parser = parse_keypoint_size)]
+    pub keypoint_size: Option<f32>,
     /// Descriptor width in bits: a multiple of 8 from 8 to 512.
     #[arg(long, default_value_t = 512, value_parser = parse_bits)]
     pub bits: usize,
     /// Detect on a scale pyramid of LEVELS levels (full resolution included), each FACTOR (in
     /// [1.05, 2], default 2) smaller than the one before; each keypoint is described on its own level.
+    /// Default 8:1.2 (the library's default); see --single-scale.
     #[arg(long, value_name = "LEVELS[:FACTOR]", value_parser = parse_pyramid)]
     pub pyramid: Option<Pyramid>,
+    /// The single-scale speed preset: full resolution only, 64-pixel windows, the strongest keypoints
+    /// anywhere (the defaults of clatch before 0.2). Fewer correct matches under scale and viewpoint
+    /// change.
+    #[arg(long, conflicts_with_all = ["pyramid", "level_budget"])]
+    pub single_scale: bool,
     /// Spread keypoints over a GRID x GRID division of each image (1: the strongest anywhere; default
     /// 1, and 8 for `colmap`, so that textured corners of a photo cannot take every keypoint).
     #[arg(long, value_name = "GRID", value_parser = clap::value_parser!(u32).range(1..=64))]
     pub grid: Option<u32>,
     /// How --max-keypoints is shared among pyramid levels: `global` (the strongest of all levels) or
-    /// `geometric` (ORB's shares, each level's in proportion to its scale).
-    #[arg(long, value_enum, default_value_t = LevelBudgetArg::Global)]
-    pub level_budget: LevelBudgetArg,
+    /// `geometric` (ORB's shares, each level's in proportion to its scale; the default).
+    #[arg(long, value_enum)]
+    pub level_budget: Option<LevelBudgetArg>,
     /// What orders corners when the strongest are kept: `fast` (the FAST score) or `harris` (ORB's
     /// Harris response over the strongest 2 x --max-keypoints).
     #[arg(long, value_enum, default_value_t = RankingArg::Fast)]
     pub ranking: RankingArg,
+}
+
+/// `--subpixel` (every command but `colmap`, which adds its `corner` method).
+#[derive(Debug, Args)]
+pub struct SubpixelArgs {
+    /// Sub-pixel keypoint positions: `none` (whole pixels of each keypoint's pyramid level) or `score`
+    /// (per axis, the peak of the parabola through the FAST scores of the keypoint and its 4
+    /// neighbours, on every level; descriptors do not change). Default `score`, and `none` with
+    /// --single-scale.
+    #[arg(long, value_enum)]
+    pub subpixel: Option<SubpixelArg>,
+}
+
+/// `--subpixel`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SubpixelArg {
+    /// Whole pixels.
+    None,
+    /// The peak of the FAST score, per axis.
+    Score,
+}
+
+impl SubpixelArgs {
+    /// The library's setting, when given.
+    pub fn library(&self) -> Option<Subpixel> {
+        self.subpixel.map(|s| match s {
+            SubpixelArg::None => Subpixel::None,
+            SubpixelArg::Score => Subpixel::Score,
+        })
+    }
 }
 
 /// `--ranking`.
@@ -520,28 +565,48 @@ impl BackendArgs {
 }
 
 impl DetectArgs {
-    /// Detector and descriptor configuration.
+    /// Detector and descriptor configuration: the library's default (or the single-scale preset)
+    /// with the flags given on top.
     pub fn config(&self) -> Result<ExtractorConfig, CliError> {
+        self.config_from(if self.single_scale {
+            ExtractorConfig::single_scale()
+        } else {
+            ExtractorConfig::default()
+        })
+    }
+
+    /// [`DetectArgs::config`] for OpenCV-compatible LATCH, which describes full-resolution keypoints
+    /// only: the single-scale preset unless --pyramid is given (which the caller then refuses).
+    pub fn config_full_resolution(&self) -> Result<ExtractorConfig, CliError> {
+        if self.pyramid.is_some() {
+            return self.config();
+        }
+        self.config_from(ExtractorConfig::single_scale())
+    }
+
+    fn config_from(&self, base: ExtractorConfig) -> Result<ExtractorConfig, CliError> {
         Ok(ExtractorConfig {
             detector: DetectorConfig {
                 threshold: self.threshold,
                 max_keypoints: self.max_keypoints,
-                keypoint_size: self.keypoint_size,
+                keypoint_size: self.keypoint_size.unwrap_or(base.detector.keypoint_size),
                 grid: self.grid.unwrap_or(1) as usize,
                 level_budget: match self.level_budget {
-                    LevelBudgetArg::Global => clatch::LevelBudget::Global,
-                    LevelBudgetArg::Geometric => clatch::LevelBudget::Geometric,
+                    None => base.detector.level_budget,
+                    Some(LevelBudgetArg::Global) => clatch::LevelBudget::Global,
+                    Some(LevelBudgetArg::Geometric) => clatch::LevelBudget::Geometric,
                 },
                 ranking: match self.ranking {
                     RankingArg::Fast => clatch::Ranking::Fast,
                     RankingArg::Harris => clatch::Ranking::Harris,
                 },
+                subpixel: base.detector.subpixel,
             },
             descriptor: DescriptorConfig {
                 width: DescriptorWidth::from_bits(self.bits)?,
-                weights: PatchWeights::default(),
+                ..base.descriptor
             },
-            pyramid: self.pyramid,
+            pyramid: self.pyramid.or(base.pyramid),
         })
     }
 }
@@ -557,15 +622,20 @@ impl MatchingArgs {
     }
 }
 
-/// Everything the pipeline needs, from the shared flags.
+/// Everything the pipeline needs, from the shared flags and the sub-pixel setting.
 pub fn settings(
     backend: &BackendArgs,
     detect: &DetectArgs,
+    subpixel: Option<Subpixel>,
     matching: Option<&MatchingArgs>,
 ) -> Result<Settings, CliError> {
+    let mut extractor = detect.config()?;
+    if let Some(subpixel) = subpixel {
+        extractor.detector.subpixel = subpixel;
+    }
     Ok(Settings {
         backend: backend.resolve()?,
-        extractor: detect.config()?,
+        extractor,
         matching: matching.map(MatchingArgs::config).unwrap_or_default(),
         opencv_latch: None,
     })
@@ -711,5 +781,60 @@ mod tests {
             args.resolve(),
             Err(CliError::Clatch(clatch::Error::BackendUnavailable { .. }))
         ));
+    }
+
+    #[test]
+    fn subpixel_reaches_the_library_and_colmap_keeps_score() {
+        let extract = |extra: &[&str]| {
+            let args = [&["clatch", "extract", "a.png", "-o", "a"][..], extra].concat();
+            match Cli::try_parse_from(args).map(|c| c.command) {
+                Ok(Command::Extract(e)) => Ok(e.subpixel.library()),
+                Ok(_) => panic!("parsed the wrong subcommand"),
+                Err(e) => Err(e),
+            }
+        };
+        // Not given: the library's default (or the single-scale preset's) stays.
+        assert_eq!(extract(&[]).unwrap(), None);
+        assert_eq!(
+            extract(&["--subpixel", "score"]).unwrap(),
+            Some(Subpixel::Score)
+        );
+        assert_eq!(
+            extract(&["--subpixel", "none"]).unwrap(),
+            Some(Subpixel::None)
+        );
+        assert!(extract(&["--subpixel", "corner"]).is_err());
+        for command in ["match", "eval", "demo"] {
+            let mut args = vec!["clatch", command];
+            if command == "match" {
+                args.extend(["a.png", "b.png"]);
+            }
+            args.extend(["--subpixel", "score"]);
+            assert!(Cli::try_parse_from(&args).is_ok(), "{args:?}");
+        }
+        let colmap = |extra: &[&str]| {
+            let args = [
+                &["clatch", "colmap", "--images", "d", "--database", "d.db"][..],
+                extra,
+            ]
+            .concat();
+            let Command::Colmap(c) = Cli::try_parse_from(args).unwrap().command else {
+                panic!("parsed the wrong subcommand")
+            };
+            c.subpixel
+        };
+        assert_eq!(colmap(&[]), subpixel::Subpixel::Score);
+        assert_eq!(colmap(&[]).library(), Subpixel::Score);
+        assert_eq!(colmap(&["--subpixel", "corner"]).library(), Subpixel::None);
+        assert_eq!(colmap(&["--subpixel", "none"]).library(), Subpixel::None);
+        let backend = BackendArgs {
+            backend: BackendChoice::Cpu,
+            device: 0,
+        };
+        let Command::Demo(demo) = Cli::try_parse_from(["clatch", "demo"]).unwrap().command else {
+            panic!("parsed the wrong subcommand")
+        };
+        let s = settings(&backend, &demo.detect, Some(Subpixel::Score), None).unwrap();
+        assert_eq!(s.extractor.detector.subpixel, Subpixel::Score);
     }
 }

@@ -36,7 +36,8 @@ pub fn write_matches_csv(
 
 /// Runs `clatch match`.
 pub fn main(args: &MatchArgs) -> Result<(), CliError> {
-    let settings = settings(&args.backend, &args.detect, Some(&args.matching))?;
+    let subpixel = args.subpixel.library();
+    let settings = settings(&args.backend, &args.detect, subpixel, Some(&args.matching))?;
     check_picture_path(&args.output)?;
     check_paths(args)?;
     // Read the cheap inputs first, so a bad homography file fails before any work.

@@ -60,16 +60,18 @@ pub struct PairRun {
 }
 
 /// Detects and describes one image; `name` labels errors. With a pyramid, description happens on the
-/// levels inside detection, so the whole time is reported as detection.
+/// levels inside detection, and with sub-pixel positions description needs the whole-pixel positions
+/// detection had, so in both cases the whole time is reported as detection.
 pub fn extract(
     extractor: &Extractor,
     img: &GrayImage,
     name: &Path,
     progress: &Progress,
 ) -> Result<Extracted, CliError> {
-    if extractor.config().pyramid.is_some() {
+    let config = extractor.config();
+    if config.pyramid.is_some() || config.detector.subpixel != clatch::Subpixel::None {
         let view = GrayView::try_from(img).map_err(CliError::in_image(name))?;
-        progress.stage("detecting and describing keypoints on the pyramid");
+        progress.stage("detecting and describing keypoints");
         let start = Instant::now();
         let features = extractor
             .detect_and_describe(&view)

@@ -2,13 +2,15 @@
 //!
 //! FAST keypoints sit on whole pixels, and a whole-pixel position is up to half a pixel off: on its own
 //! that is about 0.38 px of mean reprojection error (the mean length of a vector uniform in a unit
-//! square), which the mapper cannot remove. This refines the position written to COLMAP with the
-//! corner estimator of Förstner and Gülch (1987), the one behind OpenCV's `cornerSubPix`: the point
-//! closest, in the least-squares sense, to the lines through every pixel of a window along which the
-//! intensity does not change (each pixel's gradient is normal to its line). Descriptors and matches
-//! are untouched: they come from the whole-pixel keypoints, as every backend computes them.
+//! square), which the mapper cannot remove. `clatch colmap` refines positions by default with the
+//! library's [`clatch::Subpixel::Score`] (the peak of the FAST score, on every pyramid level); this
+//! module adds the `corner` method: the corner estimator of Förstner and Gülch (1987), the one behind
+//! OpenCV's `cornerSubPix`, the point closest, in the least-squares sense, to the lines through every
+//! pixel of a window along which the intensity does not change (each pixel's gradient is normal to its
+//! line). Descriptors and matches are untouched: they come from the whole-pixel keypoints, as every
+//! backend computes them.
 
-use clatch::{GrayView, KeyPoint};
+use clatch::KeyPoint;
 use image::GrayImage;
 
 /// How keypoint positions are refined for COLMAP.
@@ -16,13 +18,25 @@ use image::GrayImage;
 pub enum Subpixel {
     /// Whole pixels, as detected.
     None,
-    /// The peak of a parabola through the FAST scores of the keypoint and its 4 neighbours, per axis.
+    /// The library's [`clatch::Subpixel::Score`]: the peak of a parabola through the FAST scores of
+    /// the keypoint and its 4 neighbours, per axis, on the keypoint's pyramid level.
     Score,
-    /// Förstner's least-squares corner over a window (see [`refine`]).
+    /// Förstner's least-squares corner over a window of the photo (see [`refine`]).
     Corner,
 }
 
-/// `keypoints` with sub-pixel positions by `method` (`radius`: the corner window's half side).
+impl Subpixel {
+    /// What the library does: `score` is the library's own, the others detect whole pixels.
+    pub fn library(self) -> clatch::Subpixel {
+        match self {
+            Subpixel::Score => clatch::Subpixel::Score,
+            Subpixel::None | Subpixel::Corner => clatch::Subpixel::None,
+        }
+    }
+}
+
+/// `keypoints` (as the library returned them) with the host-side refinement of `method`, if it has
+/// one (`radius`: the corner window's half side).
 pub fn refine_with(
     img: &GrayImage,
     keypoints: &[KeyPoint],
@@ -30,50 +44,9 @@ pub fn refine_with(
     radius: u32,
 ) -> Vec<KeyPoint> {
     match method {
-        Subpixel::None => keypoints.to_vec(),
-        Subpixel::Score => refine_by_score(img, keypoints),
+        Subpixel::None | Subpixel::Score => keypoints.to_vec(),
         Subpixel::Corner => refine(img, keypoints, radius),
     }
-}
-
-/// The offset in (-0.5, 0.5) of the peak of the parabola through `(-1, l)`, `(0, c)`, `(1, r)`, or 0
-/// when `c` is not a strict peak of the three.
-fn parabola_peak(l: f64, c: f64, r: f64) -> f64 {
-    let curvature = l - 2.0 * c + r;
-    if curvature >= 0.0 || c < l || c < r {
-        return 0.0;
-    }
-    (0.5 * (l - r) / curvature).clamp(-0.5, 0.5)
-}
-
-/// Refines each keypoint to the peak of its FAST score, one parabola per axis (as SIFT and SURF
-/// refine theirs, here on the detector's own response).
-pub fn refine_by_score(img: &GrayImage, keypoints: &[KeyPoint]) -> Vec<KeyPoint> {
-    let Ok(view) = GrayView::try_from(img) else {
-        return keypoints.to_vec();
-    };
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    keypoints
-        .iter()
-        .map(|k| {
-            let (x, y) = (k.x as usize, k.y as usize);
-            // FAST reads 3 pixels around its centre: the neighbours must keep that inside the image.
-            if x < 4 || y < 4 || x + 4 >= w || y + 4 >= h {
-                return *k;
-            }
-            let s = |x: usize, y: usize| clatch::fast_score(&view, x, y).map(f64::from);
-            let (Some(c), Some(l), Some(r), Some(u), Some(d)) =
-                (s(x, y), s(x - 1, y), s(x + 1, y), s(x, y - 1), s(x, y + 1))
-            else {
-                return *k;
-            };
-            KeyPoint {
-                x: k.x + parabola_peak(l, c, r) as f32,
-                y: k.y + parabola_peak(u, c, d) as f32,
-                ..*k
-            }
-        })
-        .collect()
 }
 
 /// Largest shift accepted, in pixels: farther means the window holds no corner to speak of.

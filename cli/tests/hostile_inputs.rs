@@ -127,11 +127,11 @@ fn images_too_small_for_any_keypoint_are_refused() {
     let dir = workdir("hostile", "small");
     let prefix = dir.join("out");
     let small = dir.join("small.png");
-    photo(96, 200, 0).save(&small).unwrap();
+    photo(63, 200, 0).save(&small).unwrap();
     let out = clatch(&["extract", str(&small), "-o", str(&prefix)]);
-    assert_refused(&out, "needs at least 97x97 pixels");
+    assert_refused(&out, "smaller than the 64x64 descriptor window");
     let ok = dir.join("ok.png");
-    photo(97, 97, 0).save(&ok).unwrap();
+    photo(64, 64, 0).save(&ok).unwrap();
     assert!(
         clatch(&["extract", str(&ok), "-o", str(&prefix)])
             .status

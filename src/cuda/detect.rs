@@ -15,7 +15,7 @@ use cudarc::driver::{CudaSlice, CudaStream, LaunchConfig, PushKernelArg, ValidAs
 use super::device::{GpuDevice, driver_error};
 use super::header::{
     CLATCH_DETECT_ROW_ALIGN, CLATCH_DETECT_TILE_X, CLATCH_DETECT_TILE_Y, CLATCH_DETECT_WARPS,
-    CLATCH_SCAN_CHUNK, CLATCH_SCAN_THREADS, CLATCH_SCAN_TOP_THREADS,
+    CLATCH_SCAN_CHUNK, CLATCH_SCAN_THREADS, CLATCH_SCAN_TOP_THREADS, CLATCH_SUBPIXEL_THREADS,
 };
 use super::memory::alloc_zeros;
 use super::texture::DeviceImage;
@@ -296,6 +296,44 @@ pub(crate) fn detect_on_device(
     job.launch(dev, stream, image)?;
     // The scratch buffers are freed in stream order, after the launches that use them.
     Ok(job.output)
+}
+
+/// Queues `kernels/detect.cu`'s `clatch_subpixel` on `stream`: the sub-pixel offsets of the `count`
+/// keypoints in `keypoints` (whole positions on `image`) into `offsets` (`[dx, dy]` per keypoint, in
+/// 1/65536 pixel), reproducing [`crate::detect::cpu::subpixel_offset`] for each, bit for bit.
+pub(crate) fn launch_subpixel(
+    dev: &GpuDevice,
+    stream: &Arc<CudaStream>,
+    image: &DeviceImage,
+    keypoints: &CudaSlice<KeyPoint>,
+    count: usize,
+    offsets: &mut CudaSlice<i32>,
+) -> Result<()> {
+    debug_assert!(count <= keypoints.len() && 2 * count <= offsets.len());
+    if count == 0 {
+        return Ok(());
+    }
+    let texture = image.texture();
+    let (width, height) = (image.width() as i32, image.height() as i32);
+    let n = count as u32;
+    let mut launch = stream.launch_builder(dev.kernel("clatch_subpixel"));
+    launch
+        .arg(&texture)
+        .arg(&width)
+        .arg(&height)
+        .arg(keypoints)
+        .arg(&n)
+        .arg(offsets);
+    let threads = CLATCH_SUBPIXEL_THREADS as usize;
+    let config = LaunchConfig {
+        grid_dim: (count.div_ceil(threads) as u32, 1, 1),
+        block_dim: (threads as u32, 1, 1),
+        shared_mem_bytes: 0,
+    };
+    // SAFETY: arguments match the kernel's signature; threads past `count` return; keypoint k < count
+    // is read and offsets 2k, 2k + 1 written, within both buffers (checked above).
+    unsafe { launch.launch(config) }.map_err(driver_error("launching clatch_subpixel"))?;
+    Ok(())
 }
 
 /// Detects keypoints on the GPU: the same list as [`crate::detect::cpu::detect`]. The image must be

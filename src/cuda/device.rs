@@ -54,6 +54,7 @@ const KERNELS: &[KernelFile] = &[
             "clatch_scan_apply",
             "clatch_detect_scatter",
             "clatch_detect_orient",
+            "clatch_subpixel",
         ],
         needs_tensor_cores: false,
     },

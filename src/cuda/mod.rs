@@ -84,6 +84,7 @@ mod tests {
         assert_eq!(CLATCH_ROTATION_FRAC_BITS, angle::ROTATION_FRAC_BITS);
         assert_eq!(CLATCH_ORIENTATION_RADIUS as i32, detect::ORIENTATION_RADIUS);
         assert_eq!(CLATCH_FAST_ARC as usize, detect::FAST_ARC);
+        assert_eq!(CLATCH_SUBPIXEL_FRAC_BITS, detect::SUBPIXEL_FRAC_BITS);
         assert_eq!(
             CLATCH_PYRAMID_STEP_FRAC_BITS,
             crate::pyramid::STEP_FRAC_BITS

@@ -3,21 +3,23 @@
 //!
 //! Everything is queued on one stream. The global top-N over the levels ([`crate::pyramid::select`])
 //! runs on the host: the levels' keypoints are read back once, the selection is uploaded per level for
-//! description. So the asynchronous extractor queues the levels and their detection at once and does
-//! the rest in `wait`.
+//! description and, with [`crate::Subpixel::Score`], for `clatch_subpixel` (`kernels/detect.cu`),
+//! whose offsets are read back with the descriptors and mapped to level 0 on the host
+//! ([`crate::pyramid::report`]). So the asynchronous extractor queues the levels and their detection at
+//! once and does the rest in `wait`.
 
 use std::sync::Arc;
 
-use cudarc::driver::CudaStream;
+use cudarc::driver::{CudaSlice, CudaStream};
 
 use super::describe::{launch_describe, upload_weights};
-use super::detect::{DeviceKeypoints, detect_on_device};
+use super::detect::{DeviceKeypoints, detect_on_device, launch_subpixel};
 use super::device::{GpuDevice, driver_error};
 use super::memory::{alloc_zeros, upload};
 use super::texture::DeviceImage;
 use crate::describe::DescriptorConfig;
 use crate::descriptor::DescriptorSet;
-use crate::detect::{DetectorConfig, Ranking};
+use crate::detect::{DetectorConfig, Ranking, Subpixel};
 use crate::error::Result;
 use crate::features::Features;
 use crate::gray_view::GrayView;
@@ -112,9 +114,29 @@ impl QueuedPyramid {
             .collect()
     }
 
-    /// The selected keypoints in level-0 coordinates (waits for the stream).
-    pub(crate) fn keypoints(self) -> Result<Vec<KeyPoint>> {
-        let selected = self.select()?;
+    /// The selected keypoints in level-0 coordinates, refined by [`DetectorConfig::subpixel`] (waits
+    /// for the stream).
+    pub(crate) fn keypoints(self, dev: &GpuDevice) -> Result<Vec<KeyPoint>> {
+        let mut selected = self.select()?;
+        if self.config.subpixel != Subpixel::None {
+            let mut offsets = Vec::with_capacity(self.levels.len());
+            for (l, level) in self.levels.iter().enumerate() {
+                let keypoints = pyramid::of_level(&selected, l);
+                if keypoints.is_empty() {
+                    offsets.push(None);
+                    continue;
+                }
+                let on_device = upload(&self.stream, &keypoints, "pyramid keypoint upload")?;
+                offsets.push(queue_offsets(
+                    dev,
+                    &self.stream,
+                    level,
+                    self.config.subpixel,
+                    (&on_device, keypoints.len()),
+                )?);
+            }
+            apply_offsets(&self.stream, &mut selected, &offsets)?;
+        }
         Ok(self.report(&selected))
     }
 
@@ -124,15 +146,17 @@ impl QueuedPyramid {
         dev: &GpuDevice,
         descriptor: &DescriptorConfig,
     ) -> Result<Features> {
-        let selected = self.select()?;
+        let mut selected = self.select()?;
         let stream = &self.stream;
         let width = descriptor.width;
         let weights = upload_weights(stream, descriptor)?;
         let mut outputs = Vec::with_capacity(self.levels.len());
+        let mut offsets = Vec::with_capacity(self.levels.len());
         for (l, level) in self.levels.iter_mut().enumerate() {
             let keypoints = pyramid::of_level(&selected, l);
             if keypoints.is_empty() {
                 outputs.push(None);
+                offsets.push(None);
                 continue;
             }
             level.build_quads(dev, stream)?;
@@ -154,6 +178,14 @@ impl QueuedPyramid {
                 &mut out,
             )?;
             outputs.push(Some(out));
+            // Orientation and descriptor stay those of the whole pixel; only the position moves.
+            offsets.push(queue_offsets(
+                dev,
+                stream,
+                level,
+                self.config.subpixel,
+                (&on_device, keypoints.len()),
+            )?);
         }
         let per_level = outputs
             .iter()
@@ -167,11 +199,53 @@ impl QueuedPyramid {
                 }
             })
             .collect::<Result<Vec<_>>>()?;
+        apply_offsets(stream, &mut selected, &offsets)?;
         Ok(Features::all(
             self.report(&selected),
             pyramid::assemble(&selected, &per_level, width)?,
         ))
     }
+}
+
+/// Queues the sub-pixel offsets of one level's selected keypoints (`count` of them, already on the
+/// device) when `subpixel` refines positions: `clatch_subpixel` through
+/// [`launch_subpixel`], which reproduces [`crate::detect::cpu::subpixel_offset`], as
+/// [`crate::pyramid::cpu`] applies it after selection.
+fn queue_offsets(
+    dev: &GpuDevice,
+    stream: &Arc<CudaStream>,
+    level: &DeviceImage,
+    subpixel: Subpixel,
+    (keypoints, count): (&CudaSlice<KeyPoint>, usize),
+) -> Result<Option<CudaSlice<i32>>> {
+    if subpixel == Subpixel::None || count == 0 {
+        return Ok(None);
+    }
+    let mut offsets = alloc_zeros(stream, 2 * count, "sub-pixel offsets")?;
+    launch_subpixel(dev, stream, level, keypoints, count, &mut offsets)?;
+    Ok(Some(offsets))
+}
+
+/// Reads each level's offsets back (waits for the stream) and gives them to that level's selected
+/// keypoints, in selection order (the order they were uploaded in, [`pyramid::of_level`]).
+fn apply_offsets(
+    stream: &Arc<CudaStream>,
+    selected: &mut [LevelKeypoint],
+    per_level: &[Option<CudaSlice<i32>>],
+) -> Result<()> {
+    for (l, offsets) in per_level.iter().enumerate() {
+        let Some(offsets) = offsets else {
+            continue;
+        };
+        let flat = stream
+            .clone_dtoh(offsets)
+            .map_err(driver_error("copying sub-pixel offsets back"))?;
+        let of_level = selected.iter_mut().filter(|k| k.level == l);
+        for (k, pair) in of_level.zip(flat.chunks_exact(2)) {
+            k.offset = [pair[0], pair[1]];
+        }
+    }
+    Ok(())
 }
 
 /// Multi-scale detection on the GPU: the same list as [`crate::pyramid::cpu::detect`].
@@ -181,7 +255,7 @@ pub(crate) fn pyramid_detect(
     config: &DetectorConfig,
     p: &Pyramid,
 ) -> Result<Vec<KeyPoint>> {
-    queue(dev, &dev.new_stream()?, image, config, p)?.keypoints()
+    queue(dev, &dev.new_stream()?, image, config, p)?.keypoints(dev)
 }
 
 /// Multi-scale detection and description on the GPU: the same features as

@@ -2,7 +2,7 @@
 
 use crate::parallel::*;
 
-use super::{DetectorConfig, FAST_ARC, FAST_CIRCLE, ORIENTATION_RADIUS};
+use super::{DetectorConfig, FAST_ARC, FAST_CIRCLE, ORIENTATION_RADIUS, SUBPIXEL_FRAC_BITS};
 use crate::angle::{bin_degrees, direction_bin};
 use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
@@ -27,28 +27,102 @@ pub fn fast_score(img: &GrayView, x: usize, y: usize) -> i32 {
     best
 }
 
-/// Cheap necessary condition: nine contiguous circle pixels always include two adjacent compass pixels
-/// (0, 4, 8, 12) beyond the threshold on the same side.
-#[inline]
-fn may_be_corner(img: &GrayView, x: usize, y: usize, threshold: i32) -> bool {
-    let p = img.at(x, y) as i32;
-    let compass = [
-        img.at(x, y - 3) as i32,
-        img.at(x + 3, y) as i32,
-        img.at(x, y + 3) as i32,
-        img.at(x - 3, y) as i32,
-    ];
-    let bright = compass.map(|v| v - p > threshold);
-    let dark = compass.map(|v| p - v > threshold);
-    (0..4).any(|i| (bright[i] && bright[(i + 1) % 4]) || (dark[i] && dark[(i + 1) % 4]))
+/// The peak of the parabola through `(-1, l)`, `(0, c)`, `(1, r)` in 1/65536 pixel:
+/// `(l - r) / (2 (l - 2c + r)) · 2^16` rounded to the nearest integer (half away from zero), by integer
+/// division only; 0 unless `c` is a strict peak (`c > l` and `c > r`: ties and slopes give 0).
+///
+/// With `a = c - l > 0` and `b = c - r > 0` the offset is `(a - b) · 2^15 / (a + b)`, so
+/// `|offset| < 2^15` (less than half a pixel), positive towards `r`. Scores are FAST scores
+/// (`|s| ≤ 255`), so `a + b < 2^10` and the quotient is never exactly half an integer: the rounding
+/// direction of halves never decides a bit.
+pub fn parabola_offset(l: i32, c: i32, r: i32) -> i32 {
+    if c <= l || c <= r {
+        return 0;
+    }
+    let (a, b) = (c - l, c - r);
+    let numerator = (a - b) << (SUBPIXEL_FRAC_BITS - 1);
+    let denominator = a + b;
+    numerator.signum() * ((2 * numerator.abs() + denominator) / (2 * denominator))
 }
 
-/// Score map: FAST score of each pixel inside the margin that is a corner, 0 elsewhere. Row-major,
-/// `width * height`.
+/// The sub-pixel offset `[dx, dy]` (1/65536 pixel) of the keypoint at `(x, y)` under
+/// [`super::Subpixel::Score`]: [`parabola_offset`] of the FAST scores ([`fast_score`], whatever their
+/// value, threshold or margin) of the left neighbour, the pixel and the right neighbour, and likewise
+/// of the one above, the pixel and the one below. `[0, 0]` when a neighbour's circle would leave the
+/// image (`(x, y)` closer than 4 pixels to a border; detected keypoints never are).
+pub fn subpixel_offset(img: &GrayView, x: usize, y: usize) -> [i32; 2] {
+    let inside = x >= 4 && y >= 4 && x + 4 < img.width() && y + 4 < img.height();
+    if !inside {
+        return [0, 0];
+    }
+    let c = fast_score(img, x, y);
+    [
+        parabola_offset(fast_score(img, x - 1, y), c, fast_score(img, x + 1, y)),
+        parabola_offset(fast_score(img, x, y - 1), c, fast_score(img, x, y + 1)),
+    ]
+}
+
+/// [`fast_score`] from the circle differences `ring` (circle pixel minus centre), by sliding minima
+/// and maxima instead of nine comparisons per arc: `min9[k] = min(min8[k], ring[k + 8])` with
+/// `min8 = min(min4[k], min4[k + 4])` and so on (indices modulo 16). Integer comparisons only: the
+/// same value as the plain loop, which a test checks on random rings.
+#[inline]
+fn arc_score(ring: &[i32; 16]) -> i32 {
+    let at = |a: &[i32; 16], k: usize| a[k & 15];
+    let lo2: [i32; 16] = std::array::from_fn(|k| ring[k].min(at(ring, k + 1)));
+    let hi2: [i32; 16] = std::array::from_fn(|k| ring[k].max(at(ring, k + 1)));
+    let lo4: [i32; 16] = std::array::from_fn(|k| lo2[k].min(at(&lo2, k + 2)));
+    let hi4: [i32; 16] = std::array::from_fn(|k| hi2[k].max(at(&hi2, k + 2)));
+    let mut brighter = i32::MIN;
+    let mut darker = i32::MIN;
+    for k in 0..16 {
+        let lo9 = lo4[k].min(at(&lo4, k + 4)).min(at(ring, k + 8));
+        let hi9 = hi4[k].max(at(&hi4, k + 4)).max(at(ring, k + 8));
+        brighter = brighter.max(lo9);
+        darker = darker.max(-hi9);
+    }
+    brighter.max(darker)
+}
+
+/// [`fast_score`] of a pixel known to be inside the circle margin, reading rows directly.
+#[inline]
+fn fast_score_in_rows(img: &GrayView, x: usize, y: usize) -> i32 {
+    let p = img.at(x, y) as i32;
+    let ring: [i32; 16] = std::array::from_fn(|i| {
+        let [dx, dy] = FAST_CIRCLE[i];
+        img.row((y as i32 + dy) as usize)[(x as i32 + dx) as usize] as i32 - p
+    });
+    arc_score(&ring)
+}
+
+/// Cheap necessary condition, for `xs` of row `y` at once (`out[i]` for `x = xs.start + i`): nine
+/// contiguous circle pixels always include two adjacent compass pixels (0, 4, 8, 12) beyond the
+/// threshold on the same side. Saturating `u8` differences, so the loop vectorises.
+fn may_be_corners(img: &GrayView, y: usize, xs: std::ops::Range<usize>, threshold: u8, out: &mut [bool]) {
+    let (lo, hi) = (xs.start, xs.end);
+    let centre = &img.row(y)[lo..hi];
+    let north = &img.row(y - 3)[lo..hi];
+    let south = &img.row(y + 3)[lo..hi];
+    let east = &img.row(y)[lo + 3..hi + 3];
+    let west = &img.row(y)[lo - 3..hi - 3];
+    for i in 0..hi - lo {
+        let p = centre[i];
+        let b = |v: u8| v.saturating_sub(p) > threshold;
+        let d = |v: u8| p.saturating_sub(v) > threshold;
+        let (bn, be, bs, bw) = (b(north[i]), b(east[i]), b(south[i]), b(west[i]));
+        let (dn, de, ds, dw) = (d(north[i]), d(east[i]), d(south[i]), d(west[i]));
+        out[i] = (bn & be) | (be & bs) | (bs & bw) | (bw & bn) | (dn & de) | (de & ds) | (ds & dw) | (dw & dn);
+    }
+}
+
+/// Score map: FAST score of each pixel inside the margin (at least 3) that is a corner, 0 elsewhere.
+/// Row-major, `width * height`.
 pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
     let (w, h) = (img.width(), img.height());
     let t = threshold as i32;
     let mut scores = vec![0u8; w * h];
+    // The circle reaches 3 pixels out: pixels nearer a border are never corners.
+    let margin = margin.max(3);
     if w <= 2 * margin || h <= 2 * margin {
         return scores;
     }
@@ -57,13 +131,14 @@ pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
         .enumerate()
         .skip(margin)
         .take(h - 2 * margin)
-        .for_each(|(y, row)| {
-            for (x, score) in row.iter_mut().enumerate().take(w - margin).skip(margin) {
-                if may_be_corner(img, x, y, t) {
-                    let s = fast_score(img, x, y);
-                    if s > t {
-                        *score = s as u8;
-                    }
+        .for_each_init(Vec::new, |candidates, (y, row)| {
+            candidates.resize(w - 2 * margin, false);
+            may_be_corners(img, y, margin..w - margin, threshold, candidates);
+            for (i, _) in candidates.iter().enumerate().filter(|&(_, &c)| c) {
+                let x = margin + i;
+                let s = fast_score_in_rows(img, x, y);
+                if s > t {
+                    row[x] = s as u8;
                 }
             }
         });
@@ -73,19 +148,28 @@ pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
 /// Corners that survive 3x3 non-maximum suppression (ties go to the first in raster order), as
 /// `(x, y, score)` in raster order.
 pub fn suppress_non_maxima(scores: &[u8], width: usize, height: usize) -> Vec<(u32, u32, u8)> {
+    // Score maps are mostly zeros: rows are scanned a block at a time and empty blocks skipped.
+    const BLOCK: usize = 32;
     (1..height.saturating_sub(1))
         .into_par_iter()
         .flat_map_iter(|y| {
             let above = &scores[(y - 1) * width..y * width];
             let here = &scores[y * width..(y + 1) * width];
             let below = &scores[(y + 1) * width..(y + 2) * width];
-            (1..width - 1).filter_map(move |x| {
-                let s = here[x];
-                let earlier = [above[x - 1], above[x], above[x + 1], here[x - 1]];
-                let later = [here[x + 1], below[x - 1], below[x], below[x + 1]];
-                let kept = s > 0 && earlier.iter().all(|&n| s > n) && later.iter().all(|&n| s >= n);
-                kept.then_some((x as u32, y as u32, s))
-            })
+            let inner = 1..width.saturating_sub(1);
+            inner
+                .clone()
+                .step_by(BLOCK)
+                .filter(move |&start| here[start..(start + BLOCK).min(inner.end)].iter().any(|&s| s != 0))
+                .flat_map(move |start| start..(start + BLOCK).min(width - 1))
+                .filter_map(move |x| {
+                    let s = here[x];
+                    let earlier = [above[x - 1], above[x], above[x + 1], here[x - 1]];
+                    let later = [here[x + 1], below[x - 1], below[x], below[x + 1]];
+                    let kept =
+                        s > 0 && earlier.iter().all(|&n| s > n) && later.iter().all(|&n| s >= n);
+                    kept.then_some((x as u32, y as u32, s))
+                })
         })
         .collect()
 }
@@ -135,33 +219,125 @@ pub fn centroid_moments(img: &GrayView, x: usize, y: usize) -> (i64, i64) {
     (m10, m01)
 }
 
-/// Runs the whole detector on the CPU. The image must be larger than twice the margin in both
-/// directions (checked by the caller).
-pub fn detect(img: &GrayView, config: &DetectorConfig) -> Vec<KeyPoint> {
+/// The angle of the keypoint at `(x, y)`: the intensity centroid's direction bin, in degrees.
+pub fn orientation(img: &GrayView, x: usize, y: usize) -> f32 {
+    let (m10, m01) = centroid_moments(img, x, y);
+    bin_degrees(direction_bin(m10, m01))
+}
+
+/// The detector without orientation (every `angle` 0): the strongest `max_keypoints` corners after
+/// suppression, score descending, then raster order. For callers that keep only some of them (the
+/// pyramid's selection) and orient those with [`orientation`].
+pub fn detect_unoriented(img: &GrayView, config: &DetectorConfig) -> Vec<KeyPoint> {
     let margin = config.margin();
     let scores = score_map(img, config.threshold, margin);
     let mut corners = suppress_non_maxima(&scores, img.width(), img.height());
     corners.sort_unstable_by(|a, b| b.2.cmp(&a.2).then(a.1.cmp(&b.1)).then(a.0.cmp(&b.0)));
     corners.truncate(config.max_keypoints);
     corners
-        .par_iter()
-        .map(|&(x, y, score)| {
-            let (m10, m01) = centroid_moments(img, x as usize, y as usize);
-            KeyPoint {
-                x: x as f32,
-                y: y as f32,
-                size: config.keypoint_size,
-                angle: bin_degrees(direction_bin(m10, m01)),
-                response: score as f32,
-                octave: 0,
-            }
+        .iter()
+        .map(|&(x, y, score)| KeyPoint {
+            x: x as f32,
+            y: y as f32,
+            size: config.keypoint_size,
+            angle: 0.0,
+            response: score as f32,
+            octave: 0,
         })
         .collect()
+}
+
+/// Runs the whole detector on the CPU. The image must be larger than twice the margin in both
+/// directions (checked by the caller).
+pub fn detect(img: &GrayView, config: &DetectorConfig) -> Vec<KeyPoint> {
+    let mut keypoints = detect_unoriented(img, config);
+    keypoints.par_iter_mut().for_each(|k| {
+        k.angle = orientation(img, k.x as usize, k.y as usize);
+    });
+    keypoints
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A small deterministic generator for the equivalence tests.
+    fn lcg(state: &mut u64) -> u64 {
+        *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        *state >> 33
+    }
+
+    #[test]
+    fn arc_score_equals_the_plain_arc_loop() {
+        let plain = |ring: &[i32; 16]| {
+            let mut best = i32::MIN;
+            for k in 0..16 {
+                let (mut brighter, mut darker) = (i32::MAX, i32::MAX);
+                for j in 0..FAST_ARC {
+                    brighter = brighter.min(ring[(k + j) % 16]);
+                    darker = darker.min(-ring[(k + j) % 16]);
+                }
+                best = best.max(brighter).max(darker);
+            }
+            best
+        };
+        let mut state = 7;
+        for trial in 0..200_000 {
+            // Narrow value ranges make ties and equal arcs common; wide ones reach +-255.
+            let spread = [3u64, 20, 511][trial % 3];
+            let ring: [i32; 16] =
+                std::array::from_fn(|_| (lcg(&mut state) % spread) as i32 - (spread / 2) as i32);
+            assert_eq!(arc_score(&ring), plain(&ring), "{ring:?}");
+        }
+    }
+
+    #[test]
+    fn suppression_equals_the_plain_rule_on_random_maps() {
+        let mut state = 3;
+        for (w, h) in [(1, 1), (2, 5), (3, 3), (31, 4), (33, 7), (64, 9), (100, 13)] {
+            // Sparse maps with runs of equal scores, as score maps are.
+            let scores: Vec<u8> = (0..w * h)
+                .map(|_| match lcg(&mut state) % 8 {
+                    0 => 5,
+                    1 => (lcg(&mut state) % 4) as u8 + 4,
+                    _ => 0,
+                })
+                .collect();
+            let at = |x: usize, y: usize| scores[y * w + x];
+            let mut want = Vec::new();
+            for y in 1..h.saturating_sub(1) {
+                for x in 1..w.saturating_sub(1) {
+                    let s = at(x, y);
+                    let earlier = [at(x - 1, y - 1), at(x, y - 1), at(x + 1, y - 1), at(x - 1, y)];
+                    let later = [at(x + 1, y), at(x - 1, y + 1), at(x, y + 1), at(x + 1, y + 1)];
+                    if s > 0 && earlier.iter().all(|&n| s > n) && later.iter().all(|&n| s >= n) {
+                        want.push((x as u32, y as u32, s));
+                    }
+                }
+            }
+            assert_eq!(suppress_non_maxima(&scores, w, h), want, "{w}x{h}");
+        }
+    }
+
+    #[test]
+    fn score_map_equals_fast_score_at_every_pixel() {
+        let mut state = 11;
+        for (w, h, levels, threshold, margin) in
+            [(40, 30, 4u64, 1u8, 3usize), (57, 23, 256, 20, 5), (64, 64, 30, 7, 16), (9, 9, 256, 1, 3)]
+        {
+            let pixels: Vec<u8> = (0..w * h).map(|_| (lcg(&mut state) % levels) as u8 * (255 / (levels - 1).max(1)) as u8).collect();
+            let img = GrayView::new(&pixels, w, h, w).unwrap();
+            let map = score_map(&img, threshold, margin);
+            for y in 0..h {
+                for x in 0..w {
+                    let inside = x >= margin && y >= margin && x + margin < w && y + margin < h;
+                    let s = if inside { fast_score(&img, x, y) } else { 0 };
+                    let want = if s > threshold as i32 { s as u8 } else { 0 };
+                    assert_eq!(map[y * w + x], want, "({x}, {y}) of {w}x{h}, threshold {threshold}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn harris_response_worked_by_hand() {
@@ -184,6 +360,107 @@ mod tests {
         let transposed: Vec<u8> = (0..400).map(|i| corner[(i % 20) * 20 + i / 20]).collect();
         let t = GrayView::new(&transposed, 20, 20, 20).unwrap();
         assert_eq!(harris_response(&t, 10, 10), r);
+    }
+
+    #[test]
+    fn parabola_offsets_worked_by_hand() {
+        // f(-1) = 0, f(0) = 10, f(1) = 5: f = -7.5 x² + 2.5 x + 10, peak at 2.5 / 15 = 1/6 px towards
+        // the right: 65536 / 6 = 10922.67 -> 10923. Mirrored: -10923.
+        assert_eq!(parabola_offset(0, 10, 5), 10_923);
+        assert_eq!(parabola_offset(5, 10, 0), -10_923);
+        // Negative scores (FAST scores below the threshold can be): -3, -1, -2 is 0, 2, 1 shifted,
+        // the same parabola as 0, 10, 5 up to scale: 1/6 px towards the higher neighbour, r.
+        assert_eq!(parabola_offset(-3, -1, -2), 10_923);
+        // Symmetric: 0. Ties and slopes are no strict peak: 0.
+        assert_eq!(parabola_offset(5, 10, 5), 0);
+        for (l, c, r) in [(10, 10, 5), (5, 10, 10), (12, 10, 5), (5, 10, 12), (7, 7, 7), (1, 2, 3)] {
+            assert_eq!(parabola_offset(l, c, r), 0, "{l} {c} {r}");
+        }
+        // The largest offsets stay below half a pixel: a = 510, b = 1: 509 · 32768 / 511 = 32639.7.
+        assert_eq!(parabola_offset(-255, 255, 254), 32_640);
+        assert_eq!(parabola_offset(254, 255, -255), -32_640);
+    }
+
+    #[test]
+    fn parabola_offsets_are_the_rounded_real_peak() {
+        // Against the real-valued peak (l - r) / (2 (l - 2c + r)) in f64 (exact to far below 1/65536
+        // here): never more than half a unit away, never half a pixel or more.
+        for c in (-255..=255).step_by(17) {
+            for l in (-255..=255).step_by(7) {
+                for r in (-255..=255).step_by(11) {
+                    let got = parabola_offset(l, c, r);
+                    if c <= l || c <= r {
+                        assert_eq!(got, 0);
+                        continue;
+                    }
+                    let (l, c, r) = (l as f64, c as f64, r as f64);
+                    let exact = (l - r) / (2.0 * (l - 2.0 * c + r)) * 65536.0;
+                    assert!((got as f64 - exact).abs() < 0.5, "{l} {c} {r}: {got} vs {exact}");
+                    assert!(got.abs() < 32_768);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn subpixel_offset_of_a_two_pixel_blob_worked_by_hand() {
+        // 100 at (8, 8), 60 at (9, 8), 0 elsewhere. Neither blob pixel lies on the other's circle
+        // (offsets (±1, 0) are not on it), so: c = score(8, 8) = 100 (every circle pixel 100 darker),
+        // r = score(9, 8) = 60, l = score(7, 8) = 0 (centre and circle all 0), and above and below
+        // are 0 too. Horizontal peak: (0 - 60) / (2 (0 - 200 + 60)) = 3/14 px = 14043.4 -> 14043.
+        let blob = |x0: usize, w: usize| {
+            image(w, 17, |x, y| match (x, y) {
+                (x, 8) if x == x0 => 100,
+                (x, 8) if x == x0 + 1 => 60,
+                _ => 0,
+            })
+        };
+        let buf = blob(8, 17);
+        let img = GrayView::new(&buf, 17, 17, 17).unwrap();
+        assert_eq!(fast_score(&img, 8, 8), 100);
+        assert_eq!(subpixel_offset(&img, 8, 8), [14_043, 0]);
+        // Transposed: the offset moves to y.
+        let t: Vec<u8> = (0..17 * 17).map(|i| buf[(i % 17) * 17 + i / 17]).collect();
+        let img = GrayView::new(&t, 17, 17, 17).unwrap();
+        assert_eq!(subpixel_offset(&img, 8, 8), [0, 14_043]);
+        // A lone dot is symmetric: no offset.
+        let dot = image(17, 17, |x, y| if (x, y) == (8, 8) { 100 } else { 0 });
+        let img = GrayView::new(&dot, 17, 17, 17).unwrap();
+        assert_eq!(subpixel_offset(&img, 8, 8), [0, 0]);
+    }
+
+    #[test]
+    fn subpixel_offset_at_the_borders() {
+        // The same blob as close to the left border as the neighbours' circles allow (x = 4: the left
+        // neighbour's circle reaches column 0), and one pixel closer, where it is left whole.
+        for (x0, expected) in [(4usize, [14_043, 0]), (3, [0, 0])] {
+            let buf = image(17, 17, |x, y| match (x, y) {
+                (x, 8) if x == x0 => 100,
+                (x, 8) if x == x0 + 1 => 60,
+                _ => 0,
+            });
+            let img = GrayView::new(&buf, 17, 17, 17).unwrap();
+            assert_eq!(subpixel_offset(&img, x0, 8), expected, "x = {x0}");
+        }
+        // Right border: x + 4 must stay inside (x = 12 of 17 columns), even where the keypoint's own
+        // circle would fit (x = 13).
+        for (x0, expected) in [(11usize, [14_043, 0]), (12, [-14_043, 0]), (13, [0, 0])] {
+            // The 60 goes to the left of the 100 when there is no room on the right.
+            let buf = image(17, 17, |x, y| match (x, y) {
+                (x, 8) if x == x0 => 100,
+                (x, 8) if x0 < 12 && x == x0 + 1 => 60,
+                (x, 8) if x0 >= 12 && x + 1 == x0 => 60,
+                _ => 0,
+            });
+            let img = GrayView::new(&buf, 17, 17, 17).unwrap();
+            assert_eq!(subpixel_offset(&img, x0, 8), expected, "x = {x0}");
+        }
+        // Top and bottom likewise.
+        let buf = vec![9u8; 17 * 17];
+        let img = GrayView::new(&buf, 17, 17, 17).unwrap();
+        for (x, y) in [(8, 3), (8, 13), (0, 0), (16, 16)] {
+            assert_eq!(subpixel_offset(&img, x, y), [0, 0]);
+        }
     }
 
     fn image(w: usize, h: usize, f: impl Fn(usize, usize) -> u8) -> Vec<u8> {
@@ -218,10 +495,9 @@ mod tests {
                 let img = GrayView::new(&buf, 9, 9, 9).unwrap();
                 assert_eq!(fast_score(&img, 4, 4), expected, "run {run} from {start}");
                 if run == 9 {
-                    assert!(
-                        may_be_corner(&img, 4, 4, 20),
-                        "the quick test must never reject a corner"
-                    );
+                    let mut candidate = [false];
+                    may_be_corners(&img, 4, 4..5, 20, &mut candidate);
+                    assert!(candidate[0], "the quick test must never reject a corner");
                 }
             }
         }
@@ -251,7 +527,10 @@ mod tests {
             }
         });
         let img = GrayView::new(&buf, 160, 160, 160).unwrap();
-        let config = DetectorConfig::default();
+        let config = DetectorConfig {
+            keypoint_size: 64.0,
+            ..DetectorConfig::default()
+        };
         assert_eq!(config.margin(), 48);
         let kps = detect(&img, &config);
         let positions: Vec<(f32, f32)> = kps.iter().map(|k| (k.x, k.y)).collect();

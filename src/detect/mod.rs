@@ -16,15 +16,21 @@
 //!    around the keypoint, binned by [`crate::angle::direction_bin`]; the reported angle is the bin's
 //!    angle (a multiple of 1/8 degree, exact in `f32`).
 //!
-//! Keypoints are reported at integer pixel positions with `size = keypoint_size`, `response = score`,
-//! `octave = 0`. The margin is chosen so that every detected keypoint's descriptor window fits in the
+//! 5. **Sub-pixel position** (optional, [`Subpixel::Score`]): per axis, the peak of the parabola
+//!    through the FAST scores of the keypoint and its two neighbours, `(l - r) / (2 (l - 2c + r))`
+//!    pixels, 0 unless the keypoint's score `c` is strictly above both; computed as a rounded integer in
+//!    1/65536 pixel ([`cpu::parabola_offset`], [`cpu::subpixel_offset`]) and mapped to level 0 with the
+//!    level position by [`crate::pyramid::to_level0_fixed`]. Only the reported `x`, `y` move:
+//!    orientation and descriptor are computed at the whole pixel.
+//!
+//! Keypoints are reported at integer pixel positions (unless refined) with `size = keypoint_size`,
+//! `response = score`, `octave = 0`. The margin is chosen so that every detected keypoint's descriptor window fits in the
 //! image at any angle, so detection never produces a keypoint that description skips.
 
 pub mod cpu;
 
 use crate::error::{Error, Result};
 use crate::gray_view::GrayView;
-use crate::keypoint::DEFAULT_KEYPOINT_SIZE;
 
 /// The 16 offsets of the FAST circle of radius 3, clockwise from the top (x right, y down).
 pub const FAST_CIRCLE: [[i32; 2]; 16] = [
@@ -55,6 +61,10 @@ pub const MAX_GRID: usize = 64;
 /// Radius of the disc the orientation moments are summed over.
 pub const ORIENTATION_RADIUS: i32 = 15;
 
+/// Fractional bits of a sub-pixel offset ([`Subpixel`]): offsets are integers in 1/65536 pixel, the
+/// 16.16 fixed point of the pyramid's mapping to level 0.
+pub const SUBPIXEL_FRAC_BITS: u32 = 16;
+
 /// FAST-9 detector settings: score, non-maximum suppression, top-N, orientation by intensity centroid
 /// (every rule: [`crate::numerics`], section 3).
 #[derive(Clone, Debug, PartialEq)]
@@ -64,7 +74,10 @@ pub struct DetectorConfig {
     pub threshold: u8,
     /// Keep at most this many keypoints, the strongest first. Default 5000.
     pub max_keypoints: usize,
-    /// `size` given to detected keypoints: the side of their descriptor window in pixels. Default 64.
+    /// `size` given to detected keypoints: the side of their descriptor window in pixels. Default
+    /// [`DetectorConfig::DEFAULT_KEYPOINT_SIZE`] (40): with the default pyramid, smaller windows
+    /// match more keypoints under viewpoint change than the 64 of [`crate::KeyPoint::DEFAULT_SIZE`]
+    /// (EVALUATION.md), which [`crate::ExtractorConfig::single_scale`] keeps.
     pub keypoint_size: f32,
     /// Spreading: the keypoints kept are spread over a `grid` x `grid` division of the image (of each
     /// pyramid level), so that the most textured part of a photo cannot take them all. Each cell first
@@ -72,10 +85,52 @@ pub struct DetectorConfig {
     /// left. 1 (the default) keeps the plain strongest; at most 64.
     pub grid: usize,
     /// How `max_keypoints` is shared among the levels of a [`crate::Pyramid`]. Default
-    /// [`LevelBudget::Global`].
+    /// [`LevelBudget::Geometric`] (ORB's shares).
     pub level_budget: LevelBudget,
     /// Which corners count as the strongest. Default [`Ranking::Fast`].
     pub ranking: Ranking,
+    /// How reported positions are refined below a pixel, on every pyramid level. Default
+    /// [`Subpixel::Score`] (measured: correct matches within 1 px +46% on the Oxford sequences;
+    /// EVALUATION.md); [`crate::ExtractorConfig::single_scale`] keeps whole pixels.
+    pub subpixel: Subpixel,
+}
+
+/// How a keypoint's reported position is refined below a pixel of its level.
+///
+/// Only the reported `x`, `y` change: orientation and descriptor are computed at the whole pixel of
+/// the keypoint's level, so the descriptors are the same with every setting. The refinement is
+/// integer-exact (the same bits on every backend); the rule is in [`crate::numerics`], sections 3
+/// and 6.
+///
+/// ```
+/// use clatch::{Backend, DetectorConfig, Extractor, ExtractorConfig, GrayView, Subpixel};
+///
+/// let pixels = clatch::synthetic::rectangles(320, 240, 1)?;
+/// let image = GrayView::new(&pixels, 320, 240, 320)?;
+/// let config = |subpixel| ExtractorConfig {
+///     detector: DetectorConfig { subpixel, ..DetectorConfig::default() },
+///     ..ExtractorConfig::default()
+/// };
+/// let whole = Extractor::new(Backend::Cpu, config(Subpixel::None))?.detect_and_describe(&image)?;
+/// let refined = Extractor::new(Backend::Cpu, config(Subpixel::Score))?.detect_and_describe(&image)?;
+/// assert_eq!(whole.descriptors, refined.descriptors);
+/// for (w, r) in whole.keypoints.iter().zip(&refined.keypoints) {
+///     // Less than half a pixel of the keypoint's level.
+///     let level_pixel = 1.2f32.powi(w.octave);
+///     assert!((w.x - r.x).abs() <= 0.5 * level_pixel && (w.y - r.y).abs() <= 0.5 * level_pixel);
+/// }
+/// # Ok::<(), clatch::Error>(())
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum Subpixel {
+    /// Whole pixels of the keypoint's level, mapped to level 0.
+    None,
+    /// Per axis, the peak of the parabola through the FAST scores of the keypoint and its two
+    /// neighbours on its level (0 unless the keypoint's score is strictly above both), in 1/65536
+    /// pixel, then mapped to level 0 as a whole position would be. The default.
+    #[default]
+    Score,
 }
 
 /// What orders corners when the strongest are kept.
@@ -97,12 +152,12 @@ pub enum Ranking {
 pub enum LevelBudget {
     /// The strongest keypoints over all levels together: a textured full-resolution level can take
     /// almost all of them.
-    #[default]
     Global,
     /// As ORB shares its features: level `l` gets a share proportional to `scale_factor^-l`
     /// (`max_keypoints · (1 - f) / (1 - f^L) · f^l` with `f = 1 / scale_factor`, rounded; the last
     /// level gets the rest), each level keeps its strongest within its share, and what levels short of
-    /// keypoints leave goes to the strongest of the others.
+    /// keypoints leave goes to the strongest of the others. The default.
+    #[default]
     Geometric,
 }
 
@@ -111,15 +166,19 @@ impl Default for DetectorConfig {
         Self {
             threshold: 20,
             max_keypoints: 5000,
-            keypoint_size: DEFAULT_KEYPOINT_SIZE,
+            keypoint_size: Self::DEFAULT_KEYPOINT_SIZE,
             grid: 1,
-            level_budget: LevelBudget::Global,
+            level_budget: LevelBudget::Geometric,
             ranking: Ranking::Fast,
+            subpixel: Subpixel::Score,
         }
     }
 }
 
 impl DetectorConfig {
+    /// The default `keypoint_size` of detected keypoints.
+    pub const DEFAULT_KEYPOINT_SIZE: f32 = 40.0;
+
     /// Checks every field's range.
     pub fn validate(&self) -> Result<()> {
         if self.threshold == 0 || self.threshold == 255 {
@@ -150,10 +209,14 @@ impl DetectorConfig {
         })
     }
 
-    /// Whether keypoints are chosen by more than the plain top-N (then extraction goes through the
-    /// selection of [`crate::pyramid`], with a one-level pyramid when none is configured).
+    /// Whether keypoints are chosen by more than the plain top-N, or their positions refined (then
+    /// extraction goes through the selection and reporting of [`crate::pyramid`], with a one-level
+    /// pyramid when none is configured).
     pub(crate) fn selects(&self) -> bool {
-        self.grid > 1 || self.level_budget != LevelBudget::Global || self.ranking != Ranking::Fast
+        self.grid > 1
+            || self.level_budget != LevelBudget::Global
+            || self.ranking != Ranking::Fast
+            || self.subpixel != Subpixel::None
     }
 
     /// The settings each level is detected with before selection: with spreading every corner is a

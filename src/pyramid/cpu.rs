@@ -4,7 +4,7 @@ use crate::parallel::*;
 
 use super::{LevelKeypoint, Plan, Pyramid, STEP_FRAC_BITS, downscaled, source_position};
 use crate::describe::{self, DescriptorConfig};
-use crate::detect::{self, DetectorConfig, Ranking};
+use crate::detect::{self, DetectorConfig, Ranking, Subpixel};
 use crate::error::Result;
 use crate::features::Features;
 use crate::gray_view::GrayView;
@@ -93,7 +93,8 @@ fn level_view<'a>(
     GrayView::new(&levels[l - 1], w, h, w).expect("level geometry")
 }
 
-/// Detects on every level and keeps the strongest `max_keypoints` over all (level coordinates).
+/// Detects on every level and keeps the strongest `max_keypoints` over all (level coordinates), with
+/// their sub-pixel offsets ([`DetectorConfig::subpixel`]).
 fn detect_levels(
     img: &GrayView,
     levels: &[Vec<u8>],
@@ -104,15 +105,33 @@ fn detect_levels(
     let views: Vec<GrayView> = (0..plan.sizes.len())
         .map(|l| level_view(img, levels, plan, l))
         .collect();
+    // Orientation does not take part in the selection: only the kept keypoints are oriented.
     let per_level: Vec<_> = views
         .iter()
-        .map(|view| detect::cpu::detect(view, &candidates))
+        .map(|view| detect::cpu::detect_unoriented(view, &candidates))
         .collect();
     let rank = |level: usize, k: &crate::keypoint::KeyPoint| match config.ranking {
         Ranking::Fast => super::fast_rank(level, k),
         Ranking::Harris => detect::cpu::harris_response(&views[level], k.x as usize, k.y as usize),
     };
-    super::select(&per_level, &plan.sizes, plan.scale_factor(), config, &rank)
+    let mut selected = super::select(&per_level, &plan.sizes, plan.scale_factor(), config, &rank);
+    selected.par_iter_mut().for_each(|k| {
+        let view = &views[k.level];
+        k.keypoint.angle = detect::cpu::orientation(view, k.keypoint.x as usize, k.keypoint.y as usize);
+    });
+    if config.subpixel == Subpixel::Score {
+        let offsets: Vec<[i32; 2]> = selected
+            .par_iter()
+            .map(|k| {
+                let (x, y) = (k.keypoint.x as usize, k.keypoint.y as usize);
+                detect::cpu::subpixel_offset(&views[k.level], x, y)
+            })
+            .collect();
+        for (k, offset) in selected.iter_mut().zip(offsets) {
+            k.offset = offset;
+        }
+    }
+    selected
 }
 
 /// Multi-scale detection on the CPU: keypoints in level-0 coordinates, strongest first.
@@ -161,6 +180,54 @@ pub fn detect_and_describe(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn subpixel_moves_only_the_reported_positions() {
+        // Multi-scale and single-scale extraction with and without Subpixel::Score: the same keypoints
+        // in the same order, the same descriptors, sizes, angles and responses; each refined position
+        // is the whole one's level position plus the level's parabola offset, mapped by the same
+        // chain, so within half a level pixel of the whole one.
+        let pixels = crate::synthetic::rectangles(400, 300, 5).expect("synthetic image");
+        let img = GrayView::new(&pixels, 400, 300, 400).unwrap();
+        for pyramid in [
+            Pyramid { levels: 4, scale_factor: 1.5 },
+            Pyramid { levels: 1, scale_factor: 2.0 },
+        ] {
+            let whole_config = DetectorConfig { subpixel: Subpixel::None, ..DetectorConfig::default() };
+            let refined_config = DetectorConfig { subpixel: Subpixel::Score, ..whole_config.clone() };
+            let descriptor = DescriptorConfig::default();
+            let whole = detect_and_describe(&img, &whole_config, &descriptor, &pyramid).unwrap();
+            let refined = detect_and_describe(&img, &refined_config, &descriptor, &pyramid).unwrap();
+            assert_eq!(detect(&img, &refined_config, &pyramid), refined.keypoints);
+            assert_eq!(whole.descriptors, refined.descriptors);
+            assert_eq!(whole.keypoints.len(), refined.keypoints.len());
+            let plan = Plan::new(&pyramid, 400, 300, whole_config.margin());
+            let levels = build_levels(&img, &plan);
+            let mut moved = 0;
+            for (w, r) in whole.keypoints.iter().zip(&refined.keypoints) {
+                assert_eq!((w.size, w.angle, w.response, w.octave), (r.size, r.angle, r.response, r.octave));
+                let level = w.octave as usize;
+                let view = level_view(&img, &levels, &plan, level);
+                // The level position of the whole keypoint, found back from its level-0 coordinate.
+                let (lx, ly) = (0..plan.sizes[level].0)
+                    .flat_map(|x| (0..plan.sizes[level].1).map(move |y| (x, y)))
+                    .find(|&(x, y)| {
+                        super::super::to_level0_fixed((x as i64) << 16, level, plan.step) == w.x
+                            && super::super::to_level0_fixed((y as i64) << 16, level, plan.step) == w.y
+                    })
+                    .expect("a whole level position");
+                let [dx, dy] = detect::cpu::subpixel_offset(&view, lx, ly);
+                let expected = |whole: usize, offset: i32| {
+                    super::super::to_level0_fixed(((whole as i64) << 16) + offset as i64, level, plan.step)
+                };
+                assert_eq!((r.x, r.y), (expected(lx, dx), expected(ly, dy)));
+                let half = 0.5 * plan.scale_factor().powi(level as i32) + 1.0 / 256.0;
+                assert!((r.x - w.x).abs() as f64 <= half && (r.y - w.y).abs() as f64 <= half);
+                moved += usize::from((r.x, r.y) != (w.x, w.y));
+            }
+            assert!(moved > whole.keypoints.len() / 4, "{moved} of {} moved", whole.keypoints.len());
+        }
+    }
 
     #[test]
     fn factor_two_is_the_rounded_2x2_mean() {

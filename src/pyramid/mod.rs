@@ -19,8 +19,11 @@
 //!   `>> 16`). For `scale_factor = 2` this is exactly the 2x2 mean rounded half up.
 //! - **Selection** ([`select`]): all levels' keypoints sorted by (score descending, level, y, x
 //!   ascending, in level coordinates), the first `max_keypoints` kept.
-//! - **Back to level 0** ([`to_level0`]): `p = X · 2^16`, then `level` times
+//! - **Back to level 0** ([`to_level0_fixed`]): `p = X · 2^16 + offset`, then `level` times
 //!   `p = (((p + 2^15) · step) >> 16) - 2^15`, then `x = ((p + 128) >> 8) / 256` (exact in `f32`).
+//!   `offset` is 0, or with [`crate::Subpixel::Score`] the keypoint's sub-pixel offset on its level in
+//!   1/65536 pixel ([`crate::detect::cpu::subpixel_offset`], integer-exact), found after selection for
+//!   the kept keypoints only; orientation and descriptor stay those of the whole pixel `X`.
 
 pub mod cpu;
 
@@ -55,7 +58,7 @@ pub const MAX_LEVELS: usize = 32;
 ///     ..ExtractorConfig::default()
 /// };
 /// let features = Extractor::new(Backend::Cpu, config)?.detect_and_describe(&image)?;
-/// assert!(features.keypoints.iter().any(|k| k.octave == 1 && k.size == 128.0));
+/// assert!(features.keypoints.iter().any(|k| k.octave == 1 && k.size == 80.0)); // 40 x 2
 /// # Ok::<(), clatch::Error>(())
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -69,6 +72,12 @@ pub struct Pyramid {
 }
 
 impl Pyramid {
+    /// The default pyramid: 8 levels, each 1.2 times smaller than the one before (as ORB's).
+    pub const DEFAULT: Pyramid = Pyramid {
+        levels: 8,
+        scale_factor: 1.2,
+    };
+
     /// The scale factor in 16.16 fixed point: `round_half_even(scale_factor · 2^16)`.
     pub(crate) fn step(&self) -> i64 {
         (self.scale_factor as f64 * (1u64 << STEP_FRAC_BITS) as f64).round_ties_even() as i64
@@ -154,10 +163,16 @@ pub fn source_position(index: usize, step: i64) -> i64 {
     ((2 * index as i64 + 1) * step - (1 << STEP_FRAC_BITS)) >> 1
 }
 
-/// The level-0 coordinate of coordinate `index` on `level` (see the module docs), exact in `f32`.
-pub fn to_level0(index: usize, level: usize, step: i64) -> f32 {
+// Sub-pixel offsets are added to 16.16 level positions as they are.
+const _: () = assert!(crate::detect::SUBPIXEL_FRAC_BITS == STEP_FRAC_BITS);
+
+/// The level-0 coordinate of the 16.16 fixed-point coordinate `position` on `level`: `level` times
+/// `p = (((p + 2^15) · step) >> 16) - 2^15` (the inverse of the downscale's pixel-centre rule,
+/// floored; `>>` floors), then `((p + 128) >> 8) / 256`, a 24.8 value exact in `f32` (level-0
+/// coordinates are below 2^15). Integer arithmetic throughout; the one `f32` division by 256 is exact.
+pub fn to_level0_fixed(position: i64, level: usize, step: i64) -> f32 {
     let half = 1i64 << (STEP_FRAC_BITS - 1);
-    let mut p = (index as i64) << STEP_FRAC_BITS;
+    let mut p = position;
     for _ in 0..level {
         p = (((p + half) * step) >> STEP_FRAC_BITS) - half;
     }
@@ -173,6 +188,9 @@ pub struct LevelKeypoint {
     pub keypoint: KeyPoint,
     /// What orders it ([`crate::Ranking`]): the FAST score, or the Harris response.
     pub rank: i64,
+    /// Its sub-pixel offset `[dx, dy]` on its level in 1/65536 pixel ([`crate::Subpixel`]): 0 until
+    /// set after selection.
+    pub offset: [i32; 2],
 }
 
 /// The order of selection: rank descending, then level, `y`, `x` ascending (level coordinates).
@@ -274,6 +292,7 @@ pub fn select(
                 level,
                 keypoint,
                 rank: rank(level, &keypoint),
+                offset: [0, 0],
             })
         })
         .collect();
@@ -325,11 +344,13 @@ pub fn of_level(selected: &[LevelKeypoint], level: usize) -> Vec<KeyPoint> {
         .collect()
 }
 
-/// The reported keypoint: level-0 position, `size = level_size`, `octave = level`.
+/// The reported keypoint: level-0 position (whole level position plus its sub-pixel offset, by
+/// [`to_level0_fixed`]), `size = level_size`, `octave = level`.
 pub fn report(k: &LevelKeypoint, pyramid: &Pyramid, step: i64) -> KeyPoint {
+    let fixed = |whole: f32, offset: i32| ((whole as i64) << STEP_FRAC_BITS) + offset as i64;
     KeyPoint {
-        x: to_level0(k.keypoint.x as usize, k.level, step),
-        y: to_level0(k.keypoint.y as usize, k.level, step),
+        x: to_level0_fixed(fixed(k.keypoint.x, k.offset[0]), k.level, step),
+        y: to_level0_fixed(fixed(k.keypoint.y, k.offset[1]), k.level, step),
         size: pyramid.level_size(k.keypoint.size, k.level),
         octave: k.level as i32,
         ..k.keypoint
@@ -400,6 +421,7 @@ mod tests {
 
     #[test]
     fn level0_coordinates_worked_by_hand() {
+        let to_level0 = |x: usize, level, step| to_level0_fixed((x as i64) << 16, level, step);
         // Factor 2: level 1 pixel X is at 2X + 0.5; level 2 at 2(2X + 0.5) + 0.5 = 4X + 1.5; level 3
         // at 8X + 3.5.
         for x in [0usize, 1, 17, 400] {
@@ -413,6 +435,66 @@ mod tests {
         // = 990898 - 32768 = 958130 -> (958130 + 128) >> 8 = 3743 -> 14.62109375.
         assert_eq!(to_level0(10, 1, 78_643), 12.101_562_5);
         assert_eq!(to_level0(10, 2, 78_643), 14.621_094);
+    }
+
+    #[test]
+    fn subpixel_positions_on_levels_worked_by_hand() {
+        // Factor 2, X = 10 + 1/4 on level 1: p = 671744; ((671744 + 32768) · 131072 >> 16) - 32768
+        // = 1376256 = 21 px exactly, as (10.25 + 0.5) · 2 - 0.5. On level 2: 42.5.
+        assert_eq!(to_level0_fixed(10 * 65_536 + 16_384, 1, 131_072), 21.0);
+        assert_eq!(to_level0_fixed(10 * 65_536 + 16_384, 2, 131_072), 42.5);
+        // Level 0, X = 100 - 21845/65536 (-1/3 px): (6553600 - 21845 + 128) >> 8 = 25515
+        // -> 25515 / 256 = 99.66796875 (24.8, the nearest to 99.6667 but for the floor's 1/512).
+        assert_eq!(to_level0_fixed(100 * 65_536 - 21_845, 0, 78_643), 25_515.0 / 256.0);
+        // Factor 1.2, level 1, X = 10 - 1/2: p = 622592; (655360 · 78643) >> 16 = 786430 - 32768
+        // = 753662 -> (753662 + 128) >> 8 = 2944 -> 11.5 (real: 10 · 1.2 - 0.5 = 11.5).
+        assert_eq!(to_level0_fixed(10 * 65_536 - 32_768, 1, 78_643), 11.5);
+    }
+
+    #[test]
+    fn subpixel_positions_on_levels_agree_with_the_real_mapping() {
+        // The integer chain against the real-valued inverse of the pixel-centre rule computed in f64,
+        // u -> (u + 1/2) f^l - 1/2 with f = step / 2^16 exactly: each level's floor loses less than
+        // 2^-16 px (then scaled by the later levels), the final 24.8 rounding at most 1/512.
+        let mut rng = crate::synthetic::SplitMix64::new(11);
+        for step in [78_643i64, 98_304, 131_072, 131_071, 65_537, 91_750] {
+            let f = step as f64 / 65_536.0;
+            for level in 0..8 {
+                // Level-0 coordinates stay below 2^15 (images are at most 32767 pixels wide).
+                let widest = (30_000.0 / f.powi(level as i32)) as u64;
+                for _ in 0..500 {
+                    let whole = 16 + rng.below(widest) as i64;
+                    let offset = rng.below(65_535) as i64 - 32_767;
+                    let got = to_level0_fixed((whole << 16) + offset, level, step);
+                    let u = whole as f64 + offset as f64 / 65_536.0;
+                    let real = (u + 0.5) * f.powi(level as i32) - 0.5;
+                    let floors: f64 = (0..level).map(|l| f.powi(l as i32) / 65_536.0).sum();
+                    let err = got as f64 - real;
+                    assert!(
+                        err <= 1.0 / 512.0 && err >= -(1.0 / 512.0 + floors),
+                        "step {step} level {level} {whole} {offset}: {got} vs {real}"
+                    );
+                    // A 24.8 value: exact in f32.
+                    assert_eq!((got * 256.0).fract(), 0.0);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn reported_positions_carry_the_offsets() {
+        let k = LevelKeypoint {
+            level: 1,
+            keypoint: KeyPoint::new(10.0, 20.0),
+            rank: 50,
+            offset: [16_384, -16_384],
+        };
+        let reported = report(&k, &pyramid(3, 2.0), 131_072);
+        // (10.25 + 0.5) · 2 - 0.5 = 21, (19.75 + 0.5) · 2 - 0.5 = 40.
+        assert_eq!((reported.x, reported.y, reported.octave), (21.0, 40.0, 1));
+        let whole = report(&LevelKeypoint { offset: [0, 0], ..k }, &pyramid(3, 2.0), 131_072);
+        assert_eq!((whole.x, whole.y), (20.5, 40.5));
+        assert_eq!((whole.size, whole.angle), (reported.size, reported.angle));
     }
 
     fn budget(max_keypoints: usize) -> DetectorConfig {
@@ -484,7 +566,11 @@ mod tests {
         let per_level = [level0, level1];
         let sizes = [(100, 100), (50, 50)];
         let count = |s: &[LevelKeypoint], l| s.iter().filter(|k| k.level == l).count();
-        let global = select(&per_level, &sizes, 2.0, &budget(100), &fast_rank);
+        let global = DetectorConfig {
+            level_budget: LevelBudget::Global,
+            ..budget(100)
+        };
+        let global = select(&per_level, &sizes, 2.0, &global, &fast_rank);
         assert_eq!((count(&global, 0), count(&global, 1)), (100, 0));
         let geometric = DetectorConfig {
             level_budget: LevelBudget::Geometric,

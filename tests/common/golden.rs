@@ -140,7 +140,9 @@ pub fn render(image: &Gray, backend: Backend) -> String {
     let mut out = String::new();
     writeln!(out, "# Golden results of tests/golden.rs on assets/astronaut.png; the format is documented there.").unwrap();
     writeln!(out, "# Regenerate only for a deliberate contract change: CLATCH_BLESS=1 cargo test --test golden").unwrap();
-    let extractor = Extractor::new(backend, ExtractorConfig::default()).unwrap();
+    // The single-scale preset: whole-pixel keypoints that check_plausible recomputes directly (the
+    // default pyramid is held to the CPU reference by tests/pyramid.rs and tests/cuda_pyramid.rs).
+    let extractor = Extractor::new(backend, ExtractorConfig::single_scale()).unwrap();
     let detected = extractor.detect(&view).unwrap();
     writeln!(out, "detect {}", detected.len()).unwrap();
     for k in &detected {

@@ -16,6 +16,9 @@ enum NoDevice {
 /// device, and as failed when there is one that clatch cannot start on.
 pub fn run(trials: Vec<Trial>) -> ! {
     let args = Arguments::from_args();
+    if let Some(line) = super::scale::banner() {
+        println!("{line}");
+    }
     let trials = match device_name() {
         Ok(name) => {
             println!("device: {name}");

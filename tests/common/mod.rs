@@ -4,6 +4,7 @@
 pub mod golden;
 pub mod gpu;
 pub mod reference;
+pub mod scale;
 
 use clatch::synthetic::SplitMix64;
 use clatch::{DescriptorSet, DescriptorWidth, GrayView};

@@ -259,9 +259,10 @@ fn write_text(path: &std::path::Path, text: &str) -> Result<(), CliError> {
 
 /// Runs `clatch eval`.
 pub fn main(args: &EvalArgs) -> Result<(), CliError> {
-    let from_flags = settings(&args.backend, &args.detect, Some(&args.matching))?;
+    let subpixel = args.subpixel.library();
+    let from_flags = settings(&args.backend, &args.detect, subpixel, Some(&args.matching))?;
     let (methods_run, methods_note) =
-        run::methods_to_run(&args.methods, from_flags.extractor.pyramid.is_some())?;
+        run::methods_to_run(&args.methods, args.detect.pyramid.is_some())?;
     std::fs::create_dir_all(&args.out).map_err(CliError::write(&args.out))?;
     let (pairs, mut notes) = collect_pairs(args)?;
     notes.extend(methods_note);

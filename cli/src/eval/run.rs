@@ -46,8 +46,14 @@ impl ClatchMethod {
                 opencv_latch: None,
                 ..from_flags.clone()
             },
+            // Full-resolution keypoints: OpenCV-compatible LATCH describes no other level (an
+            // explicit --pyramid keeps this method out, see methods_to_run).
             ClatchMethod::ClatchOpencv => Settings {
                 opencv_latch: Some(opencv_default_latch()?),
+                extractor: clatch::ExtractorConfig {
+                    pyramid: None,
+                    ..from_flags.extractor.clone()
+                },
                 ..from_flags.clone()
             },
         })
@@ -287,7 +293,14 @@ mod tests {
         .unwrap();
         // The keypoints are the detector's (with its angles); the descriptors are the library's
         // OpenCV-compatible ones for them, not CLATCH's.
-        let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
+        let extractor = Extractor::new(
+            Backend::Cpu,
+            ExtractorConfig {
+                pyramid: None,
+                ..ExtractorConfig::default()
+            },
+        )
+        .unwrap();
         for (img, got) in [(&rot.a, &run.a), (&rot.b, &run.b)] {
             let view = GrayView::try_from(img).unwrap();
             let detected = extractor.detect(&view).unwrap();

@@ -99,3 +99,31 @@ pub fn debug_detect_stages(
         keypoints,
     })
 }
+
+/// The sub-pixel offsets `[dx, dy]` (1/65536 pixel) the GPU gives `keypoints` (whole positions) on
+/// `image`: for comparing with [`crate::detect::cpu::subpixel_offset`].
+pub fn debug_subpixel_offsets(
+    dev: &GpuDevice,
+    image: &GrayView,
+    keypoints: &[KeyPoint],
+) -> Result<Vec<[i32; 2]>> {
+    if keypoints.is_empty() {
+        return Ok(Vec::new());
+    }
+    let stream = dev.new_stream()?;
+    let device_image = DeviceImage::upload(dev, &stream, image)?;
+    let on_device = super::super::memory::upload(&stream, keypoints, "debug keypoint upload")?;
+    let mut offsets = alloc_zeros(&stream, 2 * keypoints.len(), "debug sub-pixel offsets")?;
+    launch_subpixel(
+        dev,
+        &stream,
+        &device_image,
+        &on_device,
+        keypoints.len(),
+        &mut offsets,
+    )?;
+    let flat = stream
+        .clone_dtoh(&offsets)
+        .map_err(driver_error("copying sub-pixel offsets back"))?;
+    Ok(flat.chunks_exact(2).map(|p| [p[0], p[1]]).collect())
+}

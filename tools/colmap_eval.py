@@ -7,7 +7,8 @@ MODEL_DIR is a COLMAP model (sparse/N, binary or text; converted with `colmap mo
 --output_type TXT` when binary). GT_DIR holds one `NAME.camera` per image (Strecha et al. CVPR 2008
 format, as in data/strecha_herzjesu_p8/gt_dense_cameras: K rows, a distortion row, R camera-to-world
 rows, the camera centre t in metres, `width height`). The model's camera centres are aligned to the
-ground truth's by the least-squares similarity (Umeyama 1991); errors are measured after it.
+ground truth's by the least-squares similarity (Umeyama 1991); errors are measured after it. The
+relative rotation error (each pair's rotation against the ground truth's) needs no alignment.
 Needs numpy only.
 """
 import os
@@ -85,9 +86,18 @@ def main():
         rel = gt[n][0].T @ r @ model[n][0]
         rot_err.append(np.degrees(np.arccos(np.clip((np.trace(rel) - 1) / 2, -1, 1))))
     rot_err = np.array(rot_err)
+    # Alignment-free: the rotation between every two cameras against the ground truth's.
+    rel_err = []
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            rel = (gt[a][0].T @ gt[b][0]).T @ (model[a][0].T @ model[b][0])
+            rel_err.append(np.degrees(np.arccos(np.clip((np.trace(rel) - 1) / 2, -1, 1))))
+    rel_err = np.array(rel_err)
     print(f"registered with ground truth: {len(names)} of {len(gt)}")
     print(f"camera centre error: mean {100 * centre_err.mean():.2f} cm, max {100 * centre_err.max():.2f} cm")
     print(f"rotation error: mean {rot_err.mean():.3f} deg, max {rot_err.max():.3f} deg")
+    print(f"relative rotation error (every pair, no alignment): mean {rel_err.mean():.3f} deg, "
+          f"max {rel_err.max():.3f} deg")
     for n, c, a in zip(names, centre_err, rot_err):
         print(f"  {n}: {100 * c:.2f} cm, {a:.3f} deg")
 

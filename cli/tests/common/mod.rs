@@ -7,12 +7,35 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+/// A fresh folder for one test, removed when the test ends (passing or not), so that test runs do not
+/// pile folders up in the temporary directory.
+pub struct WorkDir(PathBuf);
+
+impl std::ops::Deref for WorkDir {
+    type Target = PathBuf;
+    fn deref(&self) -> &PathBuf {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for WorkDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for WorkDir {
+    fn drop(&mut self) {
+        std::fs::remove_dir_all(&self.0).ok();
+    }
+}
+
 /// A fresh folder for one test.
-pub fn workdir(suite: &str, name: &str) -> PathBuf {
+pub fn workdir(suite: &str, name: &str) -> WorkDir {
     let dir = std::env::temp_dir().join(format!("clatch-{suite}-{}-{name}", std::process::id()));
     std::fs::remove_dir_all(&dir).ok();
     std::fs::create_dir_all(&dir).unwrap();
-    dir
+    WorkDir(dir)
 }
 
 /// Runs `clatch ARGS...`; panics if it runs longer than 60 s (an input that blocks).

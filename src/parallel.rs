@@ -21,7 +21,7 @@ pub(crate) fn threads() -> usize {
 #[cfg(not(feature = "cpu"))]
 mod sequential {
     use std::ops::Range;
-    use std::slice::{ChunksExactMut, ChunksMut, Iter};
+    use std::slice::{ChunksExactMut, ChunksMut, Iter, IterMut};
 
     pub(crate) trait ParallelSlice<T> {
         fn par_iter(&self) -> Iter<'_, T>;
@@ -34,6 +34,7 @@ mod sequential {
     }
 
     pub(crate) trait ParallelSliceMut<T> {
+        fn par_iter_mut(&mut self) -> IterMut<'_, T>;
         fn par_chunks_mut(&mut self, size: usize) -> ChunksMut<'_, T>;
         // Used by the CUDA backend's upload (`cuda` without `cpu`).
         #[allow(dead_code)]
@@ -41,6 +42,9 @@ mod sequential {
     }
 
     impl<T> ParallelSliceMut<T> for [T] {
+        fn par_iter_mut(&mut self) -> IterMut<'_, T> {
+            self.iter_mut()
+        }
         fn par_chunks_mut(&mut self, size: usize) -> ChunksMut<'_, T> {
             self.chunks_mut(size)
         }

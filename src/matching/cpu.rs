@@ -71,12 +71,94 @@ fn neighbours_popcnt(q: u32, qd: &[u64], train: &DescriptorSet, k: usize) -> Vec
 }
 
 /// The nearest query of every gallery descriptor (lowest query index on ties).
+#[cfg(test)]
 fn nearest_query_of_each_train(query: &DescriptorSet, train: &DescriptorSet) -> Vec<u32> {
     knn(train, query, 1)
         .matches
         .iter()
         .map(|m| m.train)
         .collect()
+}
+
+/// Queries per block of [`knn_and_reverse`]: each block keeps its own nearest query per gallery row.
+const QUERY_BLOCK: usize = 64;
+
+/// [`knn`] and, in the same pass over the distance matrix, the nearest query of every gallery row
+/// (lowest query index on ties), as [`knn`] of the gallery against the queries would give it: each
+/// distance is computed once instead of twice. Integer comparisons only, so the same result.
+pub fn knn_and_reverse(
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    k: usize,
+) -> (KnnMatches, Vec<u32>) {
+    let popcnt = has_popcnt();
+    let rows: Vec<&[u64]> = query.rows().collect();
+    let blocks: Vec<(Vec<Match>, Vec<u64>)> = (0..rows.len().div_ceil(QUERY_BLOCK))
+        .into_par_iter()
+        .map(|b| {
+            // (distance << 32 | query): the smallest is the nearest, then the lowest query index.
+            let mut nearest = vec![u64::MAX; train.len()];
+            let mut matches = Vec::with_capacity(QUERY_BLOCK * k);
+            for q in b * QUERY_BLOCK..((b + 1) * QUERY_BLOCK).min(rows.len()) {
+                if popcnt {
+                    // SAFETY: the CPU has the POPCNT instruction (checked at run time above).
+                    #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+                    {
+                        let found =
+                            unsafe { scan_popcnt(q as u32, rows[q], train, k, &mut nearest) };
+                        matches.extend(found);
+                        continue;
+                    }
+                }
+                matches.extend(scan(q as u32, rows[q], train, k, &mut nearest));
+            }
+            (matches, nearest)
+        })
+        .collect();
+    let mut nearest = vec![u64::MAX; train.len()];
+    let mut matches = Vec::with_capacity(rows.len() * k);
+    for (block_matches, block_nearest) in blocks {
+        matches.extend(block_matches);
+        for (n, b) in nearest.iter_mut().zip(block_nearest) {
+            *n = (*n).min(b);
+        }
+    }
+    let reverse = nearest.iter().map(|&n| n as u32).collect();
+    (KnnMatches::from_parts(k, matches), reverse)
+}
+
+/// [`neighbours`] of query `q`, also lowering `nearest[t]` to `(distance << 32 | q)` where that is
+/// smaller.
+#[inline(always)]
+fn scan(q: u32, qd: &[u64], train: &DescriptorSet, k: usize, nearest: &mut [u64]) -> Vec<Match> {
+    let mut best = Vec::with_capacity(k + 1);
+    for ((t, td), n) in train.rows().enumerate().zip(nearest.iter_mut()) {
+        let distance = hamming(qd, td);
+        *n = (*n).min((distance as u64) << 32 | q as u64);
+        insert_neighbour(
+            &mut best,
+            k,
+            Match {
+                query: q,
+                train: t as u32,
+                distance,
+            },
+        );
+    }
+    best
+}
+
+/// [`scan`] compiled with POPCNT (the same integers, so the same result).
+#[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+#[target_feature(enable = "popcnt")]
+fn scan_popcnt(
+    q: u32,
+    qd: &[u64],
+    train: &DescriptorSet,
+    k: usize,
+    nearest: &mut [u64],
+) -> Vec<Match> {
+    scan(q, qd, train, k, nearest)
 }
 
 /// Applies ratio test, cross-check and distance limit (validated configuration).
@@ -86,10 +168,12 @@ pub fn match_descriptors(
     config: &MatchConfig,
 ) -> Vec<Match> {
     let k = if config.ratio.is_some() { 2 } else { 1 };
-    let neighbours = knn(query, train, k);
-    let reverse = config
-        .cross_check
-        .then(|| nearest_query_of_each_train(query, train));
+    let (neighbours, reverse) = if config.cross_check {
+        let (neighbours, reverse) = knn_and_reverse(query, train, k);
+        (neighbours, Some(reverse))
+    } else {
+        (knn(query, train, k), None)
+    };
     neighbours
         .iter()
         .filter_map(|n| {
@@ -116,6 +200,32 @@ pub fn match_descriptors(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn one_pass_equals_the_two_directions() {
+        // Narrow descriptors make equal distances (ties) common; sizes straddle the query block.
+        let mut state = 5u64;
+        let mut next = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state >> 11
+        };
+        for (bits, nq, nt) in [(8usize, 130, 70), (16, 64, 1), (64, 1, 40), (512, 200, 300), (8, 65, 129)] {
+            let width = crate::DescriptorWidth::from_bits(bits).unwrap();
+            let random = |n: usize, next: &mut dyn FnMut() -> u64| {
+                let words: Vec<u64> = (0..n * width.words())
+                    .map(|_| next() & if bits < 64 { (1u64 << bits) - 1 } else { u64::MAX })
+                    .collect();
+                DescriptorSet::from_words(width, words).unwrap()
+            };
+            let query = random(nq, &mut next);
+            let train = random(nt, &mut next);
+            for k in [1, 2.min(nt)] {
+                let (neighbours, reverse) = knn_and_reverse(&query, &train, k);
+                assert_eq!(neighbours, knn(&query, &train, k), "{bits} bits, {nq}x{nt}, k {k}");
+                assert_eq!(reverse, nearest_query_of_each_train(&query, &train), "{bits} bits, {nq}x{nt}");
+            }
+        }
+    }
     use crate::descriptor::DescriptorWidth;
 
     fn set(rows: &[u64]) -> DescriptorSet {

@@ -99,18 +99,18 @@ pub fn knn_and_reverse(
             // (distance << 32 | query): the smallest is the nearest, then the lowest query index.
             let mut nearest = vec![u64::MAX; train.len()];
             let mut matches = Vec::with_capacity(QUERY_BLOCK * k);
-            for q in b * QUERY_BLOCK..((b + 1) * QUERY_BLOCK).min(rows.len()) {
+            let first = b * QUERY_BLOCK;
+            let block = &rows[first..(first + QUERY_BLOCK).min(rows.len())];
+            for (q, qd) in (first as u32..).zip(block) {
                 if popcnt {
                     // SAFETY: the CPU has the POPCNT instruction (checked at run time above).
                     #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
                     {
-                        let found =
-                            unsafe { scan_popcnt(q as u32, rows[q], train, k, &mut nearest) };
-                        matches.extend(found);
+                        matches.extend(unsafe { scan_popcnt(q, qd, train, k, &mut nearest) });
                         continue;
                     }
                 }
-                matches.extend(scan(q as u32, rows[q], train, k, &mut nearest));
+                matches.extend(scan(q, qd, train, k, &mut nearest));
             }
             (matches, nearest)
         })

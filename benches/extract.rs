@@ -11,7 +11,7 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use clatch::synthetic::SplitMix64;
-use clatch::{Backend, DetectorConfig, Extractor, ExtractorConfig, GrayView, KeyPoint, Smoothing};
+use clatch::{Backend, Extractor, ExtractorConfig, GrayView, KeyPoint, Smoothing};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 
 const WIDTH: usize = 1024;
@@ -19,7 +19,8 @@ const HEIGHT: usize = 768;
 
 /// `n` keypoints inside the detector margin, random angles: every one is described.
 fn keypoints(n: usize) -> Vec<KeyPoint> {
-    let margin = DetectorConfig::default().margin();
+    // The margin of 64-pixel windows: these keypoints have the default size of `KeyPoint::new`.
+    let margin = ExtractorConfig::single_scale().detector.margin();
     let mut rng = SplitMix64::new(1);
     (0..n)
         .map(|_| {

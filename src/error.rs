@@ -71,6 +71,14 @@ pub enum Error {
         train_bits: usize,
     },
 
+    /// A pair of [`crate::Matcher::match_pairs`] names a set that is not there.
+    #[error("pair {pair} names set {index}, but there are {sets} sets")]
+    PairOutOfRange {
+        pair: usize,
+        index: usize,
+        sets: usize,
+    },
+
     /// A descriptor buffer whose length is not a whole number of descriptors.
     #[error(
         "descriptor buffer of {words} words is not a multiple of {words_per_descriptor} words per descriptor"

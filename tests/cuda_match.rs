@@ -34,6 +34,7 @@ fn trials() -> Vec<Trial> {
         Trial::test("match_every_config", gpu::every_config),
         Trial::test("match_ratio_boundary", gpu::ratio_boundary),
         Trial::test("match_real_descriptors_rotated", gpu::real_descriptors),
+        Trial::test("match_pairs_of_a_collection", gpu::match_pairs),
     ]
 }
 
@@ -586,6 +587,40 @@ mod gpu {
             query.len(),
             train.len(),
             default.len()
+        );
+        Ok(())
+    }
+
+    /// `Matcher::match_pairs` on the GPU (several streams, pairs in flight) against the CPU's, pair by
+    /// pair, with empty and single-descriptor sets among the real ones.
+    pub fn match_pairs() -> Result<(), Failed> {
+        let mut rng = SplitMix64::new(21);
+        let w = width(512);
+        let sizes = scale::thin([700, 0, 1, 2000, 65, 1500, 300, 5000, 9], 2);
+        let owned: Vec<DescriptorSet> = sizes.iter().map(|&n| random_set(w, n, &mut rng)).collect();
+        let sets: Vec<&DescriptorSet> = owned.iter().collect();
+        let pairs = Matcher::all_pairs(sets.len());
+        let mut compared = 0;
+        for config in configs() {
+            let cpu = matcher(Backend::Cpu, config.clone()).match_pairs(&sets, &pairs, &|_| {})?;
+            let done = std::sync::Mutex::new(Vec::new());
+            let gpu = matcher(GPU, config.clone())
+                .match_pairs(&sets, &pairs, &|p| done.lock().unwrap().push(p))?;
+            if *done.lock().unwrap() != (0..pairs.len()).collect::<Vec<_>>() {
+                return Err(format!("{config:?}: pairs not reported once each in order").into());
+            }
+            for (p, (c, g)) in cpu.iter().zip(&gpu).enumerate() {
+                if c != g {
+                    return Err(format!("{config:?}: pair {:?} differs", pairs[p]).into());
+                }
+                compared += c.len();
+            }
+        }
+        println!(
+            "{} sets, {} pairs x {} configurations: {compared} matches identical",
+            sets.len(),
+            pairs.len(),
+            configs().len()
         );
         Ok(())
     }

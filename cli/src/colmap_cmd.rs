@@ -105,30 +105,13 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
 
     // Match every pair.
     let matcher = Matcher::new(settings.backend, settings.matching.clone())?;
-    let pairs: Vec<(usize, usize)> = (0..photos.len())
-        .flat_map(|i| (i + 1..photos.len()).map(move |j| (i, j)))
-        .collect();
+    let pairs = Matcher::all_pairs(photos.len());
     let progress = Progress::counter(pairs.len() as u64, "matching pairs");
     let watch = Stopwatch::start();
-    let needed = if settings.matching.ratio.is_some() {
-        2
-    } else {
-        1
-    };
-    let mut matches: Vec<Vec<Match>> = Vec::with_capacity(pairs.len());
-    for &(i, j) in &pairs {
-        let (a, b) = (
-            &photos[i].features.descriptors,
-            &photos[j].features.descriptors,
-        );
-        // The ratio test needs two gallery descriptors; a featureless photo simply matches nothing.
-        matches.push(if a.is_empty() || b.len() < needed {
-            Vec::new()
-        } else {
-            matcher.match_descriptors(a, b)?
-        });
-        progress.done();
-    }
+    // The library matches the whole collection (a featureless photo simply matches nothing).
+    let sets: Vec<&clatch::DescriptorSet> =
+        photos.iter().map(|p| &p.features.descriptors).collect();
+    let matches: Vec<Vec<Match>> = matcher.match_pairs(&sets, &pairs, &|_| progress.done())?;
     times.matching = watch.stop();
     progress.finish();
 

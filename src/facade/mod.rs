@@ -9,6 +9,7 @@
 
 mod extractor;
 mod matcher;
+mod pairs;
 
 pub use extractor::{Extractor, ExtractorConfig};
 pub use matcher::Matcher;

@@ -1,0 +1,145 @@
+//! Many pairs of descriptor sets in one call: the collection path (every pair of a photo collection, or
+//! a given pair list), as structure from motion needs it.
+
+use std::collections::VecDeque;
+
+use super::Matcher;
+use crate::backend::Backend;
+use crate::cuda::{self, GpuStream};
+use crate::descriptor::DescriptorSet;
+use crate::error::{Error, Result};
+use crate::matching::{self, Match};
+use crate::parallel::*;
+
+/// Streams the CUDA backend keeps busy, and the pairs it queues on each before waiting for the oldest.
+const STREAMS: usize = 4;
+const IN_FLIGHT_PER_STREAM: usize = 2;
+
+impl Matcher {
+    /// The pairs `(i, j)`, `i < j`, of `n` sets in order: `(0, 1), (0, 2), …, (1, 2), …`.
+    ///
+    /// ```
+    /// assert_eq!(clatch::Matcher::all_pairs(3), vec![(0, 1), (0, 2), (1, 2)]);
+    /// ```
+    pub fn all_pairs(n: usize) -> Vec<(usize, usize)> {
+        (0..n)
+            .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+            .collect()
+    }
+
+    /// The matches of every pair, in pair order: `pairs[p] = (a, b)` matches `sets[a]` (queries)
+    /// against `sets[b]` (gallery) exactly as [`Matcher::match_descriptors`] does. A pair with no
+    /// query or too small a gallery (none, or one descriptor under the ratio test) gets no matches
+    /// rather than an error, so that one featureless photo does not stop a collection. Every index and
+    /// width is checked before any work. `done` is called once per finished pair with its index
+    /// (in any order on the CPU, in pair order on the GPU), e.g. for progress.
+    ///
+    /// The CPU backend spreads the pairs over its threads; the CUDA backend keeps several streams
+    /// busy, each pair's transfers and kernels queued while earlier pairs finish.
+    ///
+    /// ```
+    /// use clatch::{Backend, DescriptorSet, DescriptorWidth, MatchConfig, Matcher};
+    ///
+    /// let width = DescriptorWidth::from_bits(64)?;
+    /// let set = |seed: u64| {
+    ///     let words = (0..100).map(|i| (i as u64 + seed).wrapping_mul(0x9E37_79B9_7F4A_7C15)).collect();
+    ///     DescriptorSet::from_words(width, words)
+    /// };
+    /// let (a, b, c) = (set(0)?, set(50)?, set(7)?);
+    /// let matcher = Matcher::new(Backend::Cpu, MatchConfig::default())?;
+    /// let sets = [&a, &b, &c];
+    /// let pairs = Matcher::all_pairs(sets.len());
+    /// let matches = matcher.match_pairs(&sets, &pairs, &|_| {})?;
+    /// assert_eq!(matches.len(), 3);
+    /// assert_eq!(matches[0], matcher.match_descriptors(&a, &b)?);
+    /// # Ok::<(), clatch::Error>(())
+    /// ```
+    pub fn match_pairs(
+        &self,
+        sets: &[&DescriptorSet],
+        pairs: &[(usize, usize)],
+        done: &(dyn Fn(usize) + Sync),
+    ) -> Result<Vec<Vec<Match>>> {
+        self.check_pairs(sets, pairs)?;
+        let needed = if self.config().ratio.is_some() { 2 } else { 1 };
+        let matchable = |&(a, b): &(usize, usize)| !sets[a].is_empty() && sets[b].len() >= needed;
+        match self.backend() {
+            Backend::Cpu => Ok(pairs
+                .par_iter()
+                .enumerate()
+                .map(|(p, pair)| {
+                    let found = if matchable(pair) {
+                        matching::cpu::match_descriptors(sets[pair.0], sets[pair.1], self.config())
+                    } else {
+                        Vec::new()
+                    };
+                    done(p);
+                    found
+                })
+                .collect()),
+            Backend::Cuda { device } => {
+                let streams = (0..STREAMS)
+                    .map(|_| GpuStream::new(device))
+                    .collect::<Result<Vec<_>>>()?;
+                let mut queued = VecDeque::new();
+                let mut results = Vec::with_capacity(pairs.len());
+                let mut finish_oldest = |queued: &mut VecDeque<Option<_>>| -> Result<()> {
+                    let pending: Option<cuda::PendingMatches> =
+                        queued.pop_front().expect("a queued pair");
+                    results.push(match pending {
+                        Some(pending) => pending.wait()?,
+                        None => Vec::new(),
+                    });
+                    done(results.len() - 1);
+                    Ok(())
+                };
+                for (p, pair) in pairs.iter().enumerate() {
+                    if queued.len() == STREAMS * IN_FLIGHT_PER_STREAM {
+                        finish_oldest(&mut queued)?;
+                    }
+                    queued.push_back(if matchable(pair) {
+                        let stream = &streams[p % STREAMS];
+                        Some(cuda::match_async(
+                            stream,
+                            sets[pair.0],
+                            sets[pair.1],
+                            self.config(),
+                        )?)
+                    } else {
+                        None
+                    });
+                }
+                while !queued.is_empty() {
+                    finish_oldest(&mut queued)?;
+                }
+                Ok(results)
+            }
+        }
+    }
+
+    /// Every pair's indices in range and every set of one width.
+    fn check_pairs(&self, sets: &[&DescriptorSet], pairs: &[(usize, usize)]) -> Result<()> {
+        for (p, &(a, b)) in pairs.iter().enumerate() {
+            for index in [a, b] {
+                if index >= sets.len() {
+                    return Err(Error::PairOutOfRange {
+                        pair: p,
+                        index,
+                        sets: sets.len(),
+                    });
+                }
+            }
+        }
+        if let Some(first) = sets.first() {
+            for set in sets {
+                if set.width() != first.width() {
+                    return Err(Error::DescriptorWidthMismatch {
+                        query_bits: first.width().bits(),
+                        train_bits: set.width().bits(),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+}

@@ -20,6 +20,7 @@ fn trials() -> Vec<Trial> {
         Trial::test("eight_images_in_flight", gpu::eight_in_flight),
         Trial::test("extract_next_while_matching_previous", gpu::pipelined),
         Trial::test("async_needs_a_cuda_backend", gpu::cpu_backend_refused),
+        Trial::test("batch_of_images_in_input_order", gpu::batch),
     ]
 }
 
@@ -143,5 +144,37 @@ mod gpu {
             }) => Ok(()),
             other => Err(format!("expected InvalidConfig for a CPU backend, got {other:?}").into()),
         }
+    }
+
+    /// `Extractor::detect_and_describe_batch` on the GPU (streams the library holds) against the
+    /// CPU's, image by image, with the default pyramid and the single-scale preset; more images than
+    /// the library keeps in flight, so the window turns over.
+    pub fn batch() -> Result<(), Failed> {
+        let mut owned = images();
+        owned.extend(images());
+        owned.extend(images());
+        let views: Vec<_> = owned.iter().map(|g| g.view()).collect();
+        let mut compared = 0;
+        for config in [ExtractorConfig::default(), ExtractorConfig::single_scale()] {
+            let gpu = Extractor::new(GPU, config.clone())?;
+            let cpu = Extractor::new(Backend::Cpu, config)?;
+            let done = std::sync::Mutex::new(Vec::new());
+            let got = gpu.detect_and_describe_batch(&views, &|i| done.lock().unwrap().push(i))?;
+            let expected = cpu.detect_and_describe_batch(&views, &|_| {})?;
+            if *done.lock().unwrap() != (0..views.len()).collect::<Vec<_>>() {
+                return Err("images not reported once each in input order".into());
+            }
+            for (i, (g, c)) in got.iter().zip(&expected).enumerate() {
+                if g != c {
+                    return Err(format!("image {i} differs").into());
+                }
+                compared += g.keypoints.len();
+            }
+        }
+        println!(
+            "{} images x 2 configurations: {compared} keypoints and descriptors identical",
+            views.len()
+        );
+        Ok(())
     }
 }

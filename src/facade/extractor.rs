@@ -121,7 +121,7 @@ impl Extractor {
         })
     }
 
-    fn check_image(image: &GrayView) -> Result<()> {
+    pub(super) fn check_image(image: &GrayView) -> Result<()> {
         if image.width() < WINDOW || image.height() < WINDOW {
             return Err(Error::ImageTooSmall {
                 width: image.width(),

@@ -7,7 +7,9 @@
 //! has no values, so a `Backend::Cuda` arm there can never be reached (construction already refused
 //! it) and this file needs no `cfg`.
 
+mod batch;
 mod extractor;
+mod in_flight;
 mod matcher;
 mod pairs;
 

@@ -1,19 +1,14 @@
 //! Many pairs of descriptor sets in one call: the collection path (every pair of a photo collection, or
 //! a given pair list), as structure from motion needs it.
 
-use std::collections::VecDeque;
-
 use super::Matcher;
+use super::in_flight::{Queued, STREAMS, run_in_order};
 use crate::backend::Backend;
 use crate::cuda::{self, GpuStream};
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
 use crate::matching::{self, Match};
 use crate::parallel::*;
-
-/// Streams the CUDA backend keeps busy, and the pairs it queues on each before waiting for the oldest.
-const STREAMS: usize = 4;
-const IN_FLIGHT_PER_STREAM: usize = 2;
 
 impl Matcher {
     /// The pairs `(i, j)`, `i < j`, of `n` sets in order: `(0, 1), (0, 2), …, (1, 2), …`.
@@ -81,38 +76,20 @@ impl Matcher {
                 let streams = (0..STREAMS)
                     .map(|_| GpuStream::new(device))
                     .collect::<Result<Vec<_>>>()?;
-                let mut queued = VecDeque::new();
-                let mut results = Vec::with_capacity(pairs.len());
-                let mut finish_oldest = |queued: &mut VecDeque<Option<_>>| -> Result<()> {
-                    let pending: Option<cuda::PendingMatches> =
-                        queued.pop_front().expect("a queued pair");
-                    results.push(match pending {
-                        Some(pending) => pending.wait()?,
-                        None => Vec::new(),
-                    });
-                    done(results.len() - 1);
-                    Ok(())
-                };
-                for (p, pair) in pairs.iter().enumerate() {
-                    if queued.len() == STREAMS * IN_FLIGHT_PER_STREAM {
-                        finish_oldest(&mut queued)?;
-                    }
-                    queued.push_back(if matchable(pair) {
+                run_in_order(
+                    pairs.len(),
+                    |p| {
+                        let pair = &pairs[p];
+                        if !matchable(pair) {
+                            return Ok(Queued::Ready(Vec::new()));
+                        }
                         let stream = &streams[p % STREAMS];
-                        Some(cuda::match_async(
-                            stream,
-                            sets[pair.0],
-                            sets[pair.1],
-                            self.config(),
-                        )?)
-                    } else {
-                        None
-                    });
-                }
-                while !queued.is_empty() {
-                    finish_oldest(&mut queued)?;
-                }
-                Ok(results)
+                        cuda::match_async(stream, sets[pair.0], sets[pair.1], self.config())
+                            .map(Queued::Pending)
+                    },
+                    cuda::PendingMatches::wait,
+                    done,
+                )
             }
         }
     }

@@ -1,11 +1,15 @@
-//! `Matcher::match_pairs`: many pairs in one call equal one `match_descriptors` call per pair.
+//! Collections in one call: `Matcher::match_pairs` equals one `match_descriptors` call per pair, and
+//! `Extractor::detect_and_describe_batch` one `detect_and_describe` call per image.
 
 mod common;
 
 use std::sync::Mutex;
 
 use clatch::synthetic::SplitMix64;
-use clatch::{Backend, DescriptorSet, DescriptorWidth, Error, MatchConfig, Matcher};
+use clatch::{
+    Backend, DescriptorSet, DescriptorWidth, Error, Extractor, ExtractorConfig, MatchConfig,
+    Matcher,
+};
 use common::random_set;
 
 fn sets(rng: &mut SplitMix64) -> Vec<DescriptorSet> {
@@ -95,4 +99,45 @@ fn bad_pairs_are_refused_before_any_work() {
     );
     assert_eq!(Matcher::all_pairs(0), vec![]);
     assert_eq!(Matcher::all_pairs(4).len(), 6);
+}
+
+#[test]
+fn a_batch_equals_one_call_per_image() {
+    let photo = common::astronaut();
+    let small = common::rectangles(300, 200, 9);
+    let flat = vec![128u8; 100 * 100];
+    let images = [
+        photo.view(),
+        small.view(),
+        clatch::GrayView::new(&flat, 100, 100, 100).unwrap(),
+        photo.view(),
+    ];
+    for config in [ExtractorConfig::default(), ExtractorConfig::single_scale()] {
+        let extractor = Extractor::new(Backend::Cpu, config).unwrap();
+        let finished = Mutex::new(Vec::new());
+        let all = extractor
+            .detect_and_describe_batch(&images, &|i| finished.lock().unwrap().push(i))
+            .unwrap();
+        let mut finished = finished.into_inner().unwrap();
+        finished.sort_unstable();
+        assert_eq!(finished, vec![0, 1, 2, 3]);
+        for (image, got) in images.iter().zip(&all) {
+            assert_eq!(got, &extractor.detect_and_describe(image).unwrap());
+        }
+        assert!(all[0].keypoints.len() > 100 && all[2].keypoints.is_empty());
+        assert_eq!(all[0], all[3]);
+    }
+    // A bad image anywhere is refused before any work.
+    let tiny = vec![0u8; 10 * 10];
+    let with_tiny = [
+        photo.view(),
+        clatch::GrayView::new(&tiny, 10, 10, 10).unwrap(),
+    ];
+    let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
+    let called = Mutex::new(0);
+    assert!(matches!(
+        extractor.detect_and_describe_batch(&with_tiny, &|_| *called.lock().unwrap() += 1),
+        Err(Error::ImageTooSmall { .. })
+    ));
+    assert_eq!(*called.lock().unwrap(), 0);
 }

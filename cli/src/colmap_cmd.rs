@@ -74,32 +74,13 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let progress = Progress::counter(plan.images.len() as u64, "extracting features");
     let watch = Stopwatch::start();
     let limits = args.input.limits();
-    let extract_one = |(path, name): (&PathBuf, &String)| {
-        let photo = extract(
-            &extractor,
-            path,
-            name,
-            &limits,
-            (args.subpixel, args.subpixel_radius),
-        );
-        progress.done();
-        photo
-    };
-    // The CPU extractor is parallel inside; decoding a JPEG is not, so on the CPU photos go two by two
-    // through rayon too. A GPU extractor is fed one photo at a time.
-    let photos: Vec<Photo> = if settings.backend == Backend::Cpu {
-        plan.images
-            .par_iter()
-            .zip(plan.names.par_iter())
-            .map(extract_one)
-            .collect::<Result<_, _>>()?
-    } else {
-        plan.images
-            .iter()
-            .zip(plan.names.iter())
-            .map(extract_one)
-            .collect::<Result<_, _>>()?
-    };
+    let photos = extract_all(
+        &extractor,
+        (&plan.images, &plan.names),
+        &limits,
+        (args.subpixel, args.subpixel_radius),
+        &progress,
+    )?;
     times.extract = watch.stop();
     progress.finish();
 
@@ -319,30 +300,93 @@ fn extraction_config(settings: &crate::pipeline::Settings, grid: u32) -> clatch:
     config
 }
 
-/// Reads, detects (spread over the extractor's grid) and describes one photo.
-fn extract(
+/// Photos decoded at a time: the next group is decoded on the CPU threads while the extractor works
+/// on this one (with several images in flight on the GPU).
+const DECODE_GROUP: usize = 8;
+
+/// A decoded photo waiting for extraction.
+struct Decoded {
+    img: image::GrayImage,
+    exif_block: Option<Vec<u8>>,
+    path: PathBuf,
+    name: String,
+}
+
+/// Reads and checks a group of photos in parallel.
+fn decode_group(
+    group: &[(&PathBuf, &String)],
+    limits: &DecodeLimits,
+) -> Result<Vec<Decoded>, CliError> {
+    group
+        .par_iter()
+        .map(|&(path, name)| {
+            let (img, exif_block) = load_gray_with_exif(path, limits)?;
+            check_detectable(path, img.width(), img.height())?;
+            Ok(Decoded {
+                img,
+                exif_block,
+                path: path.clone(),
+                name: name.clone(),
+            })
+        })
+        .collect()
+}
+
+/// Reads, detects (spread over the extractor's grid) and describes every photo, in order: groups of
+/// photos through [`Extractor::detect_and_describe_batch`], the next group decoded meanwhile.
+fn extract_all(
     extractor: &Extractor,
-    path: &Path,
-    name: &str,
+    (paths, names): (&[PathBuf], &[String]),
     limits: &DecodeLimits,
     (method, subpixel_radius): (subpixel::Subpixel, u32),
-) -> Result<Photo, CliError> {
-    let (img, exif_block) = load_gray_with_exif(path, limits)?;
-    check_detectable(path, img.width(), img.height())?;
-    let view = GrayView::try_from(&img).map_err(CliError::in_image(path))?;
-    let features = extractor
-        .detect_and_describe(&view)
-        .map_err(CliError::in_image(path))?;
-    Ok(Photo {
-        focal_35mm: exif_block.as_deref().and_then(exif::focal_length_35mm),
-        name: name.to_owned(),
-        width: img.width(),
-        height: img.height(),
-        features: Features {
-            keypoints: subpixel::refine_with(&img, &features.keypoints, method, subpixel_radius),
-            ..features
-        },
-    })
+    progress: &Progress,
+) -> Result<Vec<Photo>, CliError> {
+    let all: Vec<(&PathBuf, &String)> = paths.iter().zip(names).collect();
+    let groups: Vec<&[(&PathBuf, &String)]> = all.chunks(DECODE_GROUP).collect();
+    let mut photos = Vec::with_capacity(all.len());
+    let mut current = match groups.first() {
+        Some(group) => decode_group(group, limits)?,
+        None => return Ok(photos),
+    };
+    for g in 0..groups.len() {
+        let (next, extracted) = rayon::join(
+            || {
+                groups
+                    .get(g + 1)
+                    .map(|group| decode_group(group, limits))
+                    .transpose()
+            },
+            || -> Result<Vec<Features>, CliError> {
+                let views = current
+                    .iter()
+                    .map(|d| GrayView::try_from(&d.img).map_err(CliError::in_image(&d.path)))
+                    .collect::<Result<Vec<_>, _>>()?;
+                Ok(extractor.detect_and_describe_batch(&views, &|_| progress.done())?)
+            },
+        );
+        for (decoded, features) in current.into_iter().zip(extracted?) {
+            photos.push(Photo {
+                focal_35mm: decoded
+                    .exif_block
+                    .as_deref()
+                    .and_then(exif::focal_length_35mm),
+                width: decoded.img.width(),
+                height: decoded.img.height(),
+                features: Features {
+                    keypoints: subpixel::refine_with(
+                        &decoded.img,
+                        &features.keypoints,
+                        method,
+                        subpixel_radius,
+                    ),
+                    ..features
+                },
+                name: decoded.name,
+            });
+        }
+        current = next?.unwrap_or_default();
+    }
+    Ok(photos)
 }
 
 /// Cameras, images and keypoints. With K, one camera shared by every photo (which all have its size,

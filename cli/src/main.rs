@@ -22,6 +22,8 @@ mod pipeline;
 mod progress;
 mod report;
 mod subpixel;
+#[cfg(test)]
+mod test_dir;
 mod text_input;
 mod warp;
 

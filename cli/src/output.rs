@@ -255,11 +255,8 @@ mod tests {
     use super::*;
     use std::io::Write;
 
-    fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("clatch-output-{}-{name}", std::process::id()));
-        std::fs::remove_dir_all(&d).ok();
-        std::fs::create_dir_all(&d).unwrap();
-        d
+    fn dir(name: &str) -> crate::test_dir::TestDir {
+        crate::test_dir::TestDir::new(&format!("output-{name}"))
     }
 
     fn listing(d: &Path) -> Vec<String> {

@@ -46,22 +46,22 @@ pub fn read_text(path: &Path, what: &'static str) -> Result<String, CliError> {
 mod tests {
     use super::*;
 
-    fn temp(name: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("clatch-text-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+    fn temp(dir: &crate::test_dir::TestDir, name: &str) -> std::path::PathBuf {
         dir.join(name)
     }
 
     #[test]
     fn a_bom_is_skipped() {
-        let path = temp("bom.txt");
+        let dir = crate::test_dir::TestDir::new("text-bom");
+        let path = temp(&dir, "bom.txt");
         std::fs::write(&path, "\u{feff}1 0 0").unwrap();
         assert_eq!(read_text(&path, "homography").unwrap(), "1 0 0");
     }
 
     #[test]
     fn oversized_and_special_files_are_refused_without_reading_them_whole() {
-        let path = temp("big.txt");
+        let dir = crate::test_dir::TestDir::new("text-big");
+        let path = temp(&dir, "big.txt");
         std::fs::write(&path, vec![b' '; MAX_TEXT_BYTES as usize + 1]).unwrap();
         assert!(matches!(
             read_text(&path, "homography"),
@@ -82,7 +82,7 @@ mod tests {
                 ),
                 "{e}"
             );
-            let fifo = temp("pipe");
+            let fifo = temp(&dir, "pipe");
             std::fs::remove_file(&fifo).ok();
             assert!(
                 std::process::Command::new("mkfifo")

@@ -2,10 +2,38 @@
 
 use super::*;
 
-fn temp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("clatch-decode-{}", std::process::id()));
+/// A path `name` in a folder of its own, removed with the folder when the test ends.
+struct TempPath {
+    dir: PathBuf,
+    path: PathBuf,
+}
+
+impl std::ops::Deref for TempPath {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl AsRef<Path> for TempPath {
+    fn as_ref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for TempPath {
+    fn drop(&mut self) {
+        std::fs::remove_dir_all(&self.dir).ok();
+    }
+}
+
+fn temp(name: &str) -> TempPath {
+    let dir = std::env::temp_dir().join(format!("clatch-decode-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+    TempPath {
+        path: dir.join(name),
+        dir,
+    }
 }
 
 fn png_bytes(img: &DynamicImage) -> Vec<u8> {
@@ -160,7 +188,7 @@ fn fifos_and_folders_are_refused_without_blocking() {
     let fifo = temp("pipe.png");
     std::fs::remove_file(&fifo).ok();
     let made = std::process::Command::new("mkfifo")
-        .arg(&fifo)
+        .arg(&*fifo)
         .status()
         .unwrap();
     assert!(made.success());

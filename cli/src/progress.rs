@@ -21,9 +21,14 @@ impl Progress {
         Self(bar)
     }
 
-    /// A bar counting `len` items of one stage (images, pairs) under `message`.
+    /// A bar counting `len` items of one stage (images, pairs) under `message`, with their rate.
     pub fn counter(len: u64, message: &'static str) -> Self {
         let progress = Self::new(len);
+        if let Ok(style) = ProgressStyle::with_template(
+            "{spinner:.cyan} [{bar:24.cyan/blue}] {pos}/{len} {msg} ({per_sec}, {eta} left)",
+        ) {
+            progress.0.set_style(style.progress_chars("=> "));
+        }
         progress.stage(message);
         progress
     }

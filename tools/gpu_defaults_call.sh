@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Session call 2: GPU suite tests, ncu device time of the default extraction (and NMS tile variants),
+# One device call for the new defaults (issue 9) and racecheck (issue 10): the GPU suite, ncu device time of
 # CPU-vs-GPU byte equality of whole CLI runs with the new defaults, racecheck on every binary in parallel.
 cd "$(dirname "$0")/.."
 bash tools/gpu_suite.sh tests > /dev/null 2>&1

@@ -1,11 +1,15 @@
 #!/usr/bin/env bash
 # One device call for the new defaults (issue 9) and racecheck (issue 10): the GPU suite, ncu device time of
-# CPU-vs-GPU byte equality of whole CLI runs with the new defaults, racecheck on every binary in parallel.
+# the default extraction (and of NMS tile variants, when .gpu/variants.tar.xz holds them), CPU-vs-GPU byte
+# equality of whole CLI runs with the new defaults, racecheck on every binary in parallel. Prepare here:
+#     bash tools/gpu_bench_images.sh && bash tools/pack_gpu_suite.sh
+# then with the device tool: run `bash tools/gpu_defaults_call.sh`, carry [".gpu"], timeout 600.
 cd "$(dirname "$0")/.."
+OUT=${OUT:-/tmp/out}; mkdir -p "$OUT"
 bash tools/gpu_suite.sh tests > /dev/null 2>&1
 mv "$OUT/summary.txt" "$OUT/summary_tests.txt"
 B=.gpu/bin
-mkdir -p .gpu/variants && tar -xJf .gpu/variants.tar.xz -C .gpu/variants
+mkdir -p .gpu/variants && { [ -f .gpu/variants.tar.xz ] && tar -xJf .gpu/variants.tar.xz -C .gpu/variants; }
 IMG=.gpu/img/herzjesu0_5616x3744.png
 ncu_sum() {
   python3 - <<'PY'

@@ -179,4 +179,49 @@ fn main() {
             median(walls)
         );
     }
+    // Collections (issue 13): every pair of `sets` feature sets, through one match_descriptors call per
+    // pair (blocking) and through Matcher::match_pairs (the library's streams, pairs in flight), with
+    // the CPU backend's match_pairs beside them; wall clock of the whole call, after one warm-up run.
+    for (n, count) in [(2000usize, 40usize), (5000, 24)] {
+        let width = DescriptorWidth::from_bits(512).unwrap();
+        let mut rng = SplitMix64::new(n as u64);
+        let owned: Vec<DescriptorSet> = (0..count)
+            .map(|_| {
+                let words = (0..n * width.words()).map(|_| rng.next_u64()).collect();
+                DescriptorSet::from_words(width, words).unwrap()
+            })
+            .collect();
+        let sets: Vec<&DescriptorSet> = owned.iter().collect();
+        let pairs = Matcher::all_pairs(count);
+        let gpu = Matcher::new(Backend::Cuda { device: 0 }, MatchConfig::default()).unwrap();
+        let cpu = Matcher::new(Backend::Cpu, MatchConfig::default()).unwrap();
+        let time = |f: &mut dyn FnMut() -> Vec<Vec<clatch::Match>>| {
+            f();
+            let t = Instant::now();
+            let result = f();
+            (t.elapsed().as_secs_f64(), result)
+        };
+        let (one_by_one, expected) = time(&mut || {
+            pairs
+                .iter()
+                .map(|&(a, b)| gpu.match_descriptors(sets[a], sets[b]).unwrap())
+                .collect()
+        });
+        let (batched, got) = time(&mut || gpu.match_pairs(&sets, &pairs, &|_| {}).unwrap());
+        assert_eq!(got, expected, "match_pairs equals the per-pair calls");
+        let (on_cpu, cpu_result) = time(&mut || cpu.match_pairs(&sets, &pairs, &|_| {}).unwrap());
+        assert_eq!(cpu_result, expected, "the CPU backend agrees");
+        let per_pair = |s: f64| s * 1e6 / pairs.len() as f64;
+        println!(
+            "collection of {count} sets of {n} (512 bits), {} pairs, ratio 0.8 + cross-check: \
+             per-pair calls {:.1} us/pair, match_pairs {:.1} us/pair ({:.2}x), CPU match_pairs ({} threads) \
+             {:.1} us/pair",
+            pairs.len(),
+            per_pair(one_by_one),
+            per_pair(batched),
+            one_by_one / batched,
+            rayon::current_num_threads(),
+            per_pair(on_cpu)
+        );
+    }
 }

@@ -20,7 +20,7 @@ use super::header::{
 use super::memory::alloc_zeros;
 use super::texture::DeviceImage;
 use crate::detect::DetectorConfig;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
 
@@ -309,7 +309,17 @@ pub(crate) fn launch_subpixel(
     count: usize,
     offsets: &mut CudaSlice<i32>,
 ) -> Result<()> {
-    debug_assert!(count <= keypoints.len() && 2 * count <= offsets.len());
+    // The launch below relies on this (see its SAFETY comment): checked in every build.
+    if count > keypoints.len() || 2 * count > offsets.len() {
+        return Err(Error::Internal {
+            operation: "sub-pixel refinement",
+            message: format!(
+                "{count} keypoints for buffers of {} keypoints and {} offsets",
+                keypoints.len(),
+                offsets.len()
+            ),
+        });
+    }
     if count == 0 {
         return Ok(());
     }

@@ -18,6 +18,10 @@
 //!
 //! Sections: `latch7x7` (default weights) at 512 and 136 bits, `uniform` (all weights 1) at 512 bits.
 //!
+//! Last, `extract-default <n>`: the n keypoints of `ExtractorConfig::default()`'s `detect_and_describe`
+//! (8-level pyramid, level shares, sub-pixel positions), one line each:
+//! `<x> <y> <size> <angle> <response> <octave> <word 0 of its descriptor, 16 hex digits>`.
+//!
 //! The test also checks the file itself for plausibility with independent, direct code: every golden
 //! keypoint's response is its FAST-9 score and a local maximum, its angle is within half a bin of the
 //! intensity-centroid direction, and every descriptor of a size-64 keypoint at an integer position with a
@@ -44,6 +48,8 @@ struct Golden {
     detected: Vec<[f32; 4]>,
     /// Sections: name, bits, one row per keypoint of the list.
     described: Vec<(String, usize, Vec<GoldenRow>)>,
+    /// `[x, y, size, angle, response, octave]` of each keypoint of the default extraction.
+    extracted: Vec<[f32; 6]>,
 }
 
 fn parse(text: &str) -> Golden {
@@ -51,6 +57,7 @@ fn parse(text: &str) -> Golden {
     let mut golden = Golden {
         detected: Vec::new(),
         described: Vec::new(),
+        extracted: Vec::new(),
     };
     let floats =
         |fields: &[&str]| -> Vec<f32> { fields.iter().map(|f| f.parse().expect("f32")).collect() };
@@ -62,6 +69,15 @@ fn parse(text: &str) -> Golden {
                 for line in lines.by_ref().take(n) {
                     let v = floats(&line.split(' ').collect::<Vec<_>>());
                     golden.detected.push([v[0], v[1], v[2], v[3]]);
+                }
+            }
+            "extract-default" => {
+                let n: usize = fields[1].parse().unwrap();
+                for line in lines.by_ref().take(n) {
+                    let f: Vec<&str> = line.split(' ').collect();
+                    let v = floats(&f[..6]);
+                    assert_eq!(f[6].len(), 16, "64 bits of descriptor");
+                    golden.extracted.push([v[0], v[1], v[2], v[3], v[4], v[5]]);
                 }
             }
             "describe" => {
@@ -259,6 +275,38 @@ fn check_plausible(image: &Gray, golden: &Golden) {
         assert_eq!((angle * 8.0).fract(), 0.0);
         assert!((0.0..360.0).contains(&angle));
     }
+
+    // ---- the default extraction ----
+    let default = clatch::ExtractorConfig::default();
+    let pyramid = default.pyramid.unwrap();
+    assert!(
+        golden.extracted.len() > 1000 && golden.extracted.len() <= default.detector.max_keypoints
+    );
+    let mut octaves = vec![0usize; pyramid.levels];
+    let mut refined = 0;
+    for &[x, y, size, _angle, response, octave] in &golden.extracted {
+        let level = octave as usize;
+        octaves[level] += 1;
+        let expected = default.detector.keypoint_size * pyramid.scale_factor.powi(octave as i32);
+        assert!(
+            (size - expected).abs() < 1e-3 * expected,
+            "size {size} on level {level}"
+        );
+        assert!(response > f32::from(default.detector.threshold));
+        // Positions on the 1/256 grid (16.16 rounded to 24.8), within the image.
+        assert_eq!(((x * 256.0).fract(), (y * 256.0).fract()), (0.0, 0.0));
+        assert!((0.0..512.0).contains(&x) && (0.0..512.0).contains(&y));
+        refined += usize::from(level == 0 && (x.fract(), y.fract()) != (0.0, 0.0));
+    }
+    // ORB's shares reach the coarse levels; sub-pixel offsets move full-resolution keypoints.
+    assert!(
+        octaves.iter().filter(|&&n| n > 0).count() >= 6,
+        "{octaves:?}"
+    );
+    assert!(
+        refined > 100,
+        "{refined} level-0 keypoints off the pixel grid"
+    );
 
     // ---- description ----
     let list = keypoint_list();

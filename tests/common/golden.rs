@@ -182,5 +182,21 @@ pub fn render(image: &Gray, backend: Backend) -> String {
             writeln!(out, "{i} {} {} {} {} {result}", k.x, k.y, k.size, k.angle).unwrap();
         }
     }
+    // The default extraction (pyramid, level shares, sub-pixel positions) and the first bits of each
+    // descriptor: keypoints and descriptors of every level, on any backend.
+    let features = Extractor::new(backend, ExtractorConfig::default())
+        .unwrap()
+        .detect_and_describe(&view)
+        .unwrap();
+    writeln!(out, "extract-default {}", features.keypoints.len()).unwrap();
+    for (i, k) in features.keypoints.iter().enumerate() {
+        let words = features.descriptors.get(i).unwrap();
+        writeln!(
+            out,
+            "{} {} {} {} {} {} {:016x}",
+            k.x, k.y, k.size, k.angle, k.response, k.octave, words[0]
+        )
+        .unwrap();
+    }
     out
 }

@@ -20,7 +20,7 @@ use super::header::{
 use super::memory::alloc_zeros;
 use super::texture::DeviceImage;
 use crate::detect::DetectorConfig;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
 
@@ -168,7 +168,19 @@ impl DetectJob {
         last: Stage,
     ) -> Result<()> {
         let g = self.geometry;
-        debug_assert_eq!((image.width(), image.height()), (g.width, g.height));
+        super::invariant(
+            (image.width(), image.height()) == (g.width, g.height),
+            "detection",
+            || {
+                format!(
+                    "a {}x{} image for {}x{} buffers",
+                    image.width(),
+                    image.height(),
+                    g.width,
+                    g.height
+                )
+            },
+        )?;
         let texture = image.texture();
         let (width, height, margin) = (g.width as i32, g.height as i32, g.margin as i32);
         let pitch = g.pitch as i32;
@@ -309,17 +321,17 @@ pub(crate) fn launch_subpixel(
     count: usize,
     offsets: &mut CudaSlice<i32>,
 ) -> Result<()> {
-    // The launch below relies on this (see its SAFETY comment): checked in every build.
-    if count > keypoints.len() || 2 * count > offsets.len() {
-        return Err(Error::Internal {
-            operation: "sub-pixel refinement",
-            message: format!(
+    super::invariant(
+        count <= keypoints.len() && 2 * count <= offsets.len(),
+        "sub-pixel refinement",
+        || {
+            format!(
                 "{count} keypoints for buffers of {} keypoints and {} offsets",
                 keypoints.len(),
                 offsets.len()
-            ),
-        });
-    }
+            )
+        },
+    )?;
     if count == 0 {
         return Ok(());
     }

@@ -304,8 +304,21 @@ pub(crate) fn launch_merge(
     (nq, segments, k): (u32, u32, u32),
     out: &mut CudaSlice<Match>,
 ) -> Result<()> {
-    debug_assert!(partial.len() >= segments as usize * nq as usize * k as usize);
-    debug_assert!(out.len() >= nq as usize * k as usize);
+    let (rows, wanted) = (
+        nq as usize * k as usize,
+        segments as usize * nq as usize * k as usize,
+    );
+    super::invariant(
+        partial.len() >= wanted && out.len() >= rows,
+        "kNN merge",
+        || {
+            format!(
+                "buffers of {} and {} for {wanted} and {rows}",
+                partial.len(),
+                out.len()
+            )
+        },
+    )?;
     let mut launch = stream.launch_builder(dev.kernel("clatch_knn_merge"));
     launch
         .arg(partial)

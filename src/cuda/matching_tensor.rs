@@ -190,7 +190,9 @@ impl TensorKnn {
         mutual: bool,
         segment_tiles: Option<usize>,
     ) -> Result<Self> {
-        debug_assert!((1..=MAX_K).contains(&k));
+        super::invariant((1..=MAX_K).contains(&k), "tensor kNN", || {
+            format!("k = {k}")
+        })?;
         let bits = padded_bits(words);
         let geometry = Geometry::new(dev.multiprocessors, nq, nt, segment_tiles);
         let rows = |n: usize| n.div_ceil(ROW_PAD).max(1) * ROW_PAD;
@@ -279,7 +281,11 @@ fn expand(
     signs: &mut CudaSlice<u8>,
 ) -> Result<()> {
     let rows = (signs.len() / bits) as u32;
-    debug_assert!(bits_buffer.len() >= rows as usize * words as usize);
+    super::invariant(
+        bits_buffer.len() >= rows as usize * words as usize,
+        "expanding descriptors to signs",
+        || format!("{} words for {rows} rows of {words}", bits_buffer.len()),
+    )?;
     let row_bytes = bits as u32;
     let units = signs.len() / 8;
     let blocks = units.div_ceil(CLATCH_EXPAND_THREADS as usize).min(1 << 16) as u32;

@@ -59,6 +59,23 @@ use crate::error::Result;
 
 /// Checks that CUDA device `ordinal` can run clatch's kernels (driver present, device exists, kernels
 /// load).
+/// An invariant a launch's SAFETY comment relies on, checked in every build: `Error::Internal` naming
+/// `operation` when it does not hold (a bug of the crate, never of the caller's input).
+pub(crate) fn invariant(
+    holds: bool,
+    operation: &'static str,
+    message: impl FnOnce() -> String,
+) -> Result<()> {
+    if holds {
+        Ok(())
+    } else {
+        Err(crate::Error::Internal {
+            operation,
+            message: message(),
+        })
+    }
+}
+
 pub(crate) fn ensure_available(ordinal: usize) -> Result<()> {
     device(ordinal).map(|_| ())
 }

@@ -55,55 +55,15 @@ fn originals() -> Vec<(&'static str, Vec<u8>)> {
     ]
 }
 
-/// An 8-bit palette PNG (16 gray entries), written chunk by chunk.
+#[path = "common/palette_png.rs"]
+mod palette_png_writer;
+
+/// An 8-bit palette PNG of `gray` with 16 gray entries (the top 4 bits of each pixel).
 fn palette_png(gray: &image::GrayImage) -> Vec<u8> {
-    let (w, h) = gray.dimensions();
-    let mut raw = Vec::new();
-    for row in gray.rows() {
-        raw.push(0u8);
-        raw.extend(row.map(|p| p.0[0] >> 4));
-    }
-    let mut encoder = stored_zlib(&raw);
-    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
-    let mut ihdr = Vec::new();
-    ihdr.extend_from_slice(&w.to_be_bytes());
-    ihdr.extend_from_slice(&h.to_be_bytes());
-    ihdr.extend_from_slice(&[8, 3, 0, 0, 0]);
-    chunk(&mut out, b"IHDR", &ihdr);
-    let plte: Vec<u8> = (0..16u8).flat_map(|i| [i * 17; 3]).collect();
-    chunk(&mut out, b"PLTE", &plte);
-    chunk(&mut out, b"IDAT", &std::mem::take(&mut encoder));
-    chunk(&mut out, b"IEND", &[]);
-    out
-}
-
-/// zlib with stored (uncompressed) blocks: no compression crate needed.
-fn stored_zlib(data: &[u8]) -> Vec<u8> {
-    let mut out = vec![0x78, 0x01];
-    let blocks: Vec<&[u8]> = data.chunks(65_535).collect();
-    for (i, block) in blocks.iter().enumerate() {
-        out.push(u8::from(i + 1 == blocks.len()));
-        let len = block.len() as u16;
-        out.extend_from_slice(&len.to_le_bytes());
-        out.extend_from_slice(&(!len).to_le_bytes());
-        out.extend_from_slice(block);
-    }
-    let (mut a, mut b) = (1u32, 0u32);
-    for &byte in data {
-        a = (a + byte as u32) % 65_521;
-        b = (b + a) % 65_521;
-    }
-    out.extend_from_slice(&((b << 16) | a).to_be_bytes());
-    out
-}
-
-fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
-    out.extend_from_slice(&(data.len() as u32).to_be_bytes());
-    let start = out.len();
-    out.extend_from_slice(kind);
-    out.extend_from_slice(data);
-    let crc = crc32fast::hash(&out[start..]);
-    out.extend_from_slice(&crc.to_be_bytes());
+    let palette: Vec<[u8; 3]> = (0..16u8).map(|i| [i * 17; 3]).collect();
+    palette_png_writer::palette_png(gray.width(), gray.height(), &palette, |x, y| {
+        gray.get_pixel(x, y).0[0] >> 4
+    })
 }
 
 /// The header lies about the size: PNG IHDR (CRC fixed, so only the size is wrong), JPEG SOF, PNM text.

@@ -231,51 +231,20 @@ fn a_homography_file_with_a_byte_order_mark_is_read() {
     assert!(String::from_utf8_lossy(&out.stdout).contains("inliers"));
 }
 
-/// A 16x16 palette PNG with `entries` colours, every pixel index 1 except one pixel `bad_index`.
+#[path = "../../tests/common/palette_png.rs"]
+mod palette_png_writer;
+
+/// A 128x128 palette PNG with `entries` colours, indices 0 and 1 in 8-pixel stripes except one pixel
+/// `bad_index`.
 fn palette_png(entries: usize, bad_index: u8) -> Vec<u8> {
-    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
-    let mut chunk = |kind: &[u8; 4], data: &[u8]| {
-        out.extend_from_slice(&(data.len() as u32).to_be_bytes());
-        let start = out.len();
-        out.extend_from_slice(kind);
-        out.extend_from_slice(data);
-        let crc = crc32fast::hash(&out[start..]);
-        out.extend_from_slice(&crc.to_be_bytes());
-    };
-    let mut ihdr = [128u32.to_be_bytes(), 128u32.to_be_bytes()].concat();
-    ihdr.extend_from_slice(&[8, 3, 0, 0, 0]);
-    chunk(b"IHDR", &ihdr);
-    let palette: Vec<u8> = (0..entries).flat_map(|i| [i as u8 * 60, 90, 30]).collect();
-    chunk(b"PLTE", &palette);
-    let mut rows = Vec::new();
-    for y in 0..128u32 {
-        rows.push(0);
-        rows.extend((0..128u32).map(|x| {
-            if (x, y) == (60, 60) {
-                bad_index
-            } else {
-                (x / 8 % 2) as u8
-            }
-        }));
-    }
-    // zlib with stored deflate blocks of at most 65535 bytes.
-    let mut zlib = vec![0x78, 0x01];
-    let blocks: Vec<&[u8]> = rows.chunks(65535).collect();
-    for (i, block) in blocks.iter().enumerate() {
-        zlib.push(u8::from(i + 1 == blocks.len()));
-        zlib.extend_from_slice(&(block.len() as u16).to_le_bytes());
-        zlib.extend_from_slice(&(!(block.len() as u16)).to_le_bytes());
-        zlib.extend_from_slice(block);
-    }
-    let (mut a, mut b) = (1u32, 0u32);
-    for &d in &rows {
-        a = (a + u32::from(d)) % 65521;
-        b = (b + a) % 65521;
-    }
-    zlib.extend_from_slice(&((b << 16) | a).to_be_bytes());
-    chunk(b"IDAT", &zlib);
-    chunk(b"IEND", &[]);
-    out
+    let palette: Vec<[u8; 3]> = (0..entries).map(|i| [i as u8 * 60, 90, 30]).collect();
+    palette_png_writer::palette_png(128, 128, &palette, |x, y| {
+        if (x, y) == (60, 60) {
+            bad_index
+        } else {
+            (x / 8 % 2) as u8
+        }
+    })
 }
 
 #[test]

@@ -223,47 +223,14 @@ fn fifos_and_folders_are_refused_without_blocking() {
     );
 }
 
-/// A 16x16 8-bit palette PNG with `entries` colours `(10 i, 0, 200)` whose pixels are the indices
-/// `index(x, y)`, written chunk by chunk (the `image` crate writes no palette PNGs): IHDR, PLTE, one
-/// stored (uncompressed) zlib IDAT, IEND.
-fn palette_png(entries: usize, index: impl Fn(u32, u32) -> u8) -> Vec<u8> {
-    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
-    let mut chunk = |kind: &[u8; 4], data: &[u8]| {
-        out.extend_from_slice(&(data.len() as u32).to_be_bytes());
-        let start = out.len();
-        out.extend_from_slice(kind);
-        out.extend_from_slice(data);
-        let crc = crc32fast::hash(&out[start..]);
-        out.extend_from_slice(&crc.to_be_bytes());
-    };
-    let mut ihdr = [16u32.to_be_bytes(), 16u32.to_be_bytes()].concat();
-    ihdr.extend_from_slice(&[8, 3, 0, 0, 0]);
-    chunk(b"IHDR", &ihdr);
-    let palette: Vec<u8> = (0..entries).flat_map(|i| [i as u8 * 10, 0, 200]).collect();
-    chunk(b"PLTE", &palette);
-    // Each row: filter byte 0, then the indices.
-    let mut rows = Vec::new();
-    for y in 0..16 {
-        rows.push(0u8);
-        rows.extend((0..16).map(|x| index(x, y)));
-    }
-    let mut zlib = vec![0x78, 0x01, 0x01];
-    zlib.extend_from_slice(&(rows.len() as u16).to_le_bytes());
-    zlib.extend_from_slice(&(!(rows.len() as u16)).to_le_bytes());
-    zlib.extend_from_slice(&rows);
-    zlib.extend_from_slice(&adler32(&rows).to_be_bytes());
-    chunk(b"IDAT", &zlib);
-    chunk(b"IEND", &[]);
-    out
-}
+#[path = "../../tests/common/palette_png.rs"]
+mod palette_png_writer;
 
-fn adler32(data: &[u8]) -> u32 {
-    let (mut a, mut b) = (1u32, 0u32);
-    for &d in data {
-        a = (a + u32::from(d)) % 65521;
-        b = (b + a) % 65521;
-    }
-    (b << 16) | a
+/// A 16x16 8-bit palette PNG with `entries` colours `(10 i, 0, 200)` whose pixels are the indices
+/// `index(x, y)`.
+fn palette_png(entries: usize, index: impl Fn(u32, u32) -> u8) -> Vec<u8> {
+    let palette: Vec<[u8; 3]> = (0..entries).map(|i| [i as u8 * 10, 0, 200]).collect();
+    palette_png_writer::palette_png(16, 16, &palette, index)
 }
 
 #[test]

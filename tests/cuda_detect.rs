@@ -54,12 +54,14 @@ mod gpu {
     const LIMITS: [usize; 5] = [1, 10, 500, 100_000, usize::MAX];
     const SIZES: [f32; 3] = [16.0, 64.0, 200.0];
 
+    /// Single-level detection (`ExtractorConfig::single_scale`): this file checks the detector's own
+    /// stages and top-N cut; pyramids, level budgets and sub-pixel positions are `cuda_pyramid`'s.
     fn config(threshold: u8, max_keypoints: usize, keypoint_size: f32) -> DetectorConfig {
         DetectorConfig {
             threshold,
             max_keypoints,
             keypoint_size,
-            ..DetectorConfig::default()
+            ..ExtractorConfig::single_scale().detector
         }
     }
 
@@ -68,7 +70,7 @@ mod gpu {
             backend,
             ExtractorConfig {
                 detector: config.clone(),
-                ..ExtractorConfig::default()
+                ..ExtractorConfig::single_scale()
             },
         )
         .expect("valid configuration");
@@ -185,7 +187,11 @@ mod gpu {
         for (what, image, cfg) in [
             ("noise", noise(64, 64, 64064), config(1, usize::MAX, 16.0)),
             ("noise", noise(300, 260, 5), config(20, 100, 64.0)),
-            ("astronaut", astronaut(), DetectorConfig::default()),
+            (
+                "astronaut",
+                astronaut(),
+                ExtractorConfig::single_scale().detector,
+            ),
         ] {
             let view = image.view();
             let (w, h) = (image.width, image.height);
@@ -572,7 +578,7 @@ mod gpu {
                     Backend::Cpu,
                     ExtractorConfig {
                         detector: config(1, usize::MAX, 16.0),
-                        ..ExtractorConfig::default()
+                        ..ExtractorConfig::single_scale()
                     },
                 )?
                 .detect(&view)?;

@@ -168,17 +168,19 @@ mod gpu {
     /// failed calls the device's free memory is back where it was.
     ///
     /// Under `CLATCH_TEST_SCALE=sanitizer`: a 400x400 image (still three pyramid levels) and 100
-    /// keypoints, and 3 failed calls per allocation site instead of 1000 in all. Under any sanitizer the
+    /// keypoints, and 2 failed calls per allocation site instead of 1000 in all. Under any sanitizer the
     /// free-memory comparison is reported, not judged: the sanitizer's own device allocations move it.
     pub fn every_allocation_site() -> Result<(), Failed> {
         use clatch::cuda::hooks::{device_memory, fail_allocation};
         let (width, height) = scale::pick((640, 480), (400, 400));
         let image = rectangles(width, height, 9);
         let view = image.view();
+        // 30 columns from x = 40 to 40 px short of the right edge, whatever the image's width.
+        let column_step = (width - 80) as f32 / 30.0;
         let keypoints: Vec<KeyPoint> = (0..scale::pick(300, 100))
             .map(|i| {
                 KeyPoint::new(
-                    40.0 + (i % 30) as f32 * 18.5,
+                    40.0 + (i % 30) as f32 * column_step,
                     40.0 + (i / 30) as f32 * 40.25,
                 )
                 .with_angle(i as f32 * 7.0)
@@ -227,7 +229,7 @@ mod gpu {
         let mut failed = 0;
         if scale::sanitizer() {
             for ((name, call), &sites) in calls.iter().zip(&sites_per_call) {
-                for n in 0..3 * sites {
+                for n in 0..sites {
                     fail_allocation(Some(n % sites));
                     let result = call(GPU);
                     match (fail_allocation(None), result) {

@@ -392,17 +392,26 @@ mod gpu {
         let stream = clatch::cuda::GpuStream::new(0)?;
         let (mut runs, mut keypoints, mut moved) = (0, 0, 0);
         for (name, image) in images() {
-            for p in [
-                None,
-                Some(pyramids()[0]),
-                Some(pyramids()[1]),
-                Some(pyramids()[4]),
-            ] {
-                for (grid, level_budget, max_keypoints) in [
+            // CLATCH_TEST_SCALE=sanitizer: the first and last of each list.
+            let chosen_pyramids = scale::thin(
+                vec![
+                    None,
+                    Some(pyramids()[0]),
+                    Some(pyramids()[1]),
+                    Some(pyramids()[4]),
+                ],
+                3,
+            );
+            let selections = scale::thin(
+                vec![
                     (1, LevelBudget::Global, 5000),
                     (1, LevelBudget::Global, usize::MAX),
                     (4, LevelBudget::Geometric, 700),
-                ] {
+                ],
+                2,
+            );
+            for &p in &chosen_pyramids {
+                for &(grid, level_budget, max_keypoints) in &selections {
                     let detector = DetectorConfig {
                         grid,
                         level_budget,

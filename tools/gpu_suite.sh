@@ -22,7 +22,8 @@
 set -uo pipefail
 cd "$(dirname "$0")/.."
 O=${OUT:-/tmp/out}; mkdir -p "$O" .gpu/bin
-tar -xJf .gpu/suite.tar.xz -C .gpu/bin
+# Unpacked once per pack: parts run side by side (tools/gpu_sanitize_call.sh) must not rewrite running binaries.
+[ .gpu/bin/.unpacked -nt .gpu/suite.tar.xz ] || { tar -xJf .gpu/suite.tar.xz -C .gpu/bin && touch .gpu/bin/.unpacked; }
 B=.gpu/bin
 part=${1:-all}
 summary=()
@@ -84,9 +85,11 @@ if [ "$part" = sanitize-all ]; then
         for t in cuda_async cuda_faults cuda_match cuda_pyramid cuda_detect cuda_describe cuda_describe_opencv; do
             start=$(date +%s)
             echo "== $tool $t (whole, CLATCH_TEST_SCALE=$scale)" >> "$O/sanitize.txt"
-            CLATCH_TEST_SCALE=$scale timeout "${SAN_TIMEOUT:-590}" compute-sanitizer --tool "$tool" "$B/$t" > /tmp/san.txt 2>&1; rc=$?
-            grep -E "^test result|SUMMARY" /tmp/san.txt >> "$O/sanitize.txt"
-            summary+=("sanitizer $tool $t (whole, $scale) rc=$rc $(( $(date +%s) - start ))s: $(grep -E '^test result' /tmp/san.txt | tail -1 | cut -c1-60) $(grep -E 'ERROR SUMMARY|RACECHECK SUMMARY' /tmp/san.txt | tail -1)")
+            log=/tmp/san_$tool.txt
+            CLATCH_TEST_SCALE=$scale timeout "${SAN_TIMEOUT:-590}" compute-sanitizer --tool "$tool" "$B/$t" > "$log" 2>&1; rc=$?
+            grep -E "^test result|SUMMARY" "$log" >> "$O/sanitize.txt"
+            [ $rc -ne 0 ] && { echo "-- $tool $t: last lines"; tail -30 "$log"; } >> "$O/sanitize.txt"
+            summary+=("sanitizer $tool $t (whole, $scale) rc=$rc $(( $(date +%s) - start ))s: $(grep -E '^test result' "$log" | tail -1 | cut -c1-60) $(grep -E 'ERROR SUMMARY|RACECHECK SUMMARY' "$log" | tail -1)")
         done
     done
 fi

@@ -261,11 +261,13 @@ fn bad_pools_and_bad_input_are_refused_before_any_work() {
         pool.detect_and_describe_batch(&ExtractorConfig::default(), &images, &count),
         Err(Error::ImageTooSmall { .. })
     ));
-    let mut bad_pyramid = ExtractorConfig::default();
-    bad_pyramid.pyramid = Some(clatch::Pyramid {
-        levels: 0,
-        scale_factor: 1.2,
-    });
+    let bad_pyramid = ExtractorConfig {
+        pyramid: Some(clatch::Pyramid {
+            levels: 0,
+            scale_factor: 1.2,
+        }),
+        ..ExtractorConfig::default()
+    };
     assert!(matches!(
         pool.detect_and_describe_batch(&bad_pyramid, &images[..1], &count),
         Err(Error::InvalidConfig { .. })

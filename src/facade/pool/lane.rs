@@ -17,6 +17,7 @@
 //! - a `MatchJob` built from two such sets instead of uploading, with its scratch per stream.
 
 use std::collections::HashMap;
+use std::collections::hash_map::Entry;
 use std::convert::Infallible;
 
 use super::super::in_flight::{IN_FLIGHT_PER_STREAM, Queued, STREAMS, run_window, streams};
@@ -75,9 +76,8 @@ impl<S> Resident<S> {
     ) -> Result<()> {
         self.held.retain(|s, _| needed.binary_search(s).is_ok());
         for &s in needed {
-            if !self.held.contains_key(&s) {
-                let prepared = lane.prepare(sets[s])?;
-                self.held.insert(s, prepared);
+            if let Entry::Vacant(slot) = self.held.entry(s) {
+                slot.insert(lane.prepare(sets[s])?);
             }
         }
         Ok(())

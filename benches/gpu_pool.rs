@@ -7,27 +7,43 @@
 //! whole call, median of the repeats after one warm-up run; every pool result is checked equal to the
 //! one-device result. The ratio printed is pool / one device (1.00 = no overhead).
 //! `CLATCH_POOL_SETS`, `CLATCH_POOL_DESCRIPTORS`, `CLATCH_POOL_IMAGES` and `CLATCH_POOL_REPEATS`
-//! override the sizes.
+//! override the sizes. Built only with the `cuda` feature (`required-features`); without a device it
+//! prints `skipped`.
 
-#[cfg(feature = "cuda")]
 mod common;
 
-#[cfg(not(feature = "cuda"))]
-fn main() {
-    println!("skipped: no CUDA device (built without the `cuda` feature)");
+use std::time::Instant;
+
+use clatch::synthetic::SplitMix64;
+use clatch::{
+    Backend, DescriptorSet, DescriptorWidth, DevicePool, Extractor, ExtractorConfig, GrayView,
+    MatchConfig, Matcher,
+};
+
+const GPU: Backend = Backend::Cuda { device: 0 };
+
+/// Median, fastest and slowest wall time of `repeats` runs after one warm-up run, and the last run's
+/// result.
+fn timed<T>(repeats: usize, mut f: impl FnMut() -> clatch::Result<T>) -> (f64, f64, f64, T) {
+    f().expect("warm-up run");
+    let mut walls = Vec::new();
+    let mut last = None;
+    for _ in 0..repeats {
+        let t = Instant::now();
+        last = Some(f().expect("timed run"));
+        walls.push(t.elapsed().as_secs_f64());
+    }
+    walls.sort_by(f64::total_cmp);
+    let result = last.expect("at least one run");
+    (
+        walls[walls.len() / 2],
+        walls[0],
+        walls[walls.len() - 1],
+        result,
+    )
 }
 
-#[cfg(feature = "cuda")]
 fn main() {
-    use std::time::Instant;
-
-    use clatch::synthetic::SplitMix64;
-    use clatch::{
-        Backend, DescriptorSet, DescriptorWidth, DevicePool, Extractor, ExtractorConfig, GrayView,
-        MatchConfig, Matcher,
-    };
-
-    const GPU: Backend = Backend::Cuda { device: 0 };
     let setting = |name: &str, default: usize| {
         std::env::var(name)
             .ok()
@@ -45,27 +61,6 @@ fn main() {
         return;
     };
     println!("device: {}", dev.name());
-    // Median, fastest and slowest wall time of `repeats` runs after one warm-up run, and the last
-    // run's result.
-    fn timed<T>(repeats: usize, mut f: impl FnMut() -> clatch::Result<T>) -> (f64, f64, f64, T) {
-        f().expect("warm-up run");
-        let mut walls = Vec::new();
-        let mut last = None;
-        for _ in 0..repeats {
-            let t = Instant::now();
-            last = Some(f().expect("timed run"));
-            walls.push(t.elapsed().as_secs_f64());
-        }
-        walls.sort_by(f64::total_cmp);
-        let result = last.expect("at least one run");
-        (
-            walls[walls.len() / 2],
-            walls[0],
-            walls[walls.len() - 1],
-            result,
-        )
-    }
-
     // Matching: every pair of the collection.
     let width = DescriptorWidth::from_bits(512).unwrap();
     let mut rng = SplitMix64::new(11);

@@ -29,13 +29,10 @@ mod gpu {
     use std::sync::Mutex;
 
     use clatch::synthetic::SplitMix64;
-    use clatch::{
-        Backend, DescriptorSet, DescriptorWidth, DevicePool, Error, Extractor, ExtractorConfig,
-        MatchConfig, Matcher,
-    };
+    use clatch::{Backend, DescriptorSet, DevicePool, Error, Extractor, ExtractorConfig, Matcher};
     use libtest_mimic::Failed;
 
-    use super::common::{Gray, astronaut, random_set, rectangles, scale};
+    use super::common::{Gray, astronaut, match_configs, rectangles, scale, scrambled_collection};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
 
@@ -49,52 +46,6 @@ mod gpu {
         ]
     }
 
-    fn configs() -> Vec<MatchConfig> {
-        let all = vec![
-            MatchConfig::default(),
-            MatchConfig {
-                ratio: None,
-                cross_check: false,
-                max_distance: Some(200),
-            },
-            MatchConfig {
-                ratio: Some(0.9),
-                cross_check: false,
-                max_distance: None,
-            },
-            MatchConfig {
-                ratio: None,
-                cross_check: true,
-                max_distance: None,
-            },
-        ];
-        scale::thin(all, 2)
-    }
-
-    /// Sets of `bits` bits with an empty and single-descriptor sets among them, and every pair both
-    /// ways, each set with itself and repeats, in scrambled order.
-    fn collection(
-        bits: usize,
-        sizes: &[usize],
-        seed: u64,
-    ) -> (Vec<DescriptorSet>, Vec<(usize, usize)>) {
-        let mut rng = SplitMix64::new(seed);
-        let width = DescriptorWidth::from_bits(bits).expect("width");
-        let owned: Vec<DescriptorSet> = sizes
-            .iter()
-            .map(|&n| random_set(width, n, &mut rng))
-            .collect();
-        let n = owned.len();
-        let mut pairs = Matcher::all_pairs(n);
-        pairs.extend(Matcher::all_pairs(n).iter().map(|&(a, b)| (b, a)));
-        pairs.extend((0..n).map(|i| (i, i)));
-        pairs.extend((0..10).map(|_| (rng.below(n as u64) as usize, rng.below(n as u64) as usize)));
-        for i in (1..pairs.len()).rev() {
-            pairs.swap(i, rng.below(i as u64 + 1) as usize);
-        }
-        (owned, pairs)
-    }
-
     /// Whether `done` named every index exactly once.
     fn once_each(reported: Mutex<Vec<usize>>) -> bool {
         reported.into_inner().unwrap().iter().all(|&c| c == 1)
@@ -106,9 +57,9 @@ mod gpu {
         let tied = [400, 1, 0, 129, 64, 700];
         let mut compared = 0;
         for (bits, sizes, seed) in [(512, &big[..], 31), (16, &tied[..], 32)] {
-            let (owned, pairs) = collection(bits, sizes, seed);
+            let (owned, pairs) = scrambled_collection(bits, sizes, 10, &mut SplitMix64::new(seed));
             let sets: Vec<&DescriptorSet> = owned.iter().collect();
-            for config in configs() {
+            for config in scale::thin(match_configs().into_iter().step_by(5), 2) {
                 let cpu = Matcher::new(Backend::Cpu, config.clone())?.match_pairs(
                     &sets,
                     &pairs,

@@ -11,51 +11,16 @@ use clatch::{
     Backend, DescriptorSet, DescriptorWidth, DevicePool, Error, Extractor, ExtractorConfig,
     MatchConfig, Matcher,
 };
-use common::random_set;
+use common::{match_configs, random_set, scrambled_collection};
 
 const WORKER_COUNTS: [usize; 4] = [1, 2, 3, 4];
 
 /// A collection of `bits`-wide sets, an empty one and single-descriptor ones among them (too small a
-/// gallery for the ratio test), and a pair list in scrambled order: every pair both ways, pairs of a
-/// set with itself, and repeats.
+/// gallery for the ratio test), with every pair both ways, each set with itself and repeats, in
+/// scrambled order.
 fn collection(bits: usize, seed: u64) -> (Vec<DescriptorSet>, Vec<(usize, usize)>) {
-    let mut rng = SplitMix64::new(seed);
-    let width = DescriptorWidth::from_bits(bits).unwrap();
-    let owned: Vec<DescriptorSet> = [300, 0, 1, 257, 64, 1000, 2, 450, 1]
-        .iter()
-        .map(|&n| random_set(width, n, &mut rng))
-        .collect();
-    let n = owned.len();
-    let mut pairs: Vec<(usize, usize)> = Matcher::all_pairs(n);
-    pairs.extend(Matcher::all_pairs(n).iter().map(|&(a, b)| (b, a)));
-    pairs.extend((0..n).map(|i| (i, i)));
-    pairs.extend((0..20).map(|_| (rng.below(n as u64) as usize, rng.below(n as u64) as usize)));
-    // Fisher-Yates with the test's generator.
-    for i in (1..pairs.len()).rev() {
-        pairs.swap(i, rng.below(i as u64 + 1) as usize);
-    }
-    (owned, pairs)
-}
-
-fn configs() -> Vec<MatchConfig> {
-    vec![
-        MatchConfig::default(),
-        MatchConfig {
-            ratio: None,
-            cross_check: false,
-            max_distance: Some(20),
-        },
-        MatchConfig {
-            ratio: Some(0.9),
-            cross_check: false,
-            max_distance: None,
-        },
-        MatchConfig {
-            ratio: None,
-            cross_check: true,
-            max_distance: None,
-        },
-    ]
+    let sizes = [300, 0, 1, 257, 64, 1000, 2, 450, 1];
+    scrambled_collection(bits, &sizes, 20, &mut SplitMix64::new(seed))
 }
 
 /// How many times `done` named each index, from any thread.
@@ -81,7 +46,7 @@ fn pairs_equal_one_device_for_every_worker_count_and_tile() {
     for (bits, seed) in [(64, 1), (16, 2)] {
         let (owned, pairs) = collection(bits, seed);
         let sets: Vec<&DescriptorSet> = owned.iter().collect();
-        for config in configs() {
+        for config in match_configs().into_iter().step_by(5) {
             let matcher = Matcher::new(Backend::Cpu, config.clone()).unwrap();
             let expected = matcher.match_pairs(&sets, &pairs, &|_| {}).unwrap();
             let found: usize = expected.iter().map(Vec::len).sum();

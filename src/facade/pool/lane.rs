@@ -1,11 +1,12 @@
 //! What one worker of a pool runs on its device: pairs of blocks with the block's sets held resident
-//! ([`PairLane`], one implementation per backend), and images.
+//! ([`PairLane`], the plug for a device's own kind of resident set), and images.
 //!
 //! A lane prepares each set a block reads once, keeps it for the whole block, and drops it when the
 //! next block no longer reads it. On the CPU a prepared set is the host set itself. On a CUDA device
 //! it is the host set too, for now: every pair uploads its two sets, as `Matcher::match_pairs` does,
-//! because the CUDA backend has no set that stays on the device across calls yet. A resident CUDA
-//! set plugs in as `CudaPairs::Set` with no change to the scheduler; it needs from the CUDA side:
+//! because the CUDA backend has no set that stays on the device across calls yet (both are
+//! `HostSets`). A resident CUDA set plugs in as a `PairLane` of its own whose `Set` is the device
+//! copy, with no change to the scheduler; it needs from the CUDA side:
 //! - a device set type: the rows uploaded once, zero-padded to whole `ROW_PAD` tiles as
 //!   `cuda::matching::upload` pads them, and, on the tensor-core path, their ±1 expansion (today
 //!   `TensorKnn::launch` expands both sets for every pair), behind an `Arc` so that pairs in flight
@@ -145,64 +146,39 @@ pub(super) fn match_on(
     queue: &WorkQueue,
     done: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<(usize, Vec<Match>)>> {
-    match matcher.backend() {
-        Backend::Cpu => match_blocks(&mut CpuPairs { matcher }, collection, queue, done),
-        Backend::Cuda { device } => {
-            let mut lane = CudaPairs {
-                matcher,
-                streams: streams(device)?,
-                next: 0,
-            };
-            match_blocks(&mut lane, collection, queue, done)
-        }
-    }
+    let mut lane = match matcher.backend() {
+        Backend::Cpu => HostSets::Cpu(matcher),
+        Backend::Cuda { device } => HostSets::Cuda {
+            matcher,
+            streams: streams(device)?,
+            next: 0,
+        },
+    };
+    match_blocks(&mut lane, collection, queue, done)
 }
 
-/// The CPU: a set needs no preparing; one pair at a time, over all of the CPU's threads.
-struct CpuPairs<'m> {
-    matcher: &'m Matcher,
+/// A device that reads its sets from host memory, so that a set needs no preparing: the CPU, one
+/// pair at a time over all of its threads, and (until a CUDA set can stay on the device, see the
+/// module's notes) a CUDA device, which uploads each pair's two sets with the pair and keeps pairs in
+/// flight on the worker's own streams, as `Matcher::match_pairs` does.
+enum HostSets<'m> {
+    Cpu(&'m Matcher),
+    Cuda {
+        matcher: &'m Matcher,
+        streams: Vec<GpuStream>,
+        next: usize,
+    },
 }
 
-impl<'s> PairLane<'s> for CpuPairs<'_> {
-    type Set = &'s DescriptorSet;
-    type Pending = Infallible;
-
-    fn window(&self) -> usize {
-        1
-    }
-
-    fn prepare(&mut self, set: &'s DescriptorSet) -> Result<Self::Set> {
-        Ok(set)
-    }
-
-    fn queue(
-        &mut self,
-        query: &Self::Set,
-        train: &Self::Set,
-    ) -> Result<Queued<Infallible, Vec<Match>>> {
-        let matches = matching::cpu::match_descriptors(query, train, self.matcher.config());
-        Ok(Queued::Ready(matches))
-    }
-
-    fn wait(pending: Infallible) -> Result<Vec<Match>> {
-        match pending {}
-    }
-}
-
-/// A CUDA device: pairs in flight on the worker's own streams, as `Matcher::match_pairs` keeps
-/// them. A set is the host set, uploaded with each pair (see the module's notes).
-struct CudaPairs<'m> {
-    matcher: &'m Matcher,
-    streams: Vec<GpuStream>,
-    next: usize,
-}
-
-impl<'s> PairLane<'s> for CudaPairs<'_> {
+impl<'s> PairLane<'s> for HostSets<'_> {
     type Set = &'s DescriptorSet;
     type Pending = PendingMatches;
 
     fn window(&self) -> usize {
-        STREAMS * IN_FLIGHT_PER_STREAM
+        match self {
+            HostSets::Cpu(_) => 1,
+            HostSets::Cuda { .. } => STREAMS * IN_FLIGHT_PER_STREAM,
+        }
     }
 
     fn prepare(&mut self, set: &'s DescriptorSet) -> Result<Self::Set> {
@@ -214,9 +190,22 @@ impl<'s> PairLane<'s> for CudaPairs<'_> {
         query: &Self::Set,
         train: &Self::Set,
     ) -> Result<Queued<PendingMatches, Vec<Match>>> {
-        let stream = &self.streams[self.next % STREAMS];
-        self.next += 1;
-        cuda::match_async(stream, query, train, self.matcher.config()).map(Queued::Pending)
+        match self {
+            HostSets::Cpu(matcher) => Ok(Queued::Ready(matching::cpu::match_descriptors(
+                query,
+                train,
+                matcher.config(),
+            ))),
+            HostSets::Cuda {
+                matcher,
+                streams,
+                next,
+            } => {
+                let stream = &streams[*next % STREAMS];
+                *next += 1;
+                cuda::match_async(stream, query, train, matcher.config()).map(Queued::Pending)
+            }
+        }
     }
 
     fn wait(pending: PendingMatches) -> Result<Vec<Match>> {

@@ -114,6 +114,7 @@ pub(super) fn run_workers<T: Send>(
             .enumerate()
             .map(|(worker, &backend)| {
                 scope.spawn(move || {
+                    let _stop_on_panic = StopOnPanic(queue);
                     work(worker, backend, queue).unwrap_or_else(|error| {
                         queue.fail(Error::Worker {
                             worker,
@@ -155,6 +156,18 @@ pub(super) fn run_workers<T: Send>(
         .enumerate()
         .map(|(index, slot)| slot.ok_or_else(|| missing(format!("no worker gave result {index}"))))
         .collect()
+}
+
+/// Stops every worker when the thread holding it unwinds (a panic in the caller's `done`, say), so
+/// that the panic reaches the caller without the others finishing the whole run first.
+struct StopOnPanic<'q>(&'q WorkQueue);
+
+impl Drop for StopOnPanic<'_> {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            self.0.stopped.store(true, Ordering::Relaxed);
+        }
+    }
 }
 
 fn missing(message: String) -> Error {
@@ -247,6 +260,29 @@ mod tests {
         assert!(
             claimed < 1000,
             "{claimed} of 2000 items claimed after the error"
+        );
+    }
+
+    #[test]
+    fn a_panic_stops_the_others_and_reaches_the_caller() {
+        let claimed = AtomicUsize::new(0);
+        let run = std::panic::catch_unwind(|| {
+            run_workers(&[Backend::Cpu; 3], 2000, 2000, |worker, _, queue| {
+                let mut mine = Vec::new();
+                while let Some(i) = queue.claim() {
+                    claimed.fetch_add(1, Ordering::Relaxed);
+                    assert!(worker != 2, "a panicking progress callback");
+                    std::thread::sleep(std::time::Duration::from_millis(2));
+                    mine.push((i, ()));
+                }
+                Ok(mine)
+            })
+        });
+        assert!(run.is_err(), "the panic reaches the caller");
+        let claimed = claimed.into_inner();
+        assert!(
+            claimed < 1000,
+            "{claimed} of 2000 items claimed after the panic"
         );
     }
 

@@ -79,6 +79,21 @@ pub enum Error {
         sets: usize,
     },
 
+    /// A [`crate::DevicePool`] was given no workers.
+    #[error("a device pool needs at least one worker; the list of backends is empty")]
+    NoWorkers,
+
+    /// Worker `worker` of a [`crate::DevicePool`] (running on `backend`) failed: its backend cannot
+    /// run (no such device, say), or its work failed on the device. `source` is the worker's own
+    /// error, e.g. [`Error::BackendUnavailable`] or [`Error::DeviceOutOfMemory`].
+    #[error("device pool worker {worker} ({backend}): {source}")]
+    Worker {
+        worker: usize,
+        backend: String,
+        #[source]
+        source: Box<Error>,
+    },
+
     /// A descriptor buffer whose length is not a whole number of descriptors.
     #[error(
         "descriptor buffer of {words} words is not a multiple of {words_per_descriptor} words per descriptor"

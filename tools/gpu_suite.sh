@@ -29,7 +29,7 @@ part=${1:-all}
 summary=()
 if [ "$part" = tests ] || [ "$part" = all ]; then
 nvidia-smi --query-gpu=name,driver_version,clocks.max.sm,memory.total --format=csv > "$O/suite.txt" 2>&1
-SUITES="cuda_describe cuda_describe_opencv cuda_detect cuda_match cuda_pyramid cuda_faults cuda_async cuda_soak"
+SUITES="cuda_describe cuda_describe_opencv cuda_detect cuda_match cuda_pyramid cuda_faults cuda_async cuda_pool cuda_soak"
 for t in clatch_unit backend $SUITES; do
     echo "== $t" >> "$O/suite.txt"
     start=$(date +%s)
@@ -66,8 +66,9 @@ san memcheck cuda_detect detect_stage_by_stage
     echo "== clatch demo --backend cuda"; timeout 60 "$B/clatch" demo --backend cuda -o /tmp/demo.png; echo "rc $?"
     echo "== bench gpu_detect"; timeout 120 "$B/bench_gpu_detect"; echo "rc $?"
     echo "== bench gpu_match"; timeout 200 "$B/bench_gpu_match"; echo "rc $?"
+    echo "== bench gpu_pool"; timeout 200 "$B/bench_gpu_pool"; echo "rc $?"
 } > "$O/tools.txt" 2>&1
-summary+=("tools: $(grep -c '^rc 0' "$O/tools.txt") of 4 exited 0")
+summary+=("tools: $(grep -c '^rc 0' "$O/tools.txt") of 5 exited 0")
 fi
 if [ "$part" = soak ]; then
     echo "== cuda_soak ${2:-570} s" >> "$O/suite.txt"

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Builds, here (no GPU needed), everything the GPU suite runs on the device machine and packs it into
 # .gpu/suite.tar.xz (git-ignored): the GPU test binaries (tests/cuda_*.rs), the library's unit tests and
-# tests/backend.rs with the `cuda` feature, the command-line tool, the gpu_streams example and the
-# gpu_detect and gpu_match benches (they load the bench-only kernels). Then, with the device tool:
+# tests/backend.rs with the `cuda` feature, the command-line tool, the gpu_streams example, the
+# gpu_detect and gpu_match benches (they load the bench-only kernels) and the gpu_pool bench (the
+# multi-device scheduler on the one GPU). Then, with the device tool:
 #     run: bash tools/gpu_suite.sh      carry: [".gpu"]
 # Needs NVCC (see the README's CUDA section) and libclang.
 set -euo pipefail
@@ -32,7 +33,7 @@ cargo bench -p clatch --features cuda --no-run --message-format=json 2>/dev/null
 import json, sys, shutil
 for line in sys.stdin:
     m = json.loads(line)
-    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] in ("gpu_detect", "gpu_match"):
+    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] in ("gpu_detect", "gpu_match", "gpu_pool"):
         shutil.copy(m["executable"], ".gpu/bin/bench_" + m["target"]["name"])
         print("packed bench", m["target"]["name"])
 '

@@ -1,9 +1,9 @@
 //! Many images in one call.
 
 use super::Extractor;
-use super::in_flight::{Queued, STREAMS, run_in_order};
+use super::in_flight::{Queued, STREAMS, run_in_order, streams};
 use crate::backend::Backend;
-use crate::cuda::{self, GpuStream};
+use crate::cuda;
 use crate::error::Result;
 use crate::features::Features;
 use crate::gray_view::GrayView;
@@ -48,9 +48,7 @@ impl Extractor {
                 })
                 .collect(),
             Backend::Cuda { device } => {
-                let streams = (0..STREAMS)
-                    .map(|_| GpuStream::new(device))
-                    .collect::<Result<Vec<_>>>()?;
+                let streams = streams(device)?;
                 run_in_order(
                     images.len(),
                     |i| {

@@ -99,6 +99,15 @@ impl Extractor {
         Ok(Self { backend, config })
     }
 
+    /// The same configuration on `backend`, whose availability the caller has checked (a
+    /// [`crate::DevicePool`]'s workers).
+    pub(super) fn on(&self, backend: Backend) -> Self {
+        Self {
+            backend,
+            config: self.config.clone(),
+        }
+    }
+
     /// The backend this extractor runs on.
     pub fn backend(&self) -> Backend {
         self.backend

@@ -3,11 +3,17 @@
 
 use std::collections::VecDeque;
 
+use crate::cuda::GpuStream;
 use crate::error::Result;
 
 /// Streams the CUDA paths keep busy, and the items queued on each before the oldest is waited for.
 pub(super) const STREAMS: usize = 4;
 pub(super) const IN_FLIGHT_PER_STREAM: usize = 2;
+
+/// `STREAMS` new streams on CUDA device `device`.
+pub(super) fn streams(device: usize) -> Result<Vec<GpuStream>> {
+    (0..STREAMS).map(|_| GpuStream::new(device)).collect()
+}
 
 /// One item after `queue`: work in flight, or a result without any.
 pub(super) enum Queued<P, T> {
@@ -19,32 +25,54 @@ pub(super) enum Queued<P, T> {
 /// and `wait`s for them oldest first; `done(i)` follows each result. Results in input order.
 pub(super) fn run_in_order<P, T>(
     n: usize,
-    mut queue: impl FnMut(usize) -> Result<Queued<P, T>>,
-    mut wait: impl FnMut(P) -> Result<T>,
+    queue: impl FnMut(usize) -> Result<Queued<P, T>>,
+    wait: impl FnMut(P) -> Result<T>,
     done: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<T>> {
-    let mut queued = VecDeque::new();
     let mut results = Vec::with_capacity(n);
-    let mut finish_oldest =
-        |queued: &mut VecDeque<Queued<P, T>>, results: &mut Vec<T>| -> Result<()> {
-            let result = match queued.pop_front().expect("an item is queued") {
-                Queued::Pending(pending) => wait(pending)?,
-                Queued::Ready(result) => result,
-            };
+    run_window(
+        0..n,
+        STREAMS * IN_FLIGHT_PER_STREAM,
+        queue,
+        wait,
+        |i, result| {
             results.push(result);
-            done(results.len() - 1);
-            Ok(())
+            done(i);
+        },
+    )?;
+    Ok(results)
+}
+
+/// Runs `queue(item)` for each item as `items` yields it (items may be claimed from a shared queue as
+/// they are needed), keeping at most `window` (at least one) queued, and `wait`s for them oldest
+/// first; `finish(item, result)` takes each result, in the order the items came.
+pub(super) fn run_window<I: Copy, P, T>(
+    items: impl IntoIterator<Item = I>,
+    window: usize,
+    mut queue: impl FnMut(I) -> Result<Queued<P, T>>,
+    mut wait: impl FnMut(P) -> Result<T>,
+    mut finish: impl FnMut(I, T),
+) -> Result<()> {
+    let mut queued = VecDeque::new();
+    let mut finish_oldest = |queued: &mut VecDeque<(I, Queued<P, T>)>| -> Result<()> {
+        let (item, oldest) = queued.pop_front().expect("an item is queued");
+        let result = match oldest {
+            Queued::Pending(pending) => wait(pending)?,
+            Queued::Ready(result) => result,
         };
-    for i in 0..n {
-        if queued.len() == STREAMS * IN_FLIGHT_PER_STREAM {
-            finish_oldest(&mut queued, &mut results)?;
+        finish(item, result);
+        Ok(())
+    };
+    for item in items {
+        if queued.len() >= window.max(1) {
+            finish_oldest(&mut queued)?;
         }
-        queued.push_back(queue(i)?);
+        queued.push_back((item, queue(item)?));
     }
     while !queued.is_empty() {
-        finish_oldest(&mut queued, &mut results)?;
+        finish_oldest(&mut queued)?;
     }
-    Ok(results)
+    Ok(())
 }
 
 #[cfg(test)]

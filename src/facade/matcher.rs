@@ -46,6 +46,15 @@ impl Matcher {
         Ok(Self { backend, config })
     }
 
+    /// The same configuration on `backend`, whose availability the caller has checked (a
+    /// [`crate::DevicePool`]'s workers).
+    pub(super) fn on(&self, backend: Backend) -> Self {
+        Self {
+            backend,
+            config: self.config.clone(),
+        }
+    }
+
     /// The backend this matcher runs on.
     pub fn backend(&self) -> Backend {
         self.backend

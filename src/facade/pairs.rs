@@ -2,9 +2,9 @@
 //! a given pair list), as structure from motion needs it.
 
 use super::Matcher;
-use super::in_flight::{Queued, STREAMS, run_in_order};
+use super::in_flight::{Queued, STREAMS, run_in_order, streams};
 use crate::backend::Backend;
-use crate::cuda::{self, GpuStream};
+use crate::cuda;
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
 use crate::matching::{self, Match};
@@ -56,8 +56,7 @@ impl Matcher {
         done: &(dyn Fn(usize) + Sync),
     ) -> Result<Vec<Vec<Match>>> {
         self.check_pairs(sets, pairs)?;
-        let needed = if self.config().ratio.is_some() { 2 } else { 1 };
-        let matchable = |&(a, b): &(usize, usize)| !sets[a].is_empty() && sets[b].len() >= needed;
+        let matchable = |&pair: &(usize, usize)| self.matchable(sets, pair);
         match self.backend() {
             Backend::Cpu => Ok(pairs
                 .par_iter()
@@ -73,9 +72,7 @@ impl Matcher {
                 })
                 .collect()),
             Backend::Cuda { device } => {
-                let streams = (0..STREAMS)
-                    .map(|_| GpuStream::new(device))
-                    .collect::<Result<Vec<_>>>()?;
+                let streams = streams(device)?;
                 run_in_order(
                     pairs.len(),
                     |p| {
@@ -94,8 +91,20 @@ impl Matcher {
         }
     }
 
+    /// Whether pair `(a, b)` (in range) is matched at all: it has a query, and a gallery large enough
+    /// for the configured test (two descriptors for the ratio test, else one). Other pairs get no
+    /// matches.
+    pub(super) fn matchable(&self, sets: &[&DescriptorSet], (a, b): (usize, usize)) -> bool {
+        let needed = if self.config().ratio.is_some() { 2 } else { 1 };
+        !sets[a].is_empty() && sets[b].len() >= needed
+    }
+
     /// Every pair's indices in range and every set of one width.
-    fn check_pairs(&self, sets: &[&DescriptorSet], pairs: &[(usize, usize)]) -> Result<()> {
+    pub(super) fn check_pairs(
+        &self,
+        sets: &[&DescriptorSet],
+        pairs: &[(usize, usize)],
+    ) -> Result<()> {
         for (p, &(a, b)) in pairs.iter().enumerate() {
             for index in [a, b] {
                 if index >= sets.len() {

@@ -129,6 +129,27 @@ pub fn random_set(width: DescriptorWidth, count: usize, rng: &mut SplitMix64) ->
     DescriptorSet::from_words(width, words).expect("whole rows")
 }
 
+/// Random sets of `bits` bits, one per entry of `sizes`, and a pair list over them in scrambled
+/// order: every pair both ways, each set with itself, and `repeats` random pairs more.
+pub fn scrambled_collection(
+    bits: usize,
+    sizes: &[usize],
+    repeats: usize,
+    rng: &mut SplitMix64,
+) -> (Vec<DescriptorSet>, Vec<(usize, usize)>) {
+    let width = DescriptorWidth::from_bits(bits).expect("a valid width");
+    let owned: Vec<DescriptorSet> = sizes.iter().map(|&n| random_set(width, n, rng)).collect();
+    let n = owned.len();
+    let mut pairs: Vec<(usize, usize)> = (0..n).flat_map(|a| (0..n).map(move |b| (a, b))).collect();
+    pairs
+        .extend((0..repeats).map(|_| (rng.below(n as u64) as usize, rng.below(n as u64) as usize)));
+    // Fisher-Yates with the caller's generator.
+    for i in (1..pairs.len()).rev() {
+        pairs.swap(i, rng.below(i as u64 + 1) as usize);
+    }
+    (owned, pairs)
+}
+
 /// Hamming distance computed bit by bit, independent of the crate's popcount.
 pub fn naive_hamming(a: &[u64], b: &[u64], bits: usize) -> u32 {
     (0..bits)
@@ -149,6 +170,7 @@ pub fn flip_bits(row: &mut [u64], bits: usize, count: usize, rng: &mut SplitMix6
 }
 
 /// Every combination of ratio test, cross-check and distance limit the matcher suites run through.
+/// Every fifth of them (`.step_by(5)`) still has each ratio, both cross-check settings and each limit.
 pub fn match_configs() -> Vec<clatch::MatchConfig> {
     let mut out = Vec::new();
     for ratio in [None, Some(0.8), Some(1.0), Some(0.5), Some(0.95)] {

@@ -1,0 +1,368 @@
+//! numpy arrays in and out: images, keypoints, descriptors and matches.
+//!
+//! - Images: `uint8`, 2-D gray or H x W x 3 (RGB; a fourth, alpha, channel is ignored). A gray array
+//!   whose rows are contiguous (C order, or a view with a positive row step, e.g. a crop) is read in
+//!   place through a [`GrayView`] with its row stride; anything else is copied once.
+//! - Keypoints out: a structured array of [`KeyPointRecord`] (x, y, size, angle, response as
+//!   `float32`, octave as `int32`), owning the library's own `Vec<KeyPoint>` (no copy).
+//! - Descriptors: `uint8`, N x bytes, in OpenCV LATCH's byte order
+//!   ([`clatch::DescriptorSet::to_opencv_bytes`], what the command-line tool writes to `.npy`).
+//! - Matches out: a structured array of [`MatchRecord`] (query, train, distance as `uint32`), owning
+//!   the library's `Vec<Match>`.
+
+use std::mem::{offset_of, size_of};
+
+use clatch::{Descriptor, DescriptorSet, DescriptorWidth, GrayView, KeyPoint, Match};
+use numpy::ndarray::{ArrayView2, ArrayViewD, Ix2};
+use numpy::{
+    Element, IntoPyArray, PyArray1, PyArrayDescr, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods,
+    PyReadonlyArray1, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods,
+};
+use pyo3::prelude::*;
+use pyo3::sync::PyOnceLock;
+use pyo3::types::PyDict;
+
+use crate::errors::{OrRaise, invalid_input};
+
+/// A structured dtype with `fields` (name, numpy type code, byte offset) and `itemsize` bytes.
+fn record_dtype<'py>(
+    py: Python<'py>,
+    fields: &[(&str, &str, usize)],
+    itemsize: usize,
+) -> PyResult<Bound<'py, PyArrayDescr>> {
+    let spec = PyDict::new(py);
+    spec.set_item("names", fields.iter().map(|f| f.0).collect::<Vec<_>>())?;
+    spec.set_item("formats", fields.iter().map(|f| f.1).collect::<Vec<_>>())?;
+    spec.set_item("offsets", fields.iter().map(|f| f.2).collect::<Vec<_>>())?;
+    spec.set_item("itemsize", itemsize)?;
+    PyArrayDescr::new(py, spec)
+}
+
+/// A cached dtype, built once per interpreter.
+fn cached<'py>(
+    py: Python<'py>,
+    cell: &'static PyOnceLock<Py<PyArrayDescr>>,
+    make: fn(Python<'py>) -> PyResult<Bound<'py, PyArrayDescr>>,
+) -> Bound<'py, PyArrayDescr> {
+    cell.get_or_try_init(py, || make(py).map(Bound::unbind))
+        // The spec is fixed and valid: numpy accepts it on every version (checked by the tests).
+        .expect("numpy accepts the record dtype")
+        .bind(py)
+        .clone()
+}
+
+/// One keypoint as a numpy record: the library's `KeyPoint`, whose `#[repr(C)]` layout the dtype
+/// describes field by field (offsets taken from the Rust type, not assumed).
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub struct KeyPointRecord(pub KeyPoint);
+
+fn keypoint_dtype(py: Python<'_>) -> PyResult<Bound<'_, PyArrayDescr>> {
+    record_dtype(
+        py,
+        &[
+            ("x", "<f4", offset_of!(KeyPoint, x)),
+            ("y", "<f4", offset_of!(KeyPoint, y)),
+            ("size", "<f4", offset_of!(KeyPoint, size)),
+            ("angle", "<f4", offset_of!(KeyPoint, angle)),
+            ("response", "<f4", offset_of!(KeyPoint, response)),
+            ("octave", "<i4", offset_of!(KeyPoint, octave)),
+        ],
+        size_of::<KeyPoint>(),
+    )
+}
+
+// SAFETY: `KeyPointRecord` is `repr(transparent)` over `KeyPoint`, a `#[repr(C)]` struct of five `f32`
+// and one `i32` (little-endian on every target abi3 wheels are built for), and the dtype lists exactly
+// those fields at their `offset_of!` offsets with `size_of` as the item size. It is plain data.
+unsafe impl Element for KeyPointRecord {
+    const IS_COPY: bool = true;
+
+    fn get_dtype(py: Python<'_>) -> Bound<'_, PyArrayDescr> {
+        static DTYPE: PyOnceLock<Py<PyArrayDescr>> = PyOnceLock::new();
+        cached(py, &DTYPE, keypoint_dtype)
+    }
+
+    fn clone_ref(&self, _py: Python<'_>) -> Self {
+        *self
+    }
+}
+
+/// One match as a numpy record: the library's `#[repr(C)]` `Match`.
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub struct MatchRecord(pub Match);
+
+fn match_dtype(py: Python<'_>) -> PyResult<Bound<'_, PyArrayDescr>> {
+    record_dtype(
+        py,
+        &[
+            ("query", "<u4", offset_of!(Match, query)),
+            ("train", "<u4", offset_of!(Match, train)),
+            ("distance", "<u4", offset_of!(Match, distance)),
+        ],
+        size_of::<Match>(),
+    )
+}
+
+// SAFETY: as for `KeyPointRecord`: `Match` is `#[repr(C)]` with three `u32` fields, described at their
+// offsets.
+unsafe impl Element for MatchRecord {
+    const IS_COPY: bool = true;
+
+    fn get_dtype(py: Python<'_>) -> Bound<'_, PyArrayDescr> {
+        static DTYPE: PyOnceLock<Py<PyArrayDescr>> = PyOnceLock::new();
+        cached(py, &DTYPE, match_dtype)
+    }
+
+    fn clone_ref(&self, _py: Python<'_>) -> Self {
+        *self
+    }
+}
+
+/// Keypoints as a structured array that takes over the vector (no copy: the map is done in place).
+pub fn keypoints_out(
+    py: Python<'_>,
+    keypoints: Vec<KeyPoint>,
+) -> Bound<'_, PyArray1<KeyPointRecord>> {
+    keypoints
+        .into_iter()
+        .map(KeyPointRecord)
+        .collect::<Vec<_>>()
+        .into_pyarray(py)
+}
+
+/// Matches as a structured array that takes over the vector.
+pub fn matches_out(py: Python<'_>, matches: Vec<Match>) -> Bound<'_, PyArray1<MatchRecord>> {
+    matches
+        .into_iter()
+        .map(MatchRecord)
+        .collect::<Vec<_>>()
+        .into_pyarray(py)
+}
+
+/// Descriptors as an N x bytes `uint8` array in OpenCV LATCH's byte order.
+pub fn descriptors_out<'py>(py: Python<'py>, set: &DescriptorSet) -> PyResult<Bound<'py, PyAny>> {
+    let bytes = set.to_opencv_bytes();
+    Ok(bytes
+        .into_pyarray(py)
+        .reshape([set.len(), set.width().bytes()])?
+        .into_any())
+}
+
+/// The `numpy.ndarray` in `obj`, or an `InvalidInputError` naming `what`.
+fn ndarray<'a, 'py>(
+    obj: &'a Bound<'py, PyAny>,
+    what: &str,
+) -> PyResult<&'a Bound<'py, PyUntypedArray>> {
+    obj.cast::<PyUntypedArray>().map_err(|_| {
+        let type_name = obj
+            .get_type()
+            .name()
+            .map(|n| n.to_string())
+            .unwrap_or_else(|_| "?".into());
+        invalid_input(
+            obj.py(),
+            "NotAnArray",
+            format!("{what} must be a numpy.ndarray, got {type_name}"),
+        )
+    })
+}
+
+/// `obj` as a `uint8` array (read-only borrow), or an `InvalidInputError` naming `what`.
+fn uint8_array<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<PyReadonlyArrayDyn<'py, u8>> {
+    let py = obj.py();
+    let array = ndarray(obj, what)?;
+    let dtype = array.dtype();
+    if !dtype.is_equiv_to(&numpy::dtype::<u8>(py)) {
+        return Err(invalid_input(
+            py,
+            "WrongDtype",
+            format!("{what} must have dtype uint8, got {dtype}"),
+        ));
+    }
+    let typed = array.cast::<PyArrayDyn<u8>>()?;
+    typed.try_readonly().map_err(|e| {
+        invalid_input(
+            py,
+            "ArrayBorrowed",
+            format!("{what} cannot be read now: {e}"),
+        )
+    })
+}
+
+/// An image from Python: borrowed array memory (read in place) or a converted copy.
+pub struct ImageInput<'py> {
+    /// Keeps the array alive and registered as read-only borrowed while its memory is used.
+    _array: Option<PyReadonlyArrayDyn<'py, u8>>,
+    /// Start of the pixels (`len` bytes, rows `stride` apart): the array's memory, or `owned`.
+    ptr: *const u8,
+    len: usize,
+    owned: Vec<u8>,
+    width: usize,
+    height: usize,
+    stride: usize,
+}
+
+impl<'py> ImageInput<'py> {
+    /// Reads `obj` (see the module docs). `what` names it in errors.
+    pub fn new(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<Self> {
+        let py = obj.py();
+        let array = uint8_array(obj, what)?;
+        let view = array.as_array();
+        let shape = view.shape().to_vec();
+        match *shape.as_slice() {
+            [height, width] => {
+                if let Some((ptr, len, stride)) = rows_in_place(&view) {
+                    return Ok(Self {
+                        ptr,
+                        len,
+                        stride,
+                        _array: Some(array),
+                        owned: Vec::new(),
+                        width,
+                        height,
+                    });
+                }
+                // Rows not contiguous (a transposed view, a column step): one copy, row-major.
+                let owned: Vec<u8> = view.iter().copied().collect();
+                Ok(Self::owned(owned, width, height))
+            }
+            [height, width, channels] if channels == 3 || channels == 4 => {
+                let view = view
+                    .into_dimensionality::<numpy::ndarray::Ix3>()
+                    .map_err(|e| invalid_input(py, "WrongShape", e.to_string()))?;
+                let gray = match view.as_slice() {
+                    Some(packed) => packed
+                        .chunks_exact(channels)
+                        .map(|p| clatch::decode::luma(p[0], p[1], p[2]))
+                        .collect(),
+                    None => view
+                        .outer_iter()
+                        .flat_map(|row| {
+                            row.outer_iter()
+                                .map(|p| clatch::decode::luma(p[0], p[1], p[2]))
+                                .collect::<Vec<u8>>()
+                        })
+                        .collect(),
+                };
+                Ok(Self::owned(gray, width, height))
+            }
+            _ => Err(invalid_input(
+                py,
+                "WrongShape",
+                format!(
+                    "{what} must be 2-D (gray, H x W) or 3-D with 3 or 4 channels (RGB or RGBA, H x W x C), \
+                     got shape {shape:?}"
+                ),
+            )),
+        }
+    }
+
+    fn owned(owned: Vec<u8>, width: usize, height: usize) -> Self {
+        Self {
+            _array: None,
+            ptr: owned.as_ptr(),
+            len: owned.len(),
+            owned,
+            width,
+            height,
+            stride: width,
+        }
+    }
+
+    /// Whether the pixels are read in place (no copy was made).
+    pub fn zero_copy(&self) -> bool {
+        self._array.is_some()
+    }
+
+    /// The image as the library sees it (its sizes checked by `GrayView::new`).
+    pub fn view(&self) -> clatch::Result<GrayView<'_>> {
+        let data: &[u8] = if self.len == 0 {
+            &[]
+        } else if self._array.is_none() {
+            &self.owned
+        } else {
+            // SAFETY: `ptr` and `len` cover `stride * (height - 1) + width` bytes of the array's
+            // buffer (rows_in_place), which `_array` keeps alive and borrowed read-only for as long as
+            // `self`, and so the returned view, lives.
+            unsafe { std::slice::from_raw_parts(self.ptr, self.len) }
+        };
+        GrayView::new(data, self.width, self.height, self.stride)
+    }
+}
+
+/// Where a 2-D `uint8` array's rows lie when each row is contiguous and rows follow at a positive
+/// step: the first pixel, the bytes spanned, and the row stride. `None` when the array must be copied.
+fn rows_in_place(view: &ArrayViewD<'_, u8>) -> Option<(*const u8, usize, usize)> {
+    let (height, width) = (view.shape()[0], view.shape()[1]);
+    if height == 0 || width == 0 {
+        return None;
+    }
+    let strides = view.strides();
+    if width > 1 && strides[1] != 1 {
+        return None;
+    }
+    let stride = if height == 1 {
+        width
+    } else {
+        usize::try_from(strides[0]).ok().filter(|&s| s >= width)?
+    };
+    let len = stride.checked_mul(height - 1)?.checked_add(width)?;
+    Some((view.as_ptr(), len, stride))
+}
+
+/// Descriptors from an N x bytes `uint8` array in OpenCV LATCH's byte order (any strides). `what`
+/// names the array in errors.
+pub fn descriptors_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<DescriptorSet> {
+    let py = obj.py();
+    let array = uint8_array(obj, what)?;
+    let view = array.as_array();
+    let view: ArrayView2<'_, u8> = view.into_dimensionality::<Ix2>().map_err(|_| {
+        invalid_input(
+            py,
+            "WrongShape",
+            format!(
+                "{what} must be 2-D (one row of bytes per descriptor), got shape {:?}; \
+                 a single descriptor is descriptors.reshape(1, -1)",
+                array.shape()
+            ),
+        )
+    })?;
+    let width = DescriptorWidth::from_bytes(view.ncols()).or_raise(py)?;
+    let bytes = width.bytes();
+    let rows: Vec<Descriptor> = view
+        .outer_iter()
+        .map(|row| {
+            let mut full = [0u8; 64];
+            for (dst, &src) in full[..bytes].iter_mut().zip(row.iter()) {
+                *dst = src;
+            }
+            Descriptor::from_opencv_bytes(&full)
+        })
+        .collect();
+    Ok(DescriptorSet::from_descriptors(width, &rows))
+}
+
+/// Keypoints from a structured array of the keypoint dtype (`clatch.KEYPOINT_DTYPE`).
+pub fn keypoints_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<KeyPoint>> {
+    let py = obj.py();
+    let array = ndarray(obj, what)?;
+    let expected = KeyPointRecord::get_dtype(py);
+    if !array.dtype().is_equiv_to(&expected) || array.ndim() != 1 {
+        return Err(invalid_input(
+            py,
+            "WrongDtype",
+            format!(
+                "{what} must be a 1-D array of dtype clatch.KEYPOINT_DTYPE {expected}, got {}-D {}",
+                array.ndim(),
+                array.dtype()
+            ),
+        ));
+    }
+    let typed: PyReadonlyArray1<'_, KeyPointRecord> = array
+        .cast::<PyArray1<KeyPointRecord>>()?
+        .try_readonly()
+        .map_err(|e| invalid_input(py, "ArrayBorrowed", format!("{what}: {e}")))?;
+    Ok(typed.as_array().iter().map(|k| k.0).collect())
+}

@@ -1,0 +1,178 @@
+//! Every failure as a Python exception of `clatch._exceptions`, with the library's message.
+//!
+//! The classes are defined in Python (`clatch/_exceptions.py`), so that one can derive from both
+//! `ClatchError` and a built-in class (`ValueError`, `RuntimeError`, ...). Each raised exception
+//! carries `kind`: the name of the `clatch::Error` variant (or `DecodeError` variant) it came from.
+
+use std::any::Any;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+
+use pyo3::exceptions::PyRuntimeError;
+use pyo3::prelude::*;
+use pyo3::sync::PyOnceLock;
+use pyo3::types::PyType;
+
+/// The exception classes of `clatch._exceptions`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Class {
+    /// The base class: internal errors and anything not listed below.
+    Clatch,
+    /// Bad input or configuration (also a `ValueError`).
+    InvalidInput,
+    /// The backend cannot run here (also a `RuntimeError`).
+    BackendUnavailable,
+    /// A CUDA driver call failed (also a `RuntimeError`).
+    #[cfg_attr(not(feature = "cuda"), allow(dead_code))]
+    Cuda,
+    /// The device ran out of memory (a `CudaError`, also a `MemoryError`).
+    DeviceOutOfMemory,
+    /// An image file could not be read (also an `OSError`).
+    ImageRead,
+}
+
+impl Class {
+    fn name(self) -> &'static str {
+        match self {
+            Class::Clatch => "ClatchError",
+            Class::InvalidInput => "InvalidInputError",
+            Class::BackendUnavailable => "BackendUnavailableError",
+            Class::Cuda => "CudaError",
+            Class::DeviceOutOfMemory => "DeviceOutOfMemoryError",
+            Class::ImageRead => "ImageReadError",
+        }
+    }
+
+    fn cell(self) -> &'static PyOnceLock<Py<PyType>> {
+        static CELLS: [PyOnceLock<Py<PyType>>; 6] = [
+            PyOnceLock::new(),
+            PyOnceLock::new(),
+            PyOnceLock::new(),
+            PyOnceLock::new(),
+            PyOnceLock::new(),
+            PyOnceLock::new(),
+        ];
+        &CELLS[self as usize]
+    }
+}
+
+/// A Python exception of `class` with `message`, its `kind` attribute set to `kind`.
+pub fn raise(py: Python<'_>, class: Class, kind: &str, message: String) -> PyErr {
+    let made = class
+        .cell()
+        .import(py, "clatch._exceptions", class.name())
+        .and_then(|cls| cls.call1((message.clone(),)))
+        .and_then(|exc| {
+            exc.setattr("kind", kind)?;
+            Ok(exc)
+        });
+    match made {
+        Ok(exc) => PyErr::from_value(exc),
+        // Only if the package's own Python files are missing: still an exception, never a panic.
+        Err(e) => {
+            PyRuntimeError::new_err(format!("{message} (and clatch._exceptions failed: {e})"))
+        }
+    }
+}
+
+/// An `InvalidInputError` raised by the bindings themselves (array type, dtype, shape, strings).
+pub fn invalid_input(py: Python<'_>, kind: &str, message: impl Into<String>) -> PyErr {
+    raise(py, Class::InvalidInput, kind, message.into())
+}
+
+/// The name of an enum variant from its `Debug` form (`ImageTooSmall { .. }` -> `ImageTooSmall`).
+fn variant_name(debug: &str) -> &str {
+    let end = debug
+        .find(|c: char| !(c.is_alphanumeric() || c == '_'))
+        .unwrap_or(debug.len());
+    &debug[..end]
+}
+
+/// The class a library error is raised as.
+fn class_of(e: &clatch::Error) -> Class {
+    use clatch::Error as E;
+    match e {
+        E::EmptyImage { .. }
+        | E::StrideTooSmall { .. }
+        | E::BufferTooSmall { .. }
+        | E::ImageTooSmall { .. }
+        | E::ImageTooLarge { .. }
+        | E::InvalidKeyPoint { .. }
+        | E::InvalidDescriptorWidth { .. }
+        | E::DescriptorWidthMismatch { .. }
+        | E::PairOutOfRange { .. }
+        | E::DescriptorBufferLength { .. }
+        | E::EmptyGallery
+        | E::InvalidK { .. }
+        | E::KTooLargeForBackend { .. }
+        | E::WeightsLength { .. }
+        | E::WeightsOverflow { .. }
+        | E::WeightsAllZero
+        | E::InvalidConfig { .. } => Class::InvalidInput,
+        E::BackendUnavailable { .. } => Class::BackendUnavailable,
+        E::DeviceOutOfMemory { .. } => Class::DeviceOutOfMemory,
+        #[cfg(feature = "cuda")]
+        E::Cuda { .. } => Class::Cuda,
+        // `Internal` and any variant added later.
+        _ => Class::Clatch,
+    }
+}
+
+/// A library error as its Python exception, with the error's `Display` message.
+pub fn from_clatch(py: Python<'_>, e: clatch::Error) -> PyErr {
+    let debug = format!("{e:?}");
+    raise(py, class_of(&e), variant_name(&debug), e.to_string())
+}
+
+/// An image decoding error (`clatch.imread`) as an `ImageReadError`.
+pub fn from_decode(py: Python<'_>, e: clatch::decode::DecodeError) -> PyErr {
+    let debug = format!("{e:?}");
+    raise(py, Class::ImageRead, variant_name(&debug), e.to_string())
+}
+
+/// Extension trait: `clatch::Result<T>` into `PyResult<T>`.
+pub trait OrRaise<T> {
+    /// The error raised as its Python exception.
+    fn or_raise(self, py: Python<'_>) -> PyResult<T>;
+}
+
+impl<T> OrRaise<T> for clatch::Result<T> {
+    fn or_raise(self, py: Python<'_>) -> PyResult<T> {
+        self.map_err(|e| from_clatch(py, e))
+    }
+}
+
+/// The text of a panic payload.
+fn panic_message(payload: &(dyn Any + Send)) -> String {
+    if let Some(s) = payload.downcast_ref::<&str>() {
+        (*s).to_string()
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "a panic without a message".to_string()
+    }
+}
+
+/// Runs `f` with the GIL released (other Python threads run meanwhile), a panic inside caught and
+/// raised as a `ClatchError` (kind `Panic`) rather than crossing into Python, and a library error
+/// raised as its exception.
+///
+/// `f` must not touch Python objects: it gets only plain Rust data (`GrayView`s over array memory,
+/// descriptor sets), which the caller keeps alive and borrowed for the call.
+pub fn compute<T, F>(py: Python<'_>, f: F) -> PyResult<T>
+where
+    F: FnOnce() -> clatch::Result<T> + Send,
+    T: Send,
+{
+    match py.detach(|| catch_unwind(AssertUnwindSafe(f))) {
+        Ok(result) => result.or_raise(py),
+        Err(payload) => Err(raise(
+            py,
+            Class::Clatch,
+            "Panic",
+            format!(
+                "internal error: {} (a bug in clatch; please report it)",
+                panic_message(&*payload)
+            ),
+        )),
+    }
+}

@@ -1,0 +1,360 @@
+//! `clatch.Extractor`: detection and description.
+
+use clatch::{
+    DescriptorWidth, ExtractorConfig, GrayView, LevelBudget, PatchWeights, Pyramid, Ranking,
+    Smoothing, Subpixel,
+};
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyList, PyTuple};
+
+use crate::arrays::{ImageInput, descriptors_out, keypoints_in, keypoints_out};
+use crate::backend::{backend_error, backend_name, parse_backend};
+use crate::errors::{OrRaise, compute, invalid_input};
+
+/// Finds FAST keypoints and computes their 512-bit CLATCH descriptors.
+///
+/// Extractor(backend="cpu", *, single_scale=False, threshold=None, max_keypoints=None,
+///           keypoint_size=None, grid=None, level_budget=None, ranking=None, subpixel=None,
+///           pyramid=None, bits=None, smoothing=None, weights=None)
+///
+/// ``backend`` is ``"cpu"`` (every core), ``"cuda"`` (device 0), ``"cuda:N"`` or ``"auto"`` (CUDA
+/// when this build has it and a device is usable, else the CPU). Without ``single_scale`` the
+/// settings start from the library's defaults (``ExtractorConfig::default()``: an 8-level pyramid of
+/// factor 1.2, 5000 keypoints shared among the levels as ORB shares them, 40-pixel windows,
+/// sub-pixel positions); ``single_scale=True`` starts from ``ExtractorConfig::single_scale()``
+/// (full resolution only, 64-pixel windows, whole-pixel positions). Every other keyword left at
+/// ``None`` keeps the preset's value; given, it replaces it:
+///
+/// - ``threshold`` (int, 1..=254, default 20): FAST threshold.
+/// - ``max_keypoints`` (int >= 1, default 5000): keep at most this many, strongest first.
+/// - ``keypoint_size`` (float, default 40; 64 with single_scale): side of each keypoint's
+///   descriptor window in pixels of its level.
+/// - ``grid`` (int, 1..=64, default 1): spread keypoints over a grid x grid division of the image.
+/// - ``level_budget`` (``"geometric"`` default, or ``"global"``): how max_keypoints is shared among
+///   pyramid levels.
+/// - ``ranking`` (``"fast"`` default, or ``"harris"``): what orders corners.
+/// - ``subpixel`` (``"score"`` default, or ``"none"``): sub-pixel positions.
+/// - ``pyramid``: ``(levels, scale_factor)``, or ``False`` for full resolution only (default
+///   ``(8, 1.2)``; ``False`` with single_scale).
+/// - ``bits`` (multiple of 8 in 8..=512, default 512): descriptor width.
+/// - ``smoothing`` (``"none"`` default, ``"binomial3"``, ``"binomial5"``): integer smoothing of the
+///   image the descriptor samples.
+/// - ``weights`` (64 ints, 8x8 row-major): the patch weights (default LATCH's 7x7 patch).
+///
+/// Invalid settings raise ``InvalidInputError``; an unusable backend ``BackendUnavailableError``.
+/// An Extractor can be shared by threads: its methods release the GIL while they compute.
+#[pyclass(module = "clatch", frozen)]
+pub struct Extractor {
+    pub(crate) inner: clatch::Extractor,
+}
+
+/// `value` as an integer in `lo..=hi`, or the library's `InvalidConfig` error for `field`.
+fn int_in(py: Python<'_>, field: &'static str, value: i64, lo: i64, hi: i64) -> PyResult<i64> {
+    if (lo..=hi).contains(&value) {
+        return Ok(value);
+    }
+    Err(clatch::Error::InvalidConfig {
+        field,
+        value: value.to_string(),
+        reason: "out of range",
+    })
+    .or_raise(py)
+}
+
+/// One of `choices` (name, value) named by `value`, or an `InvalidInputError`.
+fn choice<T: Copy>(py: Python<'_>, field: &str, value: &str, choices: &[(&str, T)]) -> PyResult<T> {
+    choices
+        .iter()
+        .find(|(name, _)| *name == value)
+        .map(|&(_, v)| v)
+        .ok_or_else(|| {
+            let names: Vec<_> = choices.iter().map(|(n, _)| format!("{n:?}")).collect();
+            invalid_input(
+                py,
+                "InvalidConfig",
+                format!("{field} must be one of {}, got {value:?}", names.join(", ")),
+            )
+        })
+}
+
+const LEVEL_BUDGETS: &[(&str, LevelBudget)] = &[
+    ("geometric", LevelBudget::Geometric),
+    ("global", LevelBudget::Global),
+];
+const RANKINGS: &[(&str, Ranking)] = &[("fast", Ranking::Fast), ("harris", Ranking::Harris)];
+const SUBPIXELS: &[(&str, Subpixel)] = &[("score", Subpixel::Score), ("none", Subpixel::None)];
+const SMOOTHINGS: &[(&str, Smoothing)] = &[
+    ("none", Smoothing::None),
+    ("binomial3", Smoothing::Binomial3),
+    ("binomial5", Smoothing::Binomial5),
+];
+
+/// The name of `value` among `choices`.
+fn name_of<T: PartialEq>(value: &T, choices: &[(&'static str, T)]) -> &'static str {
+    choices
+        .iter()
+        .find(|(_, v)| v == value)
+        .map(|(n, _)| *n)
+        .unwrap_or("unknown")
+}
+
+/// The Python float that prints as `value` does (`1.2`, not `1.2000000476837158`): the shortest
+/// decimal that reads back as the same `f32`.
+pub fn shortest(value: f32) -> f64 {
+    value.to_string().parse().unwrap_or(f64::from(value))
+}
+
+/// `pyramid=`: `False` or `(levels, scale_factor)`.
+fn parse_pyramid(value: &Bound<'_, PyAny>) -> PyResult<Option<Pyramid>> {
+    let py = value.py();
+    if let Ok(flag) = value.cast::<PyBool>() {
+        if !flag.is_true() {
+            return Ok(None);
+        }
+    } else if let Ok((levels, scale_factor)) = value.extract::<(i64, f32)>() {
+        let levels = int_in(py, "pyramid.levels", levels, 0, i64::from(u16::MAX))? as usize;
+        return Ok(Some(Pyramid {
+            levels,
+            scale_factor,
+        }));
+    }
+    Err(invalid_input(
+        py,
+        "InvalidConfig",
+        format!(
+            "pyramid must be (levels, scale_factor) or False, got {}",
+            value.repr().map(|r| r.to_string()).unwrap_or_default()
+        ),
+    ))
+}
+
+impl Extractor {
+    /// The image views of `inputs`, each checked by `GrayView::new`.
+    fn views<'a>(py: Python<'_>, inputs: &'a [ImageInput<'_>]) -> PyResult<Vec<GrayView<'a>>> {
+        inputs
+            .iter()
+            .map(|i| i.view().or_raise(py))
+            .collect::<PyResult<Vec<_>>>()
+    }
+
+    /// `(keypoints, descriptors)` of one image's features.
+    fn features_out<'py>(
+        py: Python<'py>,
+        features: clatch::Features,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let descriptors = descriptors_out(py, &features.descriptors)?;
+        let keypoints = keypoints_out(py, features.keypoints);
+        PyTuple::new(py, [keypoints.into_any(), descriptors])
+    }
+}
+
+#[pymethods]
+impl Extractor {
+    #[new]
+    #[pyo3(signature = (
+        backend = "cpu",
+        *,
+        single_scale = false,
+        threshold = None,
+        max_keypoints = None,
+        keypoint_size = None,
+        grid = None,
+        level_budget = None,
+        ranking = None,
+        subpixel = None,
+        pyramid = None,
+        bits = None,
+        smoothing = None,
+        weights = None,
+    ))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        backend: &str,
+        single_scale: bool,
+        threshold: Option<i64>,
+        max_keypoints: Option<i64>,
+        keypoint_size: Option<f32>,
+        grid: Option<i64>,
+        level_budget: Option<&str>,
+        ranking: Option<&str>,
+        subpixel: Option<&str>,
+        pyramid: Option<&Bound<'_, PyAny>>,
+        bits: Option<i64>,
+        smoothing: Option<&str>,
+        weights: Option<Vec<i64>>,
+    ) -> PyResult<Self> {
+        let backend = parse_backend(py, backend)?;
+        let mut config = if single_scale {
+            ExtractorConfig::single_scale()
+        } else {
+            ExtractorConfig::default()
+        };
+        let detector = &mut config.detector;
+        if let Some(t) = threshold {
+            detector.threshold = int_in(py, "threshold", t, 0, 255)? as u8;
+        }
+        if let Some(n) = max_keypoints {
+            detector.max_keypoints = int_in(py, "max_keypoints", n, 0, i64::MAX)? as usize;
+        }
+        if let Some(size) = keypoint_size {
+            detector.keypoint_size = size;
+        }
+        if let Some(g) = grid {
+            detector.grid = int_in(py, "grid", g, 0, i64::from(u16::MAX))? as usize;
+        }
+        if let Some(b) = level_budget {
+            detector.level_budget = choice(py, "level_budget", b, LEVEL_BUDGETS)?;
+        }
+        if let Some(r) = ranking {
+            detector.ranking = choice(py, "ranking", r, RANKINGS)?;
+        }
+        if let Some(s) = subpixel {
+            detector.subpixel = choice(py, "subpixel", s, SUBPIXELS)?;
+        }
+        if let Some(p) = pyramid {
+            config.pyramid = parse_pyramid(p)?;
+        }
+        let descriptor = &mut config.descriptor;
+        if let Some(b) = bits {
+            let b = int_in(py, "bits", b, 0, 4096)? as usize;
+            descriptor.width = DescriptorWidth::from_bits(b).or_raise(py)?;
+        }
+        if let Some(s) = smoothing {
+            descriptor.smoothing = choice(py, "smoothing", s, SMOOTHINGS)?;
+        }
+        if let Some(w) = weights {
+            let w: Vec<u32> = w
+                .into_iter()
+                .map(|v| int_in(py, "weights", v, 0, i64::from(u32::MAX)).map(|v| v as u32))
+                .collect::<PyResult<_>>()?;
+            descriptor.weights = PatchWeights::new(&w).or_raise(py)?;
+        }
+        let inner = clatch::Extractor::new(backend, config).map_err(|e| backend_error(py, e))?;
+        Ok(Self { inner })
+    }
+
+    /// The backend: ``"cpu"`` or ``"cuda:N"``.
+    #[getter]
+    fn backend(&self) -> String {
+        backend_name(self.inner.backend())
+    }
+
+    /// The settings in effect, as the constructor's keywords (``Extractor(backend, **config)``
+    /// builds an equal extractor).
+    #[getter]
+    fn config<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let c = self.inner.config();
+        let d = PyDict::new(py);
+        d.set_item("threshold", c.detector.threshold)?;
+        d.set_item("max_keypoints", c.detector.max_keypoints)?;
+        d.set_item("keypoint_size", shortest(c.detector.keypoint_size))?;
+        d.set_item("grid", c.detector.grid)?;
+        d.set_item(
+            "level_budget",
+            name_of(&c.detector.level_budget, LEVEL_BUDGETS),
+        )?;
+        d.set_item("ranking", name_of(&c.detector.ranking, RANKINGS))?;
+        d.set_item("subpixel", name_of(&c.detector.subpixel, SUBPIXELS))?;
+        match c.pyramid {
+            Some(p) => d.set_item("pyramid", (p.levels, shortest(p.scale_factor)))?,
+            None => d.set_item("pyramid", false)?,
+        }
+        d.set_item("bits", c.descriptor.width.bits())?;
+        d.set_item("smoothing", name_of(&c.descriptor.smoothing, SMOOTHINGS))?;
+        d.set_item("weights", PyList::new(py, c.descriptor.weights.as_array())?)?;
+        Ok(d)
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        let config = self.config(py)?;
+        let items: Vec<String> = config
+            .iter()
+            .filter(|(k, _)| k.to_string() != "weights")
+            .map(|(k, v)| Ok(format!("{k}={}", v.repr()?)))
+            .collect::<PyResult<_>>()?;
+        Ok(format!(
+            "Extractor({:?}, {})",
+            self.backend(),
+            items.join(", ")
+        ))
+    }
+
+    /// detect(image) -> keypoints
+    ///
+    /// FAST keypoints of ``image`` (``uint8``, 2-D gray or H x W x 3 RGB), strongest first, as a
+    /// structured array of ``KEYPOINT_DTYPE`` (x, y, size, angle, response, octave), in full-
+    /// resolution pixel coordinates (OpenCV's convention: pixel centres at integers, angle in degrees
+    /// from +x towards +y).
+    fn detect<'py>(
+        &self,
+        py: Python<'py>,
+        image: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let input = ImageInput::new(image, "image")?;
+        let view = input.view().or_raise(py)?;
+        let keypoints = compute(py, || self.inner.detect(&view))?;
+        Ok(keypoints_out(py, keypoints).into_any())
+    }
+
+    /// detect_and_describe(image) -> (keypoints, descriptors)
+    ///
+    /// Keypoints (as ``detect``) and their descriptors: ``uint8``, one row of ``bits / 8`` bytes per
+    /// keypoint, in OpenCV LATCH's byte order (what ``clatch extract`` writes to ``.npy``), ready
+    /// for ``cv2.BFMatcher(cv2.NORM_HAMMING)``. Row i describes keypoint i.
+    fn detect_and_describe<'py>(
+        &self,
+        py: Python<'py>,
+        image: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let input = ImageInput::new(image, "image")?;
+        let view = input.view().or_raise(py)?;
+        let features = compute(py, || self.inner.detect_and_describe(&view))?;
+        Self::features_out(py, features)
+    }
+
+    /// detect_and_describe_batch(images) -> list[(keypoints, descriptors)]
+    ///
+    /// ``detect_and_describe`` of every image of a sequence, in input order, each result equal to its
+    /// own call. Every image is checked before any work; the CPU spreads the images over its threads,
+    /// CUDA keeps several streams busy.
+    fn detect_and_describe_batch<'py>(
+        &self,
+        py: Python<'py>,
+        images: Vec<Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyList>> {
+        let inputs = images
+            .iter()
+            .enumerate()
+            .map(|(i, image)| ImageInput::new(image, &format!("images[{i}]")))
+            .collect::<PyResult<Vec<_>>>()?;
+        let views = Self::views(py, &inputs)?;
+        let all = compute(py, || self.inner.detect_and_describe_batch(&views, &|_| {}))?;
+        let out = all
+            .into_iter()
+            .map(|f| Self::features_out(py, f))
+            .collect::<PyResult<Vec<_>>>()?;
+        PyList::new(py, out)
+    }
+
+    /// describe(image, keypoints) -> (keypoints, descriptors, index)
+    ///
+    /// Descriptors of your own keypoints (a 1-D array of ``KEYPOINT_DTYPE``), sampled on the full-
+    /// resolution image. Keypoints whose window leaves the image are not described: the returned
+    /// keypoints are those described, ``index`` (``int64``) gives each row's position in the input.
+    fn describe<'py>(
+        &self,
+        py: Python<'py>,
+        image: &Bound<'py, PyAny>,
+        keypoints: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let input = ImageInput::new(image, "image")?;
+        let keypoints = keypoints_in(keypoints, "keypoints")?;
+        let view = input.view().or_raise(py)?;
+        let features = compute(py, || self.inner.describe(&view, &keypoints))?;
+        let index: Vec<i64> = features.keypoint_index.iter().map(|&i| i as i64).collect();
+        let index = numpy::IntoPyArray::into_pyarray(index, py);
+        let pair = Self::features_out(py, features)?;
+        PyTuple::new(py, [pair.get_item(0)?, pair.get_item(1)?, index.into_any()])
+    }
+}

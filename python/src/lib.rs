@@ -1,0 +1,82 @@
+//! The native module of the `clatch` Python package (`clatch._clatch`); `clatch/__init__.py`
+//! re-exports it. Type stubs: `clatch/_clatch.pyi`.
+
+mod arrays;
+mod backend;
+mod bench;
+mod errors;
+mod extractor;
+mod matcher;
+
+use clatch::decode::DecodeLimits;
+use numpy::{Element, IntoPyArray, PyArrayMethods};
+use pyo3::prelude::*;
+
+use arrays::{ImageInput, KeyPointRecord, MatchRecord};
+use errors::{OrRaise, from_decode};
+
+/// imread(path, max_pixels=100_000_000) -> image
+///
+/// Reads a PNG, JPEG or PNM file as the command-line tool does (``clatch::decode::open_gray``):
+/// the size checked from the header against ``max_pixels`` before decoding, colour converted with
+/// OpenCV's RGB weights, 16-bit scaled full range. Returns a 2-D ``uint8`` array. Raises
+/// ``ImageReadError`` (an ``OSError``) naming the file when it cannot be read.
+#[pyfunction]
+#[pyo3(signature = (path, max_pixels = 100_000_000))]
+fn imread<'py>(
+    py: Python<'py>,
+    path: std::path::PathBuf,
+    max_pixels: u64,
+) -> PyResult<Bound<'py, PyAny>> {
+    let limits = DecodeLimits { max_pixels };
+    let gray = py
+        .detach(|| clatch::decode::open_gray(&path, &limits))
+        .map_err(|e| from_decode(py, e))?;
+    let (w, h) = (gray.width() as usize, gray.height() as usize);
+    Ok(gray.into_raw().into_pyarray(py).reshape([h, w])?.into_any())
+}
+
+/// to_gray(image) -> image
+///
+/// The gray image the extractor sees: a 2-D ``uint8`` image as it is (a copy), an H x W x 3 (RGB) or
+/// H x W x 4 (RGBA, alpha ignored) ``uint8`` image converted with OpenCV's ``COLOR_RGB2GRAY``
+/// integer weights (``clatch::decode::luma``: ``(4899 R + 9617 G + 1868 B + 8192) >> 14``), as the
+/// command-line tool converts colour files. OpenCV's ``cv2.imread`` gives BGR: pass
+/// ``image[..., ::-1]``.
+#[pyfunction]
+fn to_gray<'py>(py: Python<'py>, image: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    let input = ImageInput::new(image, "image")?;
+    let view = input.view().or_raise(py)?;
+    let (w, h) = (view.width(), view.height());
+    let mut out = Vec::with_capacity(w * h);
+    for y in 0..h {
+        out.extend_from_slice(view.get_row(y).unwrap_or_default());
+    }
+    Ok(out.into_pyarray(py).reshape([h, w])?.into_any())
+}
+
+/// _reads_in_place(image) -> bool
+///
+/// Not public API (the tests): whether ``image`` would be read in place (no copy) by the extractor.
+#[pyfunction]
+fn _reads_in_place(image: &Bound<'_, PyAny>) -> PyResult<bool> {
+    Ok(ImageInput::new(image, "image")?.zero_copy())
+}
+
+/// The native module.
+#[pymodule]
+fn _clatch(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add_class::<extractor::Extractor>()?;
+    m.add_class::<matcher::Matcher>()?;
+    m.add_function(wrap_pyfunction!(imread, m)?)?;
+    m.add_function(wrap_pyfunction!(to_gray, m)?)?;
+    m.add_function(wrap_pyfunction!(_reads_in_place, m)?)?;
+    m.add_function(wrap_pyfunction!(bench::_rust_match_seconds, m)?)?;
+    m.add_function(wrap_pyfunction!(bench::_rust_extract_seconds, m)?)?;
+    m.add("KEYPOINT_DTYPE", KeyPointRecord::get_dtype(py))?;
+    m.add("MATCH_DTYPE", MatchRecord::get_dtype(py))?;
+    m.add("CUDA_BUILT", cfg!(feature = "cuda"))?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,181 @@
+"""Bad input raises a ClatchError subclass with the library's message and its variant as ``kind``;
+nothing crashes, hangs or panics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import clatch
+from helpers import ASTRONAUT, random_descriptors
+
+
+@pytest.fixture(scope="module")
+def photo():
+    return clatch.imread(ASTRONAUT)
+
+
+def raises(exc, kind, call):
+    with pytest.raises(exc) as info:
+        call()
+    assert isinstance(info.value, clatch.ClatchError)
+    assert info.value.kind == kind, f"{info.value.kind}: {info.value}"
+    assert str(info.value), "the message is the library's Display text, never empty"
+    return info.value
+
+
+def test_the_hierarchy():
+    assert issubclass(clatch.InvalidInputError, ValueError)
+    assert issubclass(clatch.InvalidInputError, clatch.ClatchError)
+    assert issubclass(clatch.BackendUnavailableError, RuntimeError)
+    assert issubclass(clatch.DeviceOutOfMemoryError, clatch.CudaError)
+    assert issubclass(clatch.ImageReadError, OSError)
+    assert issubclass(clatch.ClatchError, Exception)
+
+
+@pytest.mark.parametrize(
+    "image,kind",
+    [
+        (np.zeros((100, 100), dtype=np.float32), "WrongDtype"),
+        (np.zeros((100, 100), dtype=np.int16), "WrongDtype"),
+        (np.zeros((100, 100), dtype=bool), "WrongDtype"),
+        (np.zeros(10_000, dtype=np.uint8), "WrongShape"),
+        (np.zeros((100, 100, 2), dtype=np.uint8), "WrongShape"),
+        (np.zeros((2, 100, 100, 3), dtype=np.uint8), "WrongShape"),
+        (np.zeros((63, 200), dtype=np.uint8), "ImageTooSmall"),
+        (np.zeros((200, 63, 3), dtype=np.uint8), "ImageTooSmall"),
+        (np.zeros((0, 200), dtype=np.uint8), "EmptyImage"),
+        (np.zeros((40_000, 64), dtype=np.uint8), "ImageTooLarge"),
+        ([[0] * 100] * 100, "NotAnArray"),
+    ],
+)
+def test_bad_images(backend, image, kind):
+    extractor = clatch.Extractor(backend)
+    for call in (extractor.detect, extractor.detect_and_describe, clatch.to_gray):
+        if call is clatch.to_gray and kind == "ImageTooSmall":
+            continue  # converting a small image is fine; only extraction needs a window
+        raises(clatch.InvalidInputError, kind, lambda: call(image))
+
+
+def test_too_small_names_the_size(backend):
+    e = raises(clatch.InvalidInputError, "ImageTooSmall", lambda: clatch.Extractor(backend).detect(np.zeros((63, 200), np.uint8)))
+    assert "200x63" in str(e)
+
+
+@pytest.mark.parametrize("name", ["gpu", "CPU", "cuda:", "cuda:x", "cuda:-1", "", "cpu "])
+def test_bad_backend_strings(name):
+    raises(clatch.InvalidInputError, "InvalidBackend", lambda: clatch.Extractor(name))
+    raises(clatch.InvalidInputError, "InvalidBackend", lambda: clatch.Matcher(name))
+
+
+@pytest.mark.skipif(clatch.CUDA_BUILT, reason="this build has CUDA")
+def test_cuda_without_the_feature():
+    for make in (clatch.Extractor, clatch.Matcher):
+        e = raises(clatch.BackendUnavailableError, "BackendUnavailable", lambda: make("cuda:0"))
+        assert "--features cuda" in str(e)
+
+
+@pytest.mark.parametrize(
+    "keywords",
+    [
+        {"threshold": 0},
+        {"threshold": 255},
+        {"threshold": 300},
+        {"threshold": -1},
+        {"max_keypoints": 0},
+        {"grid": 0},
+        {"grid": 65},
+        {"keypoint_size": float("nan")},
+        {"keypoint_size": 0.0},
+        {"pyramid": (0, 1.2)},
+        {"pyramid": (3, 2.5)},
+        {"pyramid": (3, 1.0)},
+        {"pyramid": "x"},
+        {"pyramid": True},
+        {"level_budget": "ORB"},
+        {"ranking": "sift"},
+        {"subpixel": "quadratic"},
+        {"smoothing": "gauss"},
+        {"bits": 100},
+        {"bits": 0},
+        {"bits": 520},
+        {"weights": [1] * 63},
+        {"weights": [0] * 64},
+        {"weights": [1 << 30] * 64},
+        {"weights": [-1] * 64},
+    ],
+)
+def test_bad_extractor_settings(backend, keywords):
+    with pytest.raises(clatch.InvalidInputError) as info:
+        clatch.Extractor(backend, **keywords)
+    assert info.value.kind in {"InvalidConfig", "InvalidDescriptorWidth", "WeightsLength", "WeightsAllZero", "WeightsOverflow"}
+
+
+@pytest.mark.parametrize("keywords", [{"ratio": 0.0}, {"ratio": 1.5}, {"ratio": float("nan")}, {"ratio": -0.5}, {"max_distance": -1}])
+def test_bad_matcher_settings(backend, keywords):
+    raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Matcher(backend, **keywords))
+
+
+def test_bad_descriptors(backend):
+    rng = np.random.default_rng(1)
+    d64, d32 = random_descriptors(rng, 10, 64), random_descriptors(rng, 10, 32)
+    m = clatch.Matcher(backend)
+    raises(clatch.InvalidInputError, "DescriptorWidthMismatch", lambda: m.match(d64, d32))
+    raises(clatch.InvalidInputError, "DescriptorWidthMismatch", lambda: m.knn(d32, d64, 2))
+    raises(clatch.InvalidInputError, "InvalidDescriptorWidth", lambda: m.match(random_descriptors(rng, 3, 65), d64))
+    raises(clatch.InvalidInputError, "InvalidDescriptorWidth", lambda: m.match(np.zeros((3, 0), np.uint8), d64))
+    raises(clatch.InvalidInputError, "WrongDtype", lambda: m.match(d64.astype(np.int32), d64))
+    raises(clatch.InvalidInputError, "WrongShape", lambda: m.match(d64[0], d64))
+    raises(clatch.InvalidInputError, "NotAnArray", lambda: m.match(d64.tolist(), d64))
+    raises(clatch.InvalidInputError, "EmptyGallery", lambda: m.match(d64, d64[:0]))
+    raises(clatch.InvalidInputError, "InvalidK", lambda: m.match(d64, d64[:1]))  # ratio test needs 2
+    raises(clatch.InvalidInputError, "InvalidK", lambda: m.knn(d64, d64, 0))
+    raises(clatch.InvalidInputError, "InvalidK", lambda: m.knn(d64, d64, -3))
+    raises(clatch.InvalidInputError, "InvalidK", lambda: m.knn(d64, d64, 11))
+    assert len(m.match(d64[:0], d64)) == 0  # no queries: no matches, no error
+
+
+def test_bad_pairs(backend):
+    rng = np.random.default_rng(2)
+    sets = [random_descriptors(rng, 20, 16) for _ in range(3)]
+    m = clatch.Matcher(backend)
+    e = raises(clatch.InvalidInputError, "PairOutOfRange", lambda: m.match_pairs(sets, [(0, 1), (1, 3)]))
+    assert "pair 1" in str(e) and "3 sets" in str(e)
+    raises(clatch.InvalidInputError, "PairOutOfRange", lambda: m.match_pairs(sets, [(0, -1)]))
+    raises(clatch.InvalidInputError, "PairOutOfRange", lambda: m.match_pairs(sets, np.array([[0, 7]])))
+    raises(clatch.InvalidInputError, "WrongShape", lambda: m.match_pairs(sets, np.array([0, 1])))
+    raises(clatch.InvalidInputError, "WrongShape", lambda: m.match_pairs(sets, np.array([[0.0, 1.0]])))
+    raises(clatch.InvalidInputError, "WrongShape", lambda: m.match_pairs(sets, [(0, 1, 2)]))
+    mixed = [sets[0], random_descriptors(rng, 20, 32)]
+    raises(clatch.InvalidInputError, "DescriptorWidthMismatch", lambda: m.match_pairs(mixed, [(0, 0)]))
+    raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Matcher.all_pairs(-1))
+
+
+def test_bad_keypoints(backend, photo):
+    extractor = clatch.Extractor(backend)
+    raises(clatch.InvalidInputError, "WrongDtype", lambda: extractor.describe(photo, np.zeros((3, 2), np.float32)))
+    keypoints = np.zeros(2, dtype=clatch.KEYPOINT_DTYPE)
+    keypoints["x"], keypoints["y"], keypoints["size"] = [100.0, np.nan], [100.0, 50.0], 64.0
+    raises(clatch.InvalidInputError, "InvalidKeyPoint", lambda: extractor.describe(photo, keypoints))
+
+
+def test_unreadable_files(tmp_path):
+    e = raises(clatch.ImageReadError, "Io", lambda: clatch.imread(tmp_path / "missing.png"))
+    assert "missing.png" in str(e)
+    (tmp_path / "garbage.png").write_bytes(b"not an image at all")
+    with pytest.raises(clatch.ImageReadError):
+        clatch.imread(tmp_path / "garbage.png")
+    with pytest.raises(clatch.ImageReadError):
+        clatch.imread(tmp_path)  # a folder
+    with pytest.raises(clatch.ImageReadError):
+        clatch.imread(ASTRONAUT, max_pixels=1000)
+
+
+def test_errors_leave_the_objects_usable(backend, photo):
+    extractor, matcher = clatch.Extractor(backend, max_keypoints=100), clatch.Matcher(backend)
+    with pytest.raises(clatch.ClatchError):
+        extractor.detect(photo[:10, :10])
+    _, d = extractor.detect_and_describe(photo)
+    with pytest.raises(clatch.ClatchError):
+        matcher.match(d, d[:, :8])
+    assert len(matcher.match(d, d)) == len(d)

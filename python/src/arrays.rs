@@ -331,16 +331,25 @@ pub fn descriptors_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Descriptor
     })?;
     let width = DescriptorWidth::from_bytes(view.ncols()).or_raise(py)?;
     let bytes = width.bytes();
-    let rows: Vec<Descriptor> = view
-        .outer_iter()
-        .map(|row| {
-            let mut full = [0u8; 64];
-            for (dst, &src) in full[..bytes].iter_mut().zip(row.iter()) {
-                *dst = src;
-            }
-            Descriptor::from_opencv_bytes(&full)
-        })
-        .collect();
+    let from_row = |row: &[u8]| {
+        let mut full = [0u8; 64];
+        full[..bytes].copy_from_slice(row);
+        Descriptor::from_opencv_bytes(&full)
+    };
+    let rows: Vec<Descriptor> = match view.as_slice() {
+        // C order (what numpy and the extractor give): whole rows as slices.
+        Some(packed) => packed.chunks_exact(bytes).map(from_row).collect(),
+        None => view
+            .outer_iter()
+            .map(|row| {
+                let mut full = [0u8; 64];
+                for (dst, &src) in full.iter_mut().zip(row.iter()) {
+                    *dst = src;
+                }
+                Descriptor::from_opencv_bytes(&full)
+            })
+            .collect(),
+    };
     Ok(DescriptorSet::from_descriptors(width, &rows))
 }
 

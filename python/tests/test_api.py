@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import ast
 import inspect
+import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import clatch
 from clatch import _clatch
@@ -58,6 +60,8 @@ def test_the_stub_lists_what_the_module_has():
 
 
 def test_signatures_follow_the_stub():
+    if sys.version_info < (3, 10):
+        pytest.skip("classes of an abi3 module carry no text signature before Python 3.10")
     tree = stub_tree()
     stub_init = {
         node.name: next(n for n in node.body if isinstance(n, ast.FunctionDef) and n.name == "__init__")

@@ -35,7 +35,8 @@ class Extractor:
     settings start from the library's defaults (8-level pyramid of factor 1.2, 5000 keypoints shared
     among the levels, 40-pixel windows, sub-pixel positions); ``single_scale=True`` starts from the
     full-resolution speed preset (64-pixel windows, whole pixels). Keywords left at ``None`` keep the
-    preset's value. The methods release the GIL while they compute.
+    preset's value. The methods release the GIL while they compute; a gray image whose rows are
+    contiguous is read in place meanwhile, so do not write to it from another thread during the call.
     """
 
     def __init__(

@@ -42,7 +42,9 @@ use crate::errors::{OrRaise, compute, invalid_input};
 /// - ``weights`` (64 ints, 8x8 row-major): the patch weights (default LATCH's 7x7 patch).
 ///
 /// Invalid settings raise ``InvalidInputError``; an unusable backend ``BackendUnavailableError``.
-/// An Extractor can be shared by threads: its methods release the GIL while they compute.
+/// An Extractor can be shared by threads: its methods release the GIL while they compute. A gray
+/// image whose rows are contiguous is read in place meanwhile: do not write to it from another thread
+/// during the call.
 #[pyclass(module = "clatch", frozen)]
 pub struct Extractor {
     pub(crate) inner: clatch::Extractor,

@@ -53,13 +53,22 @@ fn pairs_in(obj: &Bound<'_, PyAny>, sets: usize) -> PyResult<Vec<(usize, usize)>
             .map_err(|e| invalid_input(py, "WrongShape", e.to_string()))?;
         view.outer_iter().map(|r| (r[0], r[1])).collect()
     } else {
-        obj.extract::<Vec<(i64, i64)>>().map_err(|_| {
+        // Any sequence of two-element sequences: tuples, lists, 1-D arrays.
+        let not_pairs = || {
             invalid_input(
                 py,
                 "WrongShape",
                 "pairs must be a sequence of (i, j) index pairs or an integer array of shape (P, 2)",
             )
-        })?
+        };
+        let items: Vec<Bound<'_, PyAny>> = obj.extract().map_err(|_| not_pairs())?;
+        items
+            .iter()
+            .map(|item| match item.extract::<Vec<i64>>().as_deref() {
+                Ok(&[a, b]) => Ok((a, b)),
+                _ => Err(not_pairs()),
+            })
+            .collect::<PyResult<_>>()?
     };
     raw.into_iter()
         .enumerate()

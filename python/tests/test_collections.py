@@ -61,10 +61,12 @@ def test_match_pairs_equals_single_calls(backend, ratio):
     ]
     matcher = clatch.Matcher(backend, ratio=ratio)
     pairs = [(0, 1), (1, 0), (2, 3), (3, 3), (0, 4), (4, 0), (1, 5), (5, 1), (0, 1)]
-    for given in [pairs, np.array(pairs, dtype=np.int32), clatch.Matcher.all_pairs(len(sets))]:
+    as_lists = [list(p) for p in pairs]
+    as_arrays = [np.array(p, dtype=np.uint16) for p in pairs]
+    for given in [pairs, as_lists, as_arrays, np.array(pairs, dtype=np.int32), clatch.Matcher.all_pairs(len(sets))]:
         results = matcher.match_pairs(sets, given)
         assert len(results) == len(given)
-        for (a, b), got in zip(np.asarray(given).tolist(), results):
+        for (a, b), got in zip(np.asarray(given).reshape(-1, 2).tolist(), results):
             assert got.dtype == clatch.MATCH_DTYPE
             needed = 2 if ratio is not None else 1
             if len(sets[a]) == 0 or len(sets[b]) < needed:

@@ -146,6 +146,9 @@ def test_bad_pairs(backend):
     raises(clatch.InvalidInputError, "WrongShape", lambda: m.match_pairs(sets, np.array([0, 1])))
     raises(clatch.InvalidInputError, "WrongShape", lambda: m.match_pairs(sets, np.array([[0.0, 1.0]])))
     raises(clatch.InvalidInputError, "WrongShape", lambda: m.match_pairs(sets, [(0, 1, 2)]))
+    raises(clatch.InvalidInputError, "WrongShape", lambda: m.match_pairs(sets, [[0]]))
+    raises(clatch.InvalidInputError, "WrongShape", lambda: m.match_pairs(sets, "01"))
+    raises(clatch.InvalidInputError, "WrongShape", lambda: m.match_pairs(sets, 3))
     mixed = [sets[0], random_descriptors(rng, 20, 32)]
     raises(clatch.InvalidInputError, "DescriptorWidthMismatch", lambda: m.match_pairs(mixed, [(0, 0)]))
     raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Matcher.all_pairs(-1))

@@ -3,10 +3,24 @@
 from __future__ import annotations
 
 import os
-from typing import Literal, Optional, Sequence, Tuple, Union
+from typing import Any, Literal, Optional, Sequence, Tuple, Union, final
 
 import numpy as np
 import numpy.typing as npt
+
+__all__ = [
+    "Extractor",
+    "Matcher",
+    "imread",
+    "to_gray",
+    "_reads_in_place",
+    "_rust_match_seconds",
+    "_rust_extract_seconds",
+    "KEYPOINT_DTYPE",
+    "MATCH_DTYPE",
+    "CUDA_BUILT",
+    "__version__",
+]
 
 __version__: str
 #: Whether this build has the CUDA backend (installed with the ``cuda`` feature).
@@ -17,17 +31,18 @@ KEYPOINT_DTYPE: np.dtype
 MATCH_DTYPE: np.dtype
 
 #: An image: ``uint8``, 2-D gray (H x W) or H x W x 3 RGB (H x W x 4: alpha ignored).
-Image = npt.NDArray[np.uint8]
+_Image = npt.NDArray[np.uint8]
 #: Descriptors: ``uint8``, shape (N, bits / 8), OpenCV LATCH's byte order.
-Descriptors = npt.NDArray[np.uint8]
+_Descriptors = npt.NDArray[np.uint8]
 #: A structured array of ``KEYPOINT_DTYPE``.
-KeyPoints = np.ndarray
+_KeyPoints = np.ndarray
 #: A structured array of ``MATCH_DTYPE``.
-Matches = np.ndarray
+_Matches = np.ndarray
 #: Pairs of set indices: a sequence of ``(a, b)`` or an integer array of shape (P, 2).
-Pairs = Union[Sequence[Tuple[int, int]], npt.NDArray[np.integer]]
-Backend = str
+_Pairs = Union[Sequence[Tuple[int, int]], npt.NDArray[np.integer]]
+_Backend = str
 
+@final
 class Extractor:
     """Finds FAST keypoints and computes their 512-bit CLATCH descriptors.
 
@@ -39,9 +54,9 @@ class Extractor:
     contiguous is read in place meanwhile, so do not write to it from another thread during the call.
     """
 
-    def __init__(
-        self,
-        backend: Backend = "cpu",
+    def __new__(
+        cls,
+        backend: _Backend = "cpu",
         *,
         single_scale: bool = False,
         threshold: Optional[int] = None,
@@ -55,37 +70,38 @@ class Extractor:
         bits: Optional[int] = None,
         smoothing: Optional[Literal["none", "binomial3", "binomial5"]] = None,
         weights: Optional[Sequence[int]] = None,
-    ) -> None: ...
+    ) -> Extractor: ...
     @property
     def backend(self) -> str:
         """The backend: ``"cpu"`` or ``"cuda:N"``."""
     @property
-    def config(self) -> dict:
+    def config(self) -> dict[str, Any]:
         """The settings in effect, as the constructor's keywords."""
-    def detect(self, image: Image) -> KeyPoints:
+    def detect(self, image: _Image) -> _KeyPoints:
         """FAST keypoints of ``image``, strongest first (``KEYPOINT_DTYPE``)."""
-    def detect_and_describe(self, image: Image) -> Tuple[KeyPoints, Descriptors]:
+    def detect_and_describe(self, image: _Image) -> Tuple[_KeyPoints, _Descriptors]:
         """Keypoints and their descriptors (row i describes keypoint i)."""
     def detect_and_describe_batch(
-        self, images: Sequence[Image]
-    ) -> list[Tuple[KeyPoints, Descriptors]]:
+        self, images: Sequence[_Image]
+    ) -> list[Tuple[_KeyPoints, _Descriptors]]:
         """``detect_and_describe`` of every image, in input order."""
     def describe(
-        self, image: Image, keypoints: KeyPoints
-    ) -> Tuple[KeyPoints, Descriptors, npt.NDArray[np.int64]]:
+        self, image: _Image, keypoints: _KeyPoints
+    ) -> Tuple[_KeyPoints, _Descriptors, npt.NDArray[np.int64]]:
         """Descriptors of your own keypoints: (described keypoints, descriptors, input index)."""
 
+@final
 class Matcher:
     """Brute-force Hamming matcher (ratio test, cross-check, distance limit; ties to the lowest
     index). The methods release the GIL while they compute."""
 
-    def __init__(
-        self,
-        backend: Backend = "cpu",
+    def __new__(
+        cls,
+        backend: _Backend = "cpu",
         ratio: Optional[float] = 0.8,
         cross_check: bool = True,
         max_distance: Optional[int] = None,
-    ) -> None: ...
+    ) -> Matcher: ...
     @property
     def backend(self) -> str:
         """The backend: ``"cpu"`` or ``"cuda:N"``."""
@@ -98,18 +114,30 @@ class Matcher:
     @property
     def max_distance(self) -> Optional[int]:
         """The largest distance kept, in bits (``None``: no limit)."""
-    def match(self, query: Descriptors, train: Descriptors) -> Matches:
+    def match(self, query: _Descriptors, train: _Descriptors) -> _Matches:
         """The best gallery match of every query that passes the tests, in query order."""
-    def knn(self, query: Descriptors, train: Descriptors, k: int) -> Matches:
+    def knn(self, query: _Descriptors, train: _Descriptors, k: int) -> _Matches:
         """The k nearest gallery descriptors of every query: shape (N, k), nearest first."""
-    def match_pairs(self, descriptors: Sequence[Descriptors], pairs: Pairs) -> list[Matches]:
+    def match_pairs(self, descriptors: Sequence[_Descriptors], pairs: _Pairs) -> list[_Matches]:
         """``match(descriptors[a], descriptors[b])`` of every pair (a, b), in pair order."""
     @staticmethod
     def all_pairs(n: int) -> npt.NDArray[np.int64]:
         """Every pair (i, j), i < j, of n sets in order: shape (n (n - 1) / 2, 2)."""
 
-def imread(path: Union[str, os.PathLike[str]], max_pixels: int = 100_000_000) -> Image:
+def imread(path: Union[str, os.PathLike[str]], max_pixels: int = 100_000_000) -> _Image:
     """A PNG, JPEG or PNM file as a 2-D ``uint8`` gray image, read as the command-line tool reads it."""
 
-def to_gray(image: Image) -> Image:
+def to_gray(image: _Image) -> _Image:
     """The gray image the extractor sees (RGB with OpenCV's integer weights)."""
+
+# Not public API: the test suite's and the overhead bench's hooks.
+def _reads_in_place(image: _Image) -> bool:
+    """Whether ``image`` would be read in place (no copy) by the extractor."""
+
+def _rust_match_seconds(
+    matcher: Matcher, query: _Descriptors, train: _Descriptors, repeats: int
+) -> list[float]:
+    """Seconds of each of ``repeats`` calls of the library's ``Matcher::match_descriptors``."""
+
+def _rust_extract_seconds(extractor: Extractor, image: _Image, repeats: int) -> list[float]:
+    """Seconds of each of ``repeats`` calls of the library's ``Extractor::detect_and_describe``."""

@@ -107,7 +107,10 @@ fn class_of(e: &clatch::Error) -> Class {
         | E::WeightsLength { .. }
         | E::WeightsOverflow { .. }
         | E::WeightsAllZero
-        | E::InvalidConfig { .. } => Class::InvalidInput,
+        | E::InvalidConfig { .. }
+        | E::NoWorkers => Class::InvalidInput,
+        // A device pool worker's error is raised as the class of what the worker hit.
+        E::Worker { source, .. } => class_of(source),
         E::BackendUnavailable { .. } => Class::BackendUnavailable,
         E::DeviceOutOfMemory { .. } => Class::DeviceOutOfMemory,
         #[cfg(feature = "cuda")]

@@ -49,7 +49,6 @@ __all__ = [
     "InvalidInputError",
     "Matcher",
     "__version__",
-    "colmap",
     "imread",
     "to_gray",
 ]

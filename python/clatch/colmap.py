@@ -86,10 +86,12 @@ class MatchFolderResult:
     matches: int
     #: Pairs with at least one match (the pairs in the match list).
     pairs_with_matches: int
-    #: ``clatch.ray`` only: blocks of pairs, blocks run again after an actor died, actors lost.
+    #: ``clatch.ray`` only: blocks of pairs; blocks and extraction tasks run again because their
+    #: actor died; actors lost; descriptor sets the surviving actors fetched from the object store.
     blocks: int = 0
     blocks_rerun: int = 0
     actors_lost: int = 0
+    descriptor_fetches: int = 0
 
 
 def _extractor_options(extractor: Optional[Mapping[str, Any]], subpixel: str) -> Dict[str, Any]:

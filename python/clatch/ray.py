@@ -71,7 +71,7 @@ class _Worker:
         max_pixels: int,
         corner_radius: Optional[int],
         cache_photos: int,
-        exit_after_blocks: Optional[int] = None,
+        exit_after: Optional[Tuple[str, int]] = None,
     ) -> None:
         self.error: Optional[BaseException] = None
         try:
@@ -84,9 +84,13 @@ class _Worker:
         self.cache: "OrderedDict[int, np.ndarray]" = OrderedDict()
         self.cache_photos = cache_photos
         self.fetched = 0
-        self.blocks_done = 0
-        # Test hook: the process exits during its block number exit_after_blocks + 1.
-        self.exit_after_blocks = exit_after_blocks
+        self.done = {"extract": 0, "match": 0}
+        # Test hook: (stage, n): the process exits during its task number n + 1 of that stage.
+        self.exit_after = exit_after
+
+    def _maybe_exit(self, stage: str) -> None:
+        if self.exit_after is not None and self.exit_after == (stage, self.done[stage]):
+            os._exit(1)
 
     def ready(self) -> bool:
         if self.error is not None:
@@ -94,6 +98,7 @@ class _Worker:
         return True
 
     def extract(self, paths: List[str], names: List[str]) -> Tuple[Any, ...]:
+        self._maybe_exit("extract")
         photos = extract_photos(
             self.extractor,
             paths,
@@ -102,12 +107,12 @@ class _Worker:
             corner_radius=self.corner_radius,
         )
         meta = [(p.name, p.width, p.height, p.focal_35mm, p.keypoints) for p in photos]
+        self.done["extract"] += 1
         return (meta, *[p.descriptors for p in photos])
 
     def match(self, pairs: List[Tuple[int, int]], refs: Dict[int, Any]) -> List[np.ndarray]:
         ray = _import_ray()
-        if self.exit_after_blocks is not None and self.blocks_done >= self.exit_after_blocks:
-            os._exit(1)
+        self._maybe_exit("match")
         missing = [i for i in refs if i not in self.cache]
         for i, descriptors in zip(missing, ray.get([refs[i] for i in missing])):
             self.cache[i] = descriptors
@@ -117,12 +122,12 @@ class _Worker:
         found = match_block(self.matcher, self.cache, pairs)
         while len(self.cache) > max(self.cache_photos, len(refs)):
             self.cache.popitem(last=False)
-        self.blocks_done += 1
+        self.done["match"] += 1
         return found
 
     def stats(self) -> Tuple[int, int]:
         """Descriptor sets fetched from the object store, blocks matched."""
-        return self.fetched, self.blocks_done
+        return self.fetched, self.done["match"]
 
 
 class _Pool:
@@ -130,9 +135,17 @@ class _Pool:
     unfinished tasks again."""
 
     def __init__(
-        self, ray: Any, make: Callable[[int], Any], count: int, max_failures: int
+        self,
+        ray: Any,
+        make: Callable[[int], Any],
+        count: int,
+        max_failures: int,
+        kill_after: Optional[int] = None,
     ) -> None:
         self.ray = ray
+        # Test hook: the first actor is killed (``ray.kill``) once this many results came back.
+        self.kill_after = kill_after
+        self.results = 0
         self.make = make
         self.made = 0
         self.actors: List[Optional[Any]] = []
@@ -199,6 +212,9 @@ class _Pool:
                 queue.appendleft(k)
                 self.rerun += 1
                 continue
+            self.results += 1
+            if self.kill_after is not None and self.results == self.kill_after and self.actors[0]:
+                self.ray.kill(self.actors[0], no_restart=True)
             yield k, value, extra
 
 
@@ -241,7 +257,8 @@ def match_folder(
     photos_per_task: int = 8,
     cache_photos: Optional[int] = None,
     max_actor_failures: Optional[int] = None,
-    _exit_after_blocks: Optional[int] = None,
+    _exit_after: Optional[Tuple[str, int]] = None,
+    _kill_after_results: Optional[int] = None,
 ) -> MatchFolderResult:
     """``clatch.colmap.match_folder`` over a Ray cluster: the same options, the same files.
 
@@ -257,7 +274,11 @@ def match_folder(
       ``ClusterError``.
 
     The result's ``blocks``, ``blocks_rerun`` (blocks and extraction tasks run again because their
-    actor died) and ``actors_lost`` say how the run went. A clatch error in a task (a photo that
+    actor died), ``actors_lost`` and ``descriptor_fetches`` say how the run went. The two
+    underscored keywords are test hooks: ``_exit_after=(stage, n)`` makes the first actor's process
+    exit during its task ``n + 1`` of ``stage`` (``"extract"`` or ``"match"``);
+    ``_kill_after_results=n`` has the driver ``ray.kill`` the first actor once ``n`` results came
+    back. A clatch error in a task (a photo that
     cannot be read, say) is raised as itself.
     """
     ray = _import_ray()
@@ -302,10 +323,10 @@ def match_folder(
             plan.max_pixels,
             plan.corner_radius,
             cache,
-            _exit_after_blocks if index == 0 else None,
+            _exit_after if index == 0 else None,
         )
 
-    pool = _Pool(ray, make, num_actors, failures)
+    pool = _Pool(ray, make, num_actors, failures, _kill_after_results)
     staged = plan.open_writer()
     try:
         folder = plan.folder
@@ -356,7 +377,11 @@ def match_folder(
             if progress is not None:
                 progress("match", cursor, len(plan.pairs))
         rerun += pool.rerun
-        return staged.commit(blocks=len(blocks), blocks_rerun=rerun, actors_lost=pool.lost)
+        alive = [a for a in pool.actors if a is not None]
+        fetches = sum(fetched for fetched, _ in ray.get([a.stats.remote() for a in alive]))
+        return staged.commit(
+            blocks=len(blocks), blocks_rerun=rerun, actors_lost=pool.lost, descriptor_fetches=fetches
+        )
     except BaseException:
         staged.discard()
         raise

@@ -35,6 +35,8 @@ BLOCKS = 9
 
 @pytest.fixture(scope="module")
 def cluster():
+    # The tests make tasks fail on purpose; Ray would print each failed result nobody fetched.
+    os.environ.setdefault("RAY_IGNORE_UNHANDLED_ERRORS", "1")
     ray.init(num_cpus=2, include_dashboard=False, logging_level="ERROR", log_to_driver=False)
     yield
     ray.shutdown()
@@ -58,7 +60,8 @@ def same_files(a: clatch.colmap.MatchFolderResult, b: clatch.colmap.MatchFolderR
 def report(label: str, result: clatch.colmap.MatchFolderResult) -> None:
     print(
         f"\n{label}: {result.images} photos, {result.pairs} pairs, {result.matches} matches, "
-        f"{result.blocks} blocks, {result.blocks_rerun} rerun, {result.actors_lost} actors lost"
+        f"{result.blocks} blocks, {result.blocks_rerun} rerun, {result.actors_lost} actors lost, "
+        f"{result.descriptor_fetches} descriptor sets fetched"
     )
 
 
@@ -78,6 +81,9 @@ def test_two_actors_write_the_single_process_files(cluster, backend, folder, sin
     assert (result.images, result.pairs, result.matches) == (single.images, single.pairs, single.matches)
     assert single.matches > 500 and single.pairs_with_matches >= 15
     assert same_files(result, single), "the cluster's files differ from the single-process run's"
+    # Resident descriptor sets: each actor fetched each photo's at most once (fetched per block,
+    # the 9 blocks would take 27).
+    assert PHOTOS <= result.descriptor_fetches <= 2 * PHOTOS
     # And the command-line tool's.
     subprocess.run(
         [str(cli), "colmap", "--images", str(folder), "--database", str(tmp_path / "tool.db"), "--no-colmap", "--backend", "cpu"],
@@ -90,18 +96,22 @@ def test_two_actors_write_the_single_process_files(cluster, backend, folder, sin
     assert ("extract", PHOTOS, PHOTOS) in calls
 
 
-def test_a_worker_killed_mid_run_has_its_blocks_rerun(cluster, backend, folder, single, tmp_path):
-    # The first actor's process exits during its third block: that block and any queued behind it
-    # are lost with it and must run again elsewhere.
+# How a worker dies: its process exits during its third block (that block and any queued behind it
+# are lost), during its second extraction task, or the driver kills it (ray.kill) after the first
+# three results (the one extraction task and two blocks), with blocks left to give it.
+DEATHS = {
+    "exits-in-block-3": {"_exit_after": ("match", 2)},
+    "exits-in-extraction-2": {"_exit_after": ("extract", 1), "photos_per_task": 2},
+    "killed-by-the-driver": {"_kill_after_results": 3},
+}
+
+
+@pytest.mark.parametrize("death", DEATHS.values(), ids=DEATHS.keys())
+def test_a_worker_killed_mid_run_has_its_tasks_rerun(cluster, backend, folder, single, tmp_path, death):
     result = clatch.ray.match_folder(
-        folder,
-        tmp_path / "killed.db",
-        backend=backend,
-        num_actors=2,
-        block_size=BLOCK,
-        _exit_after_blocks=2,
+        folder, tmp_path / "killed.db", backend=backend, num_actors=2, block_size=BLOCK, **death
     )
-    report("a worker killed after 2 blocks", result)
+    report(f"a worker killed {death}", result)
     assert result.actors_lost == 1
     assert 1 <= result.blocks_rerun <= 2
     assert same_files(result, single), "the files differ after a worker was killed"
@@ -153,6 +163,6 @@ def test_a_photo_that_fails_on_an_actor_raises_its_own_error(cluster, backend, f
 def test_more_deaths_than_allowed_is_a_cluster_error(cluster, backend, folder, tmp_path):
     with pytest.raises(clatch.ClusterError, match="max_actor_failures=0"):
         clatch.ray.match_folder(
-            folder, tmp_path / "out.db", backend=backend, num_actors=2, block_size=BLOCK, max_actor_failures=0, _exit_after_blocks=0
+            folder, tmp_path / "out.db", backend=backend, num_actors=2, block_size=BLOCK, max_actor_failures=0, _exit_after=("match", 0)
         )
     assert not (tmp_path / "out.db").exists()

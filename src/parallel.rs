@@ -19,6 +19,7 @@ pub(crate) fn threads() -> usize {
 }
 
 /// Runs `a` and `b`, side by side with `cpu` (rayon's `join`), one after the other without.
+#[cfg(feature = "colmap")]
 pub(crate) fn join<A, B, RA, RB>(a: A, b: B) -> (RA, RB)
 where
     A: FnOnce() -> RA + Send,

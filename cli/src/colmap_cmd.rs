@@ -186,8 +186,11 @@ fn preflight(args: &ColmapArgs) -> Result<Plan, CliError> {
     let sparse = workspace.join("sparse");
     check_writable(&args.database)?;
     check_writable(&match_list)?;
-    let mut inputs: Vec<(&'static str, &Path)> =
-        folder.paths.iter().map(|p| ("image", p.as_path())).collect();
+    let mut inputs: Vec<(&'static str, &Path)> = folder
+        .paths
+        .iter()
+        .map(|p| ("image", p.as_path()))
+        .collect();
     if let Some(k) = &args.camera_k {
         inputs.push(("camera matrix", k));
     }

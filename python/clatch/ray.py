@@ -151,18 +151,43 @@ class _Pool:
         self.actors: List[Optional[Any]] = []
         self.max_failures = max_failures
         self.lost = 0
-        for _ in range(count):
-            self._add()
-        # The constructors' clatch errors (a backend unavailable on the actors) raised here.
-        self._get(ray.get, [a.ready.remote() for a in self.actors if a is not None])
+        try:
+            for _ in range(count):
+                self._add()
+            # The constructors' clatch errors (a backend unavailable on the actors) raised here.
+            self._get(ray.get, [a.ready.remote() for a in self.actors if a is not None])
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Ends every actor."""
+        for actor in self.actors:
+            if actor is not None:
+                self.ray.kill(actor)
+        self.actors = [None] * len(self.actors)
+
+    def fetches(self) -> int:
+        """Descriptor sets the living actors fetched from the object store."""
+        total = 0
+        for actor in self.actors:
+            if actor is not None:
+                try:
+                    total += self.ray.get(actor.stats.remote())[0]
+                except self.ray.exceptions.RayActorError:
+                    pass  # died after its last task: its work is in
+        return total
 
     def _add(self) -> None:
         self.actors.append(self.make(self.made))
         self.made += 1
 
     def _lose(self, slot: int) -> None:
-        if self.actors[slot] is None:
+        actor = self.actors[slot]
+        if actor is None:
             return  # already replaced: another of its tasks failed first
+        # Unreachable rather than dead (ActorUnavailableError): it must not come back to the work.
+        self.ray.kill(actor)
         self.actors[slot] = None
         self.lost += 1
         if self.lost > self.max_failures:
@@ -377,15 +402,14 @@ def match_folder(
             if progress is not None:
                 progress("match", cursor, len(plan.pairs))
         rerun += pool.rerun
-        alive = [a for a in pool.actors if a is not None]
-        fetches = sum(fetched for fetched, _ in ray.get([a.stats.remote() for a in alive]))
         return staged.commit(
-            blocks=len(blocks), blocks_rerun=rerun, actors_lost=pool.lost, descriptor_fetches=fetches
+            blocks=len(blocks),
+            blocks_rerun=rerun,
+            actors_lost=pool.lost,
+            descriptor_fetches=pool.fetches(),
         )
     except BaseException:
         staged.discard()
         raise
     finally:
-        for actor in pool.actors:
-            if actor is not None:
-                ray.kill(actor)
+        pool.close()

@@ -260,9 +260,12 @@ impl FolderWriter {
                 format!("cannot write {}: {e}", match_list.display()),
             )
         })?;
-        let writer =
-            clatch::colmap::FolderWriter::create(&database, BufWriter::new(list), camera.map(|c| &c.inner))
-                .or_raise(py)?;
+        let writer = clatch::colmap::FolderWriter::create(
+            &database,
+            BufWriter::new(list),
+            camera.map(|c| &c.inner),
+        )
+        .or_raise(py)?;
         Ok(Self {
             inner: Mutex::new(Some(writer)),
         })

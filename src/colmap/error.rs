@@ -106,10 +106,7 @@ pub enum ColmapError {
 
     /// A library error about one image (its size, its extraction).
     #[error("{path}: {source}", path = .path.display())]
-    Image {
-        path: PathBuf,
-        source: crate::Error,
-    },
+    Image { path: PathBuf, source: crate::Error },
 
     /// A library error with no image attached (a batch extraction, the backend).
     #[error("{0}")]

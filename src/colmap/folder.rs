@@ -11,9 +11,9 @@ use crate::colmap::corner::Refinement;
 use crate::colmap::error::ColmapError;
 use crate::colmap::exif;
 use crate::decode::{DecodeLimits, open_gray_with_exif, probe};
+use crate::describe::WINDOW;
 use crate::descriptor::DescriptorSet;
 use crate::detect::DetectorConfig;
-use crate::describe::WINDOW;
 use crate::facade::Extractor;
 use crate::features::Features;
 use crate::gray_view::GrayView;
@@ -229,10 +229,7 @@ impl Decoded<'_> {
             name: self.name.to_owned(),
             width: self.img.width(),
             height: self.img.height(),
-            focal_35mm: self
-                .exif_block
-                .as_deref()
-                .and_then(exif::focal_length_35mm),
+            focal_35mm: self.exif_block.as_deref().and_then(exif::focal_length_35mm),
             keypoints: refinement.apply(&self.img, features.keypoints),
         };
         (photo, features.descriptors)
@@ -292,10 +289,12 @@ pub fn extract_photos(
     for g in 0..groups.len() {
         let first = g * DECODE_GROUP;
         let (next, extracted) = crate::parallel::join(
-            || groups
+            || {
+                groups
                     .get(g + 1)
                     .map(|group| decode_group(group, limits))
-                    .transpose(),
+                    .transpose()
+            },
             || -> Result<Vec<Features>, ColmapError> {
                 let views = current
                     .iter()
@@ -363,7 +362,10 @@ mod tests {
     #[test]
     fn exif_focal_gives_a_known_focal_and_none_the_guess() {
         let known = photo_camera(3000, 2000, Some(36)).unwrap();
-        assert_eq!((known.fx, known.fy, known.focal_is_known), (3000.0, 3000.0, true));
+        assert_eq!(
+            (known.fx, known.fy, known.focal_is_known),
+            (3000.0, 3000.0, true)
+        );
         let guess = photo_camera(3000, 2000, None).unwrap();
         assert_eq!(guess, PinholeCamera::guess(3000, 2000).unwrap());
         assert!(!guess.focal_is_known);

@@ -114,7 +114,12 @@ impl<W: Write> FolderWriter<W> {
     /// Appends the matches of photos `i` and `j` (indices of [`FolderWriter::add_photo`]; `query`
     /// indexes `i`'s keypoints, `train` `j`'s) to the match list, every index checked. A pair without
     /// matches is left out of the list, as COLMAP needs nothing of it.
-    pub fn add_matches(&mut self, i: usize, j: usize, matches: &[Match]) -> Result<(), ColmapError> {
+    pub fn add_matches(
+        &mut self,
+        i: usize,
+        j: usize,
+        matches: &[Match],
+    ) -> Result<(), ColmapError> {
         let photos = self.photos.len();
         let bad = |reason| ColmapError::BadPair {
             i,

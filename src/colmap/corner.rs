@@ -55,7 +55,7 @@ const MAX_SHIFT: f64 = 1.0;
 
 /// `keypoints` with `x`, `y` moved to the least-squares corner of the `(2r+1)²` window around each,
 /// or left where they are when the window has no well-conditioned corner (edges, flat patches) or
-/// the estimate moves farther than [`MAX_SHIFT`]. `r = 0` returns them unchanged.
+/// the estimate moves farther than one pixel. `r = 0` returns them unchanged.
 pub fn refine_corners(img: &GrayImage, keypoints: &[KeyPoint], r: u32) -> Vec<KeyPoint> {
     keypoints
         .iter()

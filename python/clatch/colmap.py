@@ -55,6 +55,8 @@ _PAIR_CHUNK = 256
 #: Photos extracted per call (``progress`` is called after each).
 _PHOTO_CHUNK = 32
 
+#: A path: ``str`` or ``pathlib.Path`` (any ``os.PathLike[str]``).
+PathArg = Union[str, "os.PathLike[str]"]
 #: ``progress(stage, done, total)``: stage ``"extract"`` (photos) then ``"match"`` (pairs).
 Progress = Callable[[str, int, int], None]
 
@@ -117,7 +119,7 @@ def _invalid(kind: str, message: str) -> InvalidInputError:
 
 def extract_photos(
     extractor: Extractor,
-    paths: Sequence[Union[str, os.PathLike]],
+    paths: Sequence[PathArg],
     names: Sequence[str],
     *,
     max_pixels: int = 100_000_000,
@@ -150,10 +152,10 @@ class _Plan:
 
     def __init__(
         self,
-        images: Union[str, os.PathLike],
-        database: Union[str, os.PathLike],
+        images: PathArg,
+        database: PathArg,
         *,
-        workspace: Optional[Union[str, os.PathLike]],
+        workspace: Optional[PathArg],
         pairs: Optional[Sequence[Sequence[Union[int, str]]]],
         camera_k: Any,
         extractor: Optional[Mapping[str, Any]],
@@ -307,10 +309,10 @@ class _Staged:
 
 
 def match_folder(
-    images: Union[str, os.PathLike],
-    database: Union[str, os.PathLike],
+    images: PathArg,
+    database: PathArg,
     *,
-    workspace: Optional[Union[str, os.PathLike]] = None,
+    workspace: Optional[PathArg] = None,
     pairs: Optional[Sequence[Sequence[Union[int, str]]]] = None,
     camera_k: Any = None,
     backend: str = "cpu",

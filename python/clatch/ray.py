@@ -38,7 +38,7 @@ import numpy as np
 
 from ._clatch import Extractor, Matcher
 from ._exceptions import ClatchError, ClusterError, InvalidInputError
-from .colmap import MatchFolderResult, Photo, Progress, _Plan, extract_photos, match_block
+from .colmap import MatchFolderResult, PathArg, Photo, Progress, _Plan, extract_photos, match_block
 
 __all__ = ["match_folder"]
 
@@ -262,10 +262,10 @@ def _positive(name: str, value: Any) -> int:
 
 
 def match_folder(
-    images: Union[str, os.PathLike],
-    database: Union[str, os.PathLike],
+    images: PathArg,
+    database: PathArg,
     *,
-    workspace: Optional[Union[str, os.PathLike]] = None,
+    workspace: Optional[PathArg] = None,
     pairs: Optional[Sequence[Sequence[Union[int, str]]]] = None,
     camera_k: Any = None,
     backend: str = "cpu",

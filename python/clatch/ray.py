@@ -14,8 +14,11 @@ writes byte-identical files, with the work spread over Ray actors:
 - the driver is the one writer: it writes each pair's matches in the pairs' order as soon as every
   pair before it is done, so the file does not depend on which block finished first, and it holds
   only the matches that wait for an earlier block;
-- an actor that dies (its process killed, its node lost) has its unfinished tasks run again on the
-  others and is replaced, up to ``max_actor_failures`` times.
+- an actor that dies (its process killed or crashed, or gone with its node) has its unfinished
+  tasks run again on the others and is replaced, up to ``max_actor_failures`` times. A lost node
+  also loses the descriptor sets stored in its object store (those over Ray's 100 KiB inline limit,
+  about 1600 keypoints); they are not extracted again: a block that needs one fails the run with a
+  ``ClusterError``.
 
 Ray is imported when ``match_folder`` runs (``import clatch`` never needs it). Without a running
 Ray, ``match_folder`` starts a local one (``ray.init()``); on a cluster, connect first::

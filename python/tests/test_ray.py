@@ -166,3 +166,14 @@ def test_more_deaths_than_allowed_is_a_cluster_error(cluster, backend, folder, t
             folder, tmp_path / "out.db", backend=backend, num_actors=2, block_size=BLOCK, max_actor_failures=0, _exit_after=("match", 0)
         )
     assert not (tmp_path / "out.db").exists()
+
+
+def test_a_backend_the_actors_cannot_start_raises_its_own_error(cluster, folder, tmp_path):
+    try:
+        clatch.Extractor("cuda")
+        pytest.skip("CUDA runs here: no backend to refuse")
+    except clatch.BackendUnavailableError:
+        pass
+    with pytest.raises(clatch.BackendUnavailableError):
+        clatch.ray.match_folder(folder, tmp_path / "out.db", backend="cuda", num_actors=2)
+    assert not (tmp_path / "out.db").exists()

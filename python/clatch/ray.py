@@ -17,8 +17,8 @@ writes byte-identical files, with the work spread over Ray actors:
 - an actor that dies (its process killed or crashed, or gone with its node) has its unfinished
   tasks run again on the others and is replaced, up to ``max_actor_failures`` times. A lost node
   also loses the descriptor sets stored in its object store (those over Ray's 100 KiB inline limit,
-  about 1600 keypoints); they are not extracted again: a block that needs one fails the run with a
-  ``ClusterError``.
+  about 1600 keypoints); they are not extracted again: a block that needs one of which no other
+  node holds a copy fails the run with a ``ClusterError``.
 
 Ray is imported when ``match_folder`` runs (``import clatch`` never needs it). Without a running
 Ray, ``match_folder`` starts a local one (``ray.init()``); on a cluster, connect first::

@@ -129,6 +129,23 @@ def test_given_pairs_equal_the_single_process_run(cluster, backend, folder, tmp_
     assert first == f"{names[6]} {names[0]}"
 
 
+def test_options_reach_the_actors(cluster, backend, folder, tmp_path):
+    options = {
+        "camera_k": [[300.5, 0, 128.25], [0, 301.0, 127.75], [0, 0, 1]],
+        "extractor": {"grid": 4, "max_keypoints": 120},
+        "subpixel": "corner",
+        "subpixel_radius": 2,
+        "matcher": {"ratio": 0.9},
+    }
+    one = clatch.colmap.match_folder(folder, tmp_path / "one.db", backend=backend, **options)
+    result = clatch.ray.match_folder(folder, tmp_path / "ray.db", backend=backend, num_actors=2, block_size=3, **options)
+    assert same_files(result, one)
+    # The options changed the run: fewer keypoints than the defaults' (single-process) run.
+    default = clatch.colmap.match_folder(folder, tmp_path / "default.db", backend=backend)
+    assert result.keypoints <= 120 * PHOTOS < default.keypoints
+    assert result.matches > 100
+
+
 def test_bad_input_is_refused_before_any_work(cluster, folder, tmp_path):
     db = tmp_path / "out.db"
     with pytest.raises(clatch.ImageReadError) as e:

@@ -4,6 +4,7 @@ byte, with the command-line tool's own defaults and with its options; given pair
 from __future__ import annotations
 
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -191,3 +192,18 @@ def test_the_writer_checks_every_index(tmp_path):
     with pytest.raises(clatch.InvalidInputError) as e:
         writer.finish()
     assert e.value.kind == "WriterClosed"
+
+
+def test_clatch_and_clatch_ray_import_without_ray(tmp_path):
+    # In a fresh interpreter where `import ray` fails: the package imports, and only running
+    # clatch.ray says what to install.
+    code = (
+        "import sys; sys.modules['ray'] = None\n"
+        "import clatch, clatch.colmap, clatch.ray\n"
+        "try:\n"
+        "    clatch.ray.match_folder('.', 'x.db')\n"
+        "except ImportError as e:\n"
+        "    print(e)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, check=True, capture_output=True, text=True)
+    assert "clatch.ray needs Ray" in out.stdout and "pip install" in out.stdout, out.stdout + out.stderr

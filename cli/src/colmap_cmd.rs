@@ -2,35 +2,20 @@
 //! structure from motion (see [`clatch::colmap`] for the conventions).
 
 use std::ffi::OsString;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use clatch::colmap::{Database, MatchList, PinholeCamera};
-use clatch::{Backend, Extractor, Features, GrayView, Match, Matcher};
-use rayon::prelude::*;
+use clatch::colmap::{ColmapError, FolderWriter, ImageFolder, Photo, PinholeCamera};
+use clatch::{Backend, DescriptorSet, Extractor, Match, Matcher};
 
 use crate::ColmapArgs;
 use crate::colmap_program::{ColmapProgram, ModelStats, parse_model_analyzer};
 use crate::cpu_time::{StageTime, Stopwatch};
 use crate::error::CliError;
-use crate::exif;
-use crate::image_dir::{colmap_name, list_images};
-use crate::input::{check_detectable, load_gray_with_exif, probe_detectable};
 use crate::output::{Staged, TempDir, check_distinct, check_writable};
 use crate::progress::Progress;
 use crate::settings;
-use crate::subpixel;
 use crate::text_input::read_text;
-use clatch::decode::DecodeLimits;
-
-/// One photo's features.
-struct Photo {
-    /// EXIF `FocalLengthIn35mmFilm`, if the file has it.
-    focal_35mm: Option<u16>,
-    name: String,
-    width: u32,
-    height: u32,
-    features: Features,
-}
 
 /// Wall and CPU time of each stage.
 #[derive(Default)]
@@ -45,8 +30,7 @@ struct Times {
 
 /// Everything checked before any work: the photos, their names and sizes, the camera, the outputs.
 struct Plan {
-    images: Vec<PathBuf>,
-    names: Vec<String>,
+    folder: ImageFolder,
     /// The camera of `--camera-k`, for the photos' one size.
     camera: Option<PinholeCamera>,
     workspace: PathBuf,
@@ -58,29 +42,34 @@ struct Plan {
 
 /// Runs `clatch colmap`.
 pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
-    let subpixel = args.subpixel.library();
+    let refinement = args.subpixel.refinement(args.subpixel_radius);
     let settings = settings(
         &args.backend,
         &args.detect,
-        Some(subpixel),
+        Some(refinement.detector_subpixel()),
         Some(&args.matching),
     )?;
     let plan = preflight(args)?;
     let mut times = Times::default();
 
     // Detect and describe every photo.
-    let grid = args.detect.grid.unwrap_or(DEFAULT_GRID);
-    let extractor = Extractor::new(settings.backend, extraction_config(&settings, grid))?;
-    let progress = Progress::counter(plan.images.len() as u64, "extracting features");
+    let mut config = settings.extractor.clone();
+    config.detector.grid = args
+        .detect
+        .grid
+        .map_or(clatch::colmap::DEFAULT_GRID, |g| g as usize);
+    let extractor = Extractor::new(settings.backend, config)?;
+    let progress = Progress::counter(plan.folder.paths.len() as u64, "extracting features");
     let watch = Stopwatch::start();
-    let limits = args.input.limits();
-    let photos = extract_all(
+    let (photos, descriptors): (Vec<Photo>, Vec<DescriptorSet>) = clatch::colmap::extract_photos(
         &extractor,
-        (&plan.images, &plan.names),
-        &limits,
-        (args.subpixel, args.subpixel_radius),
-        &progress,
-    )?;
+        (&plan.folder.paths, &plan.folder.names),
+        &args.input.limits(),
+        refinement,
+        &|_| progress.done(),
+    )?
+    .into_iter()
+    .unzip();
     times.extract = watch.stop();
     progress.finish();
 
@@ -90,8 +79,7 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let progress = Progress::counter(pairs.len() as u64, "matching pairs");
     let watch = Stopwatch::start();
     // The library matches the whole collection (a featureless photo simply matches nothing).
-    let sets: Vec<&clatch::DescriptorSet> =
-        photos.iter().map(|p| &p.features.descriptors).collect();
+    let sets: Vec<&DescriptorSet> = descriptors.iter().collect();
     let matches: Vec<Vec<Match>> = matcher.match_pairs(&sets, &pairs, &|_| progress.done())?;
     times.matching = watch.stop();
     progress.finish();
@@ -129,10 +117,8 @@ fn write_and_run(
     let database = staged.reserve(&args.database)?;
     // `Database::create` makes the file itself (and never opens an existing one).
     std::fs::remove_file(&database).map_err(CliError::write(&database))?;
-    write_database(&database, plan.camera.as_ref(), photos)?;
-    let match_list = staged.write(&plan.match_list, |w| {
-        write_match_list(w, photos, pairs, matches).map_err(std::io::Error::other)
-    })?;
+    let list = write_all(&database, plan.camera.as_ref(), photos, (pairs, matches))?;
+    let match_list = staged.write(&plan.match_list, |w| w.write_all(&list))?;
     times.write = watch.stop();
 
     let Some(colmap) = &plan.colmap else {
@@ -185,20 +171,11 @@ fn write_and_run(
 /// the detector's minimum), the camera matrix against the photos' size, outputs that would overwrite
 /// an input or an earlier result, and the `colmap` program.
 fn preflight(args: &ColmapArgs) -> Result<Plan, CliError> {
-    let images = list_images(&args.images)?;
-    let names = images
-        .iter()
-        .map(|p| colmap_name(p))
-        .collect::<Result<Vec<_>, _>>()?;
-    let limits = args.input.limits();
-    let sizes = images
-        .iter()
-        .map(|p| probe_detectable(p, &limits).map(|info| (info.width, info.height)))
-        .collect::<Result<Vec<_>, _>>()?;
+    let folder = ImageFolder::open(&args.images, &args.input.limits())?;
     let camera = args
         .camera_k
         .as_deref()
-        .map(|k| camera_for_all(k, &images, &sizes))
+        .map(|k| camera_for_all(k, &folder))
         .transpose()?;
 
     let workspace = args
@@ -209,8 +186,11 @@ fn preflight(args: &ColmapArgs) -> Result<Plan, CliError> {
     let sparse = workspace.join("sparse");
     check_writable(&args.database)?;
     check_writable(&match_list)?;
-    let mut inputs: Vec<(&'static str, &Path)> =
-        images.iter().map(|p| ("image", p.as_path())).collect();
+    let mut inputs: Vec<(&'static str, &Path)> = folder
+        .paths
+        .iter()
+        .map(|p| ("image", p.as_path()))
+        .collect();
     if let Some(k) = &args.camera_k {
         inputs.push(("camera matrix", k));
     }
@@ -245,8 +225,7 @@ fn preflight(args: &ColmapArgs) -> Result<Plan, CliError> {
         found
     };
     Ok(Plan {
-        images,
-        names,
+        folder,
         camera,
         workspace,
         match_list,
@@ -256,30 +235,15 @@ fn preflight(args: &ColmapArgs) -> Result<Plan, CliError> {
 }
 
 /// The camera of the K file `k_path`, which needs every photo to have the first one's size.
-fn camera_for_all(
-    k_path: &Path,
-    images: &[PathBuf],
-    sizes: &[(u32, u32)],
-) -> Result<PinholeCamera, CliError> {
+fn camera_for_all(k_path: &Path, folder: &ImageFolder) -> Result<PinholeCamera, CliError> {
     let text = read_text(k_path, "camera matrix")?;
-    let (want_w, want_h) = sizes.first().copied().unwrap_or_default();
-    let camera =
-        PinholeCamera::from_k_text(&text, want_w, want_h).map_err(|source| CliError::CameraK {
+    folder.shared_camera(&text).map_err(|e| match e {
+        ColmapError::InvalidCamera { .. } => CliError::CameraK {
             path: k_path.to_path_buf(),
-            source,
-        })?;
-    for (path, &(got_w, got_h)) in images.iter().zip(sizes) {
-        if (got_w, got_h) != (want_w, want_h) {
-            return Err(CliError::ImageSizeMismatch {
-                path: path.clone(),
-                got_w,
-                got_h,
-                want_w,
-                want_h,
-            });
-        }
-    }
-    Ok(camera)
+            source: e,
+        },
+        other => other.into(),
+    })
 }
 
 /// `out.db` → `out-colmap/` beside it.
@@ -288,178 +252,22 @@ fn default_workspace(database: &Path) -> PathBuf {
     database.with_file_name(format!("{stem}-colmap"))
 }
 
-/// The grid keypoints are spread over when `--grid` is not given: 8 x 8 keeps textured corners of a
-/// photo (foliage, gravel) from taking every keypoint.
-const DEFAULT_GRID: u32 = 8;
-
-/// The extractor's settings: the library spreads keypoints over the grid
-/// ([`clatch::DetectorConfig::grid`]).
-fn extraction_config(settings: &crate::pipeline::Settings, grid: u32) -> clatch::ExtractorConfig {
-    let mut config = settings.extractor.clone();
-    config.detector.grid = grid as usize;
-    config
-}
-
-/// Photos decoded at a time: the next group is decoded on the CPU threads while the extractor works
-/// on this one (with several images in flight on the GPU).
-const DECODE_GROUP: usize = 8;
-
-/// A decoded photo waiting for extraction.
-struct Decoded {
-    img: image::GrayImage,
-    exif_block: Option<Vec<u8>>,
-    path: PathBuf,
-    name: String,
-}
-
-/// Reads and checks a group of photos in parallel.
-fn decode_group(
-    group: &[(&PathBuf, &String)],
-    limits: &DecodeLimits,
-) -> Result<Vec<Decoded>, CliError> {
-    group
-        .par_iter()
-        .map(|&(path, name)| {
-            let (img, exif_block) = load_gray_with_exif(path, limits)?;
-            check_detectable(path, img.width(), img.height())?;
-            Ok(Decoded {
-                img,
-                exif_block,
-                path: path.clone(),
-                name: name.clone(),
-            })
-        })
-        .collect()
-}
-
-/// Reads, detects (spread over the extractor's grid) and describes every photo, in order: groups of
-/// photos through [`Extractor::detect_and_describe_batch`], the next group decoded meanwhile.
-fn extract_all(
-    extractor: &Extractor,
-    (paths, names): (&[PathBuf], &[String]),
-    limits: &DecodeLimits,
-    (method, subpixel_radius): (subpixel::Subpixel, u32),
-    progress: &Progress,
-) -> Result<Vec<Photo>, CliError> {
-    let all: Vec<(&PathBuf, &String)> = paths.iter().zip(names).collect();
-    let groups: Vec<&[(&PathBuf, &String)]> = all.chunks(DECODE_GROUP).collect();
-    let mut photos = Vec::with_capacity(all.len());
-    let mut current = match groups.first() {
-        Some(group) => decode_group(group, limits)?,
-        None => return Ok(photos),
-    };
-    for g in 0..groups.len() {
-        let (next, extracted) = rayon::join(
-            || {
-                groups
-                    .get(g + 1)
-                    .map(|group| decode_group(group, limits))
-                    .transpose()
-            },
-            || -> Result<Vec<Features>, CliError> {
-                let views = current
-                    .iter()
-                    .map(|d| GrayView::try_from(&d.img).map_err(CliError::in_image(&d.path)))
-                    .collect::<Result<Vec<_>, _>>()?;
-                Ok(extractor.detect_and_describe_batch(&views, &|_| progress.done())?)
-            },
-        );
-        for (decoded, features) in current.into_iter().zip(extracted?) {
-            photos.push(Photo {
-                focal_35mm: decoded
-                    .exif_block
-                    .as_deref()
-                    .and_then(exif::focal_length_35mm),
-                width: decoded.img.width(),
-                height: decoded.img.height(),
-                features: Features {
-                    keypoints: subpixel::refine_with(
-                        &decoded.img,
-                        &features.keypoints,
-                        method,
-                        subpixel_radius,
-                    ),
-                    ..features
-                },
-                name: decoded.name,
-            });
-        }
-        current = next?.unwrap_or_default();
-    }
-    Ok(photos)
-}
-
-/// Cameras, images and keypoints. With K, one camera shared by every photo (which all have its size,
-/// checked before any work); without, one camera per image size and EXIF focal length: the focal
-/// length from EXIF's 35 mm equivalent where the photo has it (as COLMAP does), else COLMAP's guess.
-fn write_database(
+/// Writes the database at `path` and returns the match list: the library's one writer of a folder
+/// ([`FolderWriter`]), in the order every run writes.
+fn write_all(
     path: &Path,
     camera: Option<&PinholeCamera>,
     photos: &[Photo],
-) -> Result<(), CliError> {
-    let mut db = Database::create(path)?;
-    let shared = camera.map(|c| db.add_camera(c)).transpose()?;
-    type CameraKey = ((u32, u32), Option<u16>);
-    let mut cameras: Vec<(CameraKey, u32)> = Vec::new();
+    (pairs, matches): (&[(usize, usize)], &[Vec<Match>]),
+) -> Result<Vec<u8>, CliError> {
+    let mut writer = FolderWriter::create(path, Vec::new(), camera)?;
     for photo in photos {
-        let camera_id = match shared {
-            Some(id) => id,
-            None => {
-                let size = (photo.width, photo.height);
-                let key = (size, photo.focal_35mm);
-                match cameras.iter().find(|(k, _)| *k == key) {
-                    Some(&(_, id)) => id,
-                    None => {
-                        let id = db.add_camera(&guess_camera(size, photo.focal_35mm)?)?;
-                        cameras.push((key, id));
-                        id
-                    }
-                }
-            }
-        };
-        let image_id = db.add_image(&photo.name, camera_id)?;
-        db.set_keypoints(image_id, &photo.features.keypoints)?;
+        writer.add_photo(photo)?;
     }
-    db.finish()?;
-    Ok(())
-}
-
-/// A camera from EXIF's 35 mm focal length (marked as known, as COLMAP marks EXIF focal lengths), or
-/// COLMAP's guess without one.
-fn guess_camera(
-    (width, height): (u32, u32),
-    focal_35mm: Option<u16>,
-) -> Result<PinholeCamera, CliError> {
-    let guess = PinholeCamera::guess(width, height)?;
-    Ok(match focal_35mm {
-        Some(f) => {
-            let focal = exif::focal_pixels(f, width, height);
-            PinholeCamera {
-                fx: focal,
-                fy: focal,
-                focal_is_known: true,
-                ..guess
-            }
-            .validated()?
-        }
-        None => guess,
-    })
-}
-
-fn write_match_list(
-    out: impl std::io::Write,
-    photos: &[Photo],
-    pairs: &[(usize, usize)],
-    matches: &[Vec<Match>],
-) -> Result<(), clatch::colmap::ColmapError> {
-    let mut list = MatchList::new(out);
     for (&(i, j), m) in pairs.iter().zip(matches) {
-        if !m.is_empty() {
-            list.add_pair(&photos[i].name, &photos[j].name, m)?;
-        }
+        writer.add_matches(i, j, m)?;
     }
-    list.into_inner()?;
-    Ok(())
+    Ok(writer.finish()?)
 }
 
 /// The two COLMAP steps after the database: import with verification, then the mapper, on the given
@@ -556,7 +364,7 @@ fn print_extraction_report(
     matches: &[Vec<Match>],
     times: &Times,
 ) {
-    let keypoints: usize = photos.iter().map(|p| p.features.keypoints.len()).sum();
+    let keypoints: usize = photos.iter().map(|p| p.keypoints.len()).sum();
     let putative: usize = matches.iter().map(Vec::len).sum();
     println!("clatch colmap (COLMAP 3.8 database)");
     println!(

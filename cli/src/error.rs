@@ -44,20 +44,6 @@ pub enum CliError {
         source: image::ImageError,
     },
 
-    /// An image too small for the detector to score a single pixel.
-    #[error(
-        "{path} is {width}x{height}: keypoints are detected at least {margin} pixels from every border, \
-         so an image needs at least {min}x{min} pixels",
-        path = .path.display()
-    )]
-    ImageTooSmall {
-        path: PathBuf,
-        width: u32,
-        height: u32,
-        margin: usize,
-        min: usize,
-    },
-
     /// An input that is a folder, FIFO, device or socket: reading it could block or never end.
     #[error("{path}: not a regular file ({kind})", path = .path.display())]
     NotAFile { path: PathBuf, kind: &'static str },
@@ -96,34 +82,6 @@ pub enum CliError {
     /// An output picture path whose extension names no format this build can write.
     #[error("cannot save a picture as {path}: {reason}", path = .path.display())]
     PictureFormat { path: PathBuf, reason: String },
-
-    /// The image folder could not be listed.
-    #[error("cannot list the image folder {path}: {source}", path = .path.display())]
-    ImageDir {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-
-    /// The image folder holds no image file.
-    #[error("no image in {path} (looked for the extensions {extensions})", path = .path.display())]
-    NoImages { path: PathBuf, extensions: String },
-
-    /// A file name COLMAP cannot take (not UTF-8, or with whitespace, which its match list cannot hold).
-    #[error("{path}: {reason}; rename the file", path = .path.display())]
-    ImageName { path: PathBuf, reason: &'static str },
-
-    /// Images of different sizes with one given camera matrix.
-    #[error(
-        "{path} is {got_w}x{got_h} but the first image is {want_w}x{want_h}: one camera matrix (--camera-k) needs one image size",
-        path = .path.display()
-    )]
-    ImageSizeMismatch {
-        path: PathBuf,
-        got_w: u32,
-        got_h: u32,
-        want_w: u32,
-        want_h: u32,
-    },
 
     /// A camera matrix file that is not a pinhole K.
     #[error("bad camera matrix file {path}: {source}", path = .path.display())]

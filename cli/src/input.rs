@@ -3,8 +3,8 @@
 
 use std::path::Path;
 
-use clatch::decode::{DecodeLimits, ImageInfo};
-use clatch::{DetectorConfig, WINDOW};
+use clatch::WINDOW;
+use clatch::decode::DecodeLimits;
 use image::GrayImage;
 
 use crate::error::CliError;
@@ -13,42 +13,15 @@ use crate::error::CliError;
 /// converts it to gray with [`clatch::decode::gray_from_dynamic`] and checks that it holds one
 /// descriptor window.
 pub fn load_gray(path: &Path, limits: &DecodeLimits) -> Result<GrayImage, CliError> {
-    load_gray_with_exif(path, limits).map(|(gray, _)| gray)
-}
-
-/// [`load_gray`], with the file's raw EXIF block when it has one.
-pub fn load_gray_with_exif(
-    path: &Path,
-    limits: &DecodeLimits,
-) -> Result<(GrayImage, Option<Vec<u8>>), CliError> {
-    let (gray, exif) = clatch::decode::open_gray_with_exif(path, limits)?;
+    let gray = clatch::decode::open_gray(path, limits)?;
     check_size(&gray).map_err(CliError::in_image(path))?;
-    Ok((gray, exif))
+    Ok(gray)
 }
 
-/// The header of an image file, refused when too large, truncated (JPEG) or too small to detect on.
-pub fn probe_detectable(path: &Path, limits: &DecodeLimits) -> Result<ImageInfo, CliError> {
-    let info = clatch::decode::probe(path, limits)?;
-    check_detectable(path, info.width, info.height)?;
-    Ok(info)
-}
-
-/// Refuses an image in which the detector cannot score a single pixel: it scores only pixels at least
-/// [`DetectorConfig::margin`] from every border, so a side needs `2 margin + 1` pixels, and never
-/// less than the library's 64x64 minimum.
+/// Refuses an image in which the detector cannot score a single pixel
+/// ([`clatch::colmap::check_detectable`], the rule `clatch colmap` applies to a folder).
 pub fn check_detectable(path: &Path, width: u32, height: u32) -> Result<(), CliError> {
-    let margin = DetectorConfig::default().margin();
-    let min = (2 * margin + 1).max(WINDOW);
-    if (width as usize) < min || (height as usize) < min {
-        return Err(CliError::ImageTooSmall {
-            path: path.to_path_buf(),
-            width,
-            height,
-            margin,
-            min,
-        });
-    }
-    Ok(())
+    Ok(clatch::colmap::check_detectable(path, width, height)?)
 }
 
 /// The library's error for an image that cannot hold one 64x64 descriptor window (or that is larger
@@ -71,27 +44,6 @@ mod tests {
 
     fn limits() -> DecodeLimits {
         DecodeLimits::default()
-    }
-
-    #[test]
-    fn the_detectable_minimum_follows_the_detector_margin() {
-        // The default 40-pixel keypoints: margin ceil(40 / sqrt 2) + 2 = 31, so 63 pixels, raised to
-        // the library's 64.
-        let path = Path::new("img.png");
-        assert!(check_detectable(path, 64, 64).is_ok());
-        let e = check_detectable(path, 63, 500).unwrap_err();
-        assert!(
-            matches!(
-                e,
-                CliError::ImageTooSmall {
-                    min: 64,
-                    margin: 31,
-                    ..
-                }
-            ),
-            "{e}"
-        );
-        assert!(check_detectable(path, 500, 63).is_err());
     }
 
     fn temp_path(name: &str) -> std::path::PathBuf {

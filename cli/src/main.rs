@@ -10,10 +10,8 @@ mod demo;
 mod draw;
 mod error;
 mod eval;
-mod exif;
 mod extract;
 mod homography;
-mod image_dir;
 mod input;
 mod match_cmd;
 mod npy;
@@ -895,9 +893,14 @@ mod tests {
             c.subpixel
         };
         assert_eq!(colmap(&[]), subpixel::Subpixel::Score);
-        assert_eq!(colmap(&[]).library(), Subpixel::Score);
-        assert_eq!(colmap(&["--subpixel", "corner"]).library(), Subpixel::None);
-        assert_eq!(colmap(&["--subpixel", "none"]).library(), Subpixel::None);
+        let detector = |c: subpixel::Subpixel| c.refinement(3).detector_subpixel();
+        assert_eq!(detector(colmap(&[])), Subpixel::Score);
+        assert_eq!(detector(colmap(&["--subpixel", "corner"])), Subpixel::None);
+        assert_eq!(
+            colmap(&["--subpixel", "corner"]).refinement(5),
+            clatch::colmap::Refinement::Corner { radius: 5 }
+        );
+        assert_eq!(detector(colmap(&["--subpixel", "none"])), Subpixel::None);
         let backend = BackendArgs {
             backend: BackendChoice::Cpu,
             device: 0,

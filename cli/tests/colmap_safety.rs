@@ -112,7 +112,7 @@ fn bad_inputs_are_refused_before_any_work_and_leave_nothing_behind() {
     photo(240, 200, 0).save(images.join("view3.png")).unwrap();
     refused(
         &["--camera-k", str(&k)],
-        "one camera matrix (--camera-k) needs one image size",
+        "one camera matrix needs one image size",
     );
     std::fs::remove_file(images.join("view3.png")).unwrap();
     photo(200, 200, 10)

@@ -7,7 +7,9 @@
 //! pinned versions, see `.ci/run`). Without them the test is reported as ignored with
 //! `skipped: <reason>`, never as passed; with `CLATCH_REQUIRE_PYTHON` set (as in CI) a missing
 //! prerequisite fails instead. `CLATCH_PYTHON` picks the interpreter; `CLATCH_TEST_BACKEND` (e.g.
-//! `cuda`) is passed to the suite. The virtual environment is kept between runs (it only holds the
+//! `cuda`) is passed to the suite. `python/tests/test_ray.py` (`clatch.ray` on a local Ray cluster)
+//! needs the base interpreter's `ray` (2.60.0 in CI) and is skipped without it, unless
+//! `CLATCH_REQUIRE_RAY` is set (as in CI): then a missing Ray fails the suite. The virtual environment is kept between runs (it only holds the
 //! package); the build is incremental like any cargo build.
 
 use std::path::{Path, PathBuf};

@@ -5,7 +5,9 @@ The classes mirror the Rust library: ``Extractor`` (``detect``, ``detect_and_des
 ``all_pairs``). Images are ``uint8`` arrays (2-D gray or H x W x 3 RGB); keypoints come back as
 structured arrays of ``KEYPOINT_DTYPE``, descriptors as ``uint8`` arrays of shape (N, bits / 8) in
 OpenCV LATCH's byte order, matches as structured arrays of ``MATCH_DTYPE``. Every error is a
-``ClatchError``.
+``ClatchError``. ``clatch.colmap.match_folder`` turns a folder of photos into a COLMAP database
+(as ``clatch colmap``); ``clatch.ray.match_folder`` does the same over a Ray cluster (``import
+clatch.ray``; Ray is needed only then).
 """
 
 from __future__ import annotations
@@ -23,11 +25,14 @@ from ._clatch import (
 from ._exceptions import (
     BackendUnavailableError,
     ClatchError,
+    ClusterError,
     CudaError,
+    DatabaseError,
     DeviceOutOfMemoryError,
     ImageReadError,
     InvalidInputError,
 )
+from . import colmap
 
 __all__ = [
     "CUDA_BUILT",
@@ -35,7 +40,9 @@ __all__ = [
     "MATCH_DTYPE",
     "BackendUnavailableError",
     "ClatchError",
+    "ClusterError",
     "CudaError",
+    "DatabaseError",
     "DeviceOutOfMemoryError",
     "Extractor",
     "ImageReadError",

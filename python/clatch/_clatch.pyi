@@ -16,6 +16,10 @@ __all__ = [
     "_reads_in_place",
     "_rust_match_seconds",
     "_rust_extract_seconds",
+    "ImageFolder",
+    "PinholeCamera",
+    "_FolderWriter",
+    "_extract_photos",
     "KEYPOINT_DTYPE",
     "MATCH_DTYPE",
     "CUDA_BUILT",
@@ -129,6 +133,80 @@ def imread(path: Union[str, os.PathLike[str]], max_pixels: int = 100_000_000) ->
 
 def to_gray(image: _Image) -> _Image:
     """The gray image the extractor sees (RGB with OpenCV's integer weights)."""
+
+@final
+class ImageFolder:
+    """The photos of a folder, checked before any work (``clatch.colmap``): the image files directly
+    inside ``images``, in name order, each name UTF-8 without whitespace, each header within
+    ``max_pixels``, each image large enough to detect on."""
+
+    def __new__(
+        cls, images: Union[str, os.PathLike[str]], *, max_pixels: int = 100_000_000
+    ) -> ImageFolder: ...
+    @property
+    def paths(self) -> list[Any]:
+        """The image files (``pathlib.Path``), in name order (image ``i`` of every result)."""
+    @property
+    def names(self) -> list[str]:
+        """Their names in the database: the file names."""
+    @property
+    def sizes(self) -> list[Tuple[int, int]]:
+        """Their sizes ``(width, height)``, from the headers."""
+    def __len__(self) -> int: ...
+    def shared_camera(self, k_text: str) -> PinholeCamera:
+        """The camera of the intrinsic matrix ``k_text`` (9 numbers, row-major) for every photo."""
+
+@final
+class PinholeCamera:
+    """A PINHOLE camera of the database, in COLMAP's pixel convention."""
+
+    @property
+    def width(self) -> int:
+        """Image width in pixels."""
+    @property
+    def height(self) -> int:
+        """Image height in pixels."""
+    @property
+    def fx(self) -> float:
+        """Focal length along x, in pixels."""
+    @property
+    def fy(self) -> float:
+        """Focal length along y, in pixels."""
+    @property
+    def cx(self) -> float:
+        """Principal point x, in pixels."""
+    @property
+    def cy(self) -> float:
+        """Principal point y, in pixels."""
+    @property
+    def focal_is_known(self) -> bool:
+        """Whether the focal length is known (a given K is)."""
+
+# Not public API: the writer and the extraction that clatch.colmap and clatch.ray call.
+@final
+class _FolderWriter:
+    def __new__(
+        cls,
+        database: Union[str, os.PathLike[str]],
+        match_list: Union[str, os.PathLike[str]],
+        camera: Optional[PinholeCamera] = None,
+    ) -> _FolderWriter: ...
+    def add_photo(
+        self, name: str, width: int, height: int, focal_35mm: Optional[int], keypoints: _KeyPoints
+    ) -> int: ...
+    def add_matches(self, i: int, j: int, matches: _Matches) -> None: ...
+    @property
+    def photos(self) -> int: ...
+    def finish(self) -> None: ...
+    def close(self) -> None: ...
+
+def _extract_photos(
+    extractor: Extractor,
+    paths: Sequence[Union[str, os.PathLike[str]]],
+    names: Sequence[str],
+    max_pixels: int,
+    corner_radius: Optional[int] = None,
+) -> list[Tuple[str, int, int, Optional[int], _KeyPoints, _Descriptors]]: ...
 
 # Not public API: the test suite's and the overhead bench's hooks.
 def _reads_in_place(image: _Image) -> bool:

@@ -13,6 +13,8 @@ __all__ = [
     "CudaError",
     "DeviceOutOfMemoryError",
     "ImageReadError",
+    "DatabaseError",
+    "ClusterError",
 ]
 
 
@@ -46,3 +48,14 @@ class DeviceOutOfMemoryError(CudaError, MemoryError):
 
 class ImageReadError(ClatchError, OSError):
     """An image file could not be read or decoded (``clatch.imread``)."""
+
+
+class DatabaseError(ClatchError, OSError):
+    """The COLMAP database or match list could not be written: the database already exists
+    (``kind == "DatabaseExists"``; pass ``force=True`` to replace it), or SQLite or the file system
+    failed (``clatch.colmap``)."""
+
+
+class ClusterError(ClatchError, RuntimeError):
+    """Work spread over a Ray cluster could not finish (``clatch.ray``): actors died more often than
+    allowed, or a task failed with an error that is not clatch's own."""

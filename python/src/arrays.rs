@@ -353,25 +353,41 @@ pub fn descriptors_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Descriptor
     Ok(DescriptorSet::from_descriptors(width, &rows))
 }
 
-/// Keypoints from a structured array of the keypoint dtype (`clatch.KEYPOINT_DTYPE`).
-pub fn keypoints_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<KeyPoint>> {
+/// The records of a 1-D structured array of `R`'s dtype (`dtype_name` in errors), copied out.
+fn records_in<R: Element + Copy>(
+    obj: &Bound<'_, PyAny>,
+    what: &str,
+    dtype_name: &str,
+) -> PyResult<Vec<R>> {
     let py = obj.py();
     let array = ndarray(obj, what)?;
-    let expected = KeyPointRecord::get_dtype(py);
+    let expected = R::get_dtype(py);
     if !array.dtype().is_equiv_to(&expected) || array.ndim() != 1 {
         return Err(invalid_input(
             py,
             "WrongDtype",
             format!(
-                "{what} must be a 1-D array of dtype clatch.KEYPOINT_DTYPE {expected}, got {}-D {}",
+                "{what} must be a 1-D array of dtype {dtype_name} {expected}, got {}-D {}",
                 array.ndim(),
                 array.dtype()
             ),
         ));
     }
-    let typed: PyReadonlyArray1<'_, KeyPointRecord> = array
-        .cast::<PyArray1<KeyPointRecord>>()?
+    let typed: PyReadonlyArray1<'_, R> = array
+        .cast::<PyArray1<R>>()?
         .try_readonly()
         .map_err(|e| invalid_input(py, "ArrayBorrowed", format!("{what}: {e}")))?;
-    Ok(typed.as_array().iter().map(|k| k.0).collect())
+    Ok(typed.as_array().iter().copied().collect())
+}
+
+/// Keypoints from a structured array of the keypoint dtype (`clatch.KEYPOINT_DTYPE`).
+pub fn keypoints_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<KeyPoint>> {
+    let records: Vec<KeyPointRecord> = records_in(obj, what, "clatch.KEYPOINT_DTYPE")?;
+    Ok(records.into_iter().map(|k| k.0).collect())
+}
+
+/// Matches from a structured array of the match dtype (`clatch.MATCH_DTYPE`).
+pub fn matches_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<Match>> {
+    let records: Vec<MatchRecord> = records_in(obj, what, "clatch.MATCH_DTYPE")?;
+    Ok(records.into_iter().map(|m| m.0).collect())
 }

@@ -28,6 +28,8 @@ pub enum Class {
     DeviceOutOfMemory,
     /// An image file could not be read (also an `OSError`).
     ImageRead,
+    /// The COLMAP database or match list could not be written (also an `OSError`).
+    Database,
 }
 
 impl Class {
@@ -39,11 +41,13 @@ impl Class {
             Class::Cuda => "CudaError",
             Class::DeviceOutOfMemory => "DeviceOutOfMemoryError",
             Class::ImageRead => "ImageReadError",
+            Class::Database => "DatabaseError",
         }
     }
 
     fn cell(self) -> &'static PyOnceLock<Py<PyType>> {
-        static CELLS: [PyOnceLock<Py<PyType>>; 6] = [
+        static CELLS: [PyOnceLock<Py<PyType>>; 7] = [
+            PyOnceLock::new(),
             PyOnceLock::new(),
             PyOnceLock::new(),
             PyOnceLock::new(),
@@ -132,6 +136,29 @@ pub fn from_decode(py: Python<'_>, e: clatch::decode::DecodeError) -> PyErr {
     raise(py, Class::ImageRead, variant_name(&debug), e.to_string())
 }
 
+/// A COLMAP error (`clatch.colmap`) as its Python exception: a file that cannot be read as an
+/// `ImageReadError`, a database or match list that cannot be written as a `DatabaseError`, a library
+/// error as its own class, anything else about the input as an `InvalidInputError`.
+pub fn from_colmap(py: Python<'_>, e: clatch::colmap::ColmapError) -> PyErr {
+    use clatch::colmap::ColmapError as E;
+    let class = match e {
+        E::Decode(d) => return from_decode(py, d),
+        E::Clatch(c) => return from_clatch(py, c),
+        E::Image { ref source, .. } => class_of(source),
+        E::ImageDir { .. } => Class::ImageRead,
+        E::Sqlite { .. } | E::DatabaseExists { .. } | E::MatchListIo(_) => Class::Database,
+        _ => Class::InvalidInput,
+    };
+    let debug = format!("{e:?}");
+    raise(py, class, variant_name(&debug), e.to_string())
+}
+
+impl<T> OrRaise<T> for Result<T, clatch::colmap::ColmapError> {
+    fn or_raise(self, py: Python<'_>) -> PyResult<T> {
+        self.map_err(|e| from_colmap(py, e))
+    }
+}
+
 /// Extension trait: `clatch::Result<T>` into `PyResult<T>`.
 pub trait OrRaise<T> {
     /// The error raised as its Python exception.
@@ -165,6 +192,15 @@ pub fn compute<T, F>(py: Python<'_>, f: F) -> PyResult<T>
 where
     F: FnOnce() -> clatch::Result<T> + Send,
     T: Send,
+{
+    compute_with(py, f)
+}
+
+/// [`compute`] for a closure with another error type than `clatch::Error` (`ColmapError`).
+pub fn compute_with<T, E, F>(py: Python<'_>, f: F) -> PyResult<T>
+where
+    F: FnOnce() -> Result<T, E> + Send,
+    Result<T, E>: OrRaise<T> + Send,
 {
     match py.detach(|| catch_unwind(AssertUnwindSafe(f))) {
         Ok(result) => result.or_raise(py),

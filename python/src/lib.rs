@@ -4,6 +4,7 @@
 mod arrays;
 mod backend;
 mod bench;
+mod colmap;
 mod errors;
 mod extractor;
 mod matcher;
@@ -69,6 +70,7 @@ fn _clatch(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_class::<extractor::Extractor>()?;
     m.add_class::<matcher::Matcher>()?;
+    colmap::register(m)?;
     m.add_function(wrap_pyfunction!(imread, m)?)?;
     m.add_function(wrap_pyfunction!(to_gray, m)?)?;
     m.add_function(wrap_pyfunction!(_reads_in_place, m)?)?;

@@ -107,3 +107,16 @@ def reference_match(
 
 def as_tuples(matches: np.ndarray) -> list[tuple[int, int, int]]:
     return [(int(m["query"]), int(m["train"]), int(m["distance"])) for m in matches]
+
+
+def photo_folder(folder: Path, count: int, size: int = 256, seed: int = 11) -> Path:
+    """``count`` overlapping views of one textured scene (``size`` x ``size`` crops at shifted
+    offsets) as PGM files ``view0.pgm`` ...: every pair shares most of its pixels, so it has matches."""
+    scene = synthetic(size + 160, size + 160, seed)
+    # Smooth once so that corners survive the shifts as corners, not as pixel noise.
+    scene = ((scene[:-1, :-1].astype(np.uint16) + scene[1:, 1:]) // 2).astype(np.uint8)
+    offsets = [(0, 0), (40, 28), (80, 60), (16, 96), (108, 24), (60, 120), (120, 120), (96, 8)]
+    for k in range(count):
+        dy, dx = offsets[k % len(offsets)]
+        write_pnm(folder / f"view{k}.pgm", scene[dy : dy + size, dx : dx + size])
+    return folder

@@ -1,5 +1,7 @@
 //! What can go wrong while writing a COLMAP database or match list.
 
+use std::path::PathBuf;
+
 use thiserror::Error;
 
 /// Errors of [`crate::colmap`]. Each says which image, pair or SQL operation was involved.
@@ -55,6 +57,69 @@ pub enum ColmapError {
     /// Writing the match list failed.
     #[error("writing the COLMAP match list: {0}")]
     MatchListIo(std::io::Error),
+
+    /// The image folder could not be listed.
+    #[error("cannot list the image folder {path}: {source}", path = .path.display())]
+    ImageDir {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+
+    /// The image folder holds no image file.
+    #[error("no image in {path} (looked for the extensions {extensions})", path = .path.display())]
+    NoImages { path: PathBuf, extensions: String },
+
+    /// A file name COLMAP cannot take (not UTF-8, or with whitespace, which its match list cannot hold).
+    #[error("{path}: {reason}; rename the file", path = .path.display())]
+    ImageName { path: PathBuf, reason: &'static str },
+
+    /// An image too small for the detector to score a single pixel.
+    #[error(
+        "{path} is {width}x{height}: keypoints are detected at least {margin} pixels from every border, \
+         so an image needs at least {min}x{min} pixels",
+        path = .path.display()
+    )]
+    ImageTooSmall {
+        path: PathBuf,
+        width: u32,
+        height: u32,
+        margin: usize,
+        min: usize,
+    },
+
+    /// Images of different sizes with one given camera matrix.
+    #[error(
+        "{path} is {got_w}x{got_h} but the first image is {want_w}x{want_h}: one camera matrix needs one image size",
+        path = .path.display()
+    )]
+    ImageSizeMismatch {
+        path: PathBuf,
+        got_w: u32,
+        got_h: u32,
+        want_w: u32,
+        want_h: u32,
+    },
+
+    /// An image file that could not be read or decoded.
+    #[error("{0}")]
+    Decode(#[from] crate::decode::DecodeError),
+
+    /// A library error about one image (its size, its extraction).
+    #[error("{path}: {source}", path = .path.display())]
+    Image { path: PathBuf, source: crate::Error },
+
+    /// A library error with no image attached (a batch extraction, the backend).
+    #[error("{0}")]
+    Clatch(#[from] crate::Error),
+
+    /// Matches of a pair whose image index is not one of the photos written.
+    #[error("pair ({i}, {j}) of {photos} photos: {reason}")]
+    BadPair {
+        i: usize,
+        j: usize,
+        photos: usize,
+        reason: &'static str,
+    },
 
     /// More rows than a COLMAP blob (or its `rows` column) can describe.
     #[error("{what}: {count} rows is more than COLMAP can store")]

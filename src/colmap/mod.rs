@@ -1,5 +1,11 @@
 //! Handing keypoints and matches to [COLMAP](https://colmap.github.io) 3.8 for structure from motion
-//! (feature `colmap`).
+//! (feature `colmap`, which turns on `image`).
+//!
+//! A folder of photos goes through [`ImageFolder`] (which files, their names and sizes, checked before
+//! any work), [`extract_photos`] (features with the positions refined by a [`Refinement`]),
+//! [`crate::Matcher::match_pairs`] and [`FolderWriter`] (the database and the match list, in one
+//! order): the command-line tool's `clatch colmap` and the Python package's `clatch.colmap` and
+//! `clatch.ray` all take this path, so they write the same bytes.
 //!
 //! COLMAP cannot match binary descriptors and needs none: it gets keypoints in its SQLite database
 //! ([`Database`]) and putative matches as a text file ([`MatchList`]) that
@@ -22,15 +28,25 @@
 //! ```
 
 mod camera;
+mod corner;
 mod database;
 mod error;
+pub mod exif;
+mod folder;
 mod match_list;
 pub mod schema;
+mod writer;
 
 pub use camera::{DEFAULT_FOCAL_FACTOR, PINHOLE_MODEL_ID, PinholeCamera};
+pub use corner::{Refinement, refine_corners};
 pub use database::{Database, check_match_indices};
 pub use error::ColmapError;
+pub use folder::{
+    DEFAULT_GRID, IMAGE_EXTENSIONS, ImageFolder, Photo, check_detectable, extract_photo,
+    extract_photos, image_name, list_images, photo_camera,
+};
 pub use match_list::MatchList;
+pub use writer::FolderWriter;
 
 use crate::keypoint::KeyPoint;
 use crate::matching::Match;

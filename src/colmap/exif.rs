@@ -1,5 +1,5 @@
-//! The one EXIF field `clatch colmap` uses: the focal length in 35 mm film terms, from which COLMAP
-//! too derives a focal length in pixels when a photo carries no better calibration.
+//! The one EXIF field a folder of photos is read for: the focal length in 35 mm film terms, from which
+//! COLMAP too derives a focal length in pixels when a photo carries no better calibration.
 
 /// EXIF tag of the pointer to the Exif sub-IFD (in IFD0).
 const EXIF_IFD_POINTER: u16 = 0x8769;

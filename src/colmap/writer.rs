@@ -1,0 +1,155 @@
+//! The one writer of a folder's COLMAP input: the database (cameras, images, keypoints) and the match
+//! list, in the order every run writes them.
+
+use std::io::Write;
+use std::path::Path;
+
+use crate::colmap::camera::PinholeCamera;
+use crate::colmap::database::{Database, check_match_indices};
+use crate::colmap::error::ColmapError;
+use crate::colmap::folder::{Photo, photo_camera};
+use crate::colmap::match_list::MatchList;
+use crate::matching::Match;
+
+/// A camera's key without a shared K: one camera per image size and EXIF focal length.
+type CameraKey = ((u32, u32), Option<u16>);
+
+/// Writes a folder's photos into a new COLMAP 3.8 database and their matches into a match list.
+///
+/// Photos go in first, in image-id order ([`FolderWriter::add_photo`]), then the matches of each pair
+/// ([`FolderWriter::add_matches`]) in the order the pairs are listed; [`FolderWriter::finish`]
+/// commits the database. With one camera given, every photo shares it (and must have its size);
+/// without, each distinct image size and EXIF focal length gets its own ([`photo_camera`]), in the
+/// order of the photos. The same calls give the same bytes: a database is a function of its photos and
+/// camera, a match list of its pairs and matches, whatever process computed them.
+///
+/// ```
+/// use clatch::colmap::{FolderWriter, Photo};
+/// use clatch::{KeyPoint, Match};
+///
+/// let path = std::env::temp_dir().join(format!("clatch-doc-writer-{}.db", std::process::id()));
+/// # std::fs::remove_file(&path).ok();
+/// let photo = |name: &str| Photo {
+///     name: name.into(),
+///     width: 640,
+///     height: 480,
+///     focal_35mm: None,
+///     keypoints: vec![KeyPoint::new(10.0, 20.0), KeyPoint::new(30.0, 40.0)],
+/// };
+/// let mut writer = FolderWriter::create(&path, Vec::new(), None)?;
+/// writer.add_photo(&photo("a.png"))?;
+/// writer.add_photo(&photo("b.png"))?;
+/// writer.add_matches(0, 1, &[Match { query: 1, train: 0, distance: 12 }])?;
+/// let list = writer.finish()?;
+/// assert_eq!(String::from_utf8(list).unwrap(), "a.png b.png\n1 0\n\n");
+/// # std::fs::remove_file(&path).ok();
+/// # Ok::<(), clatch::colmap::ColmapError>(())
+/// ```
+pub struct FolderWriter<W: Write> {
+    db: Database,
+    list: MatchList<W>,
+    /// The given camera's id and size.
+    shared: Option<(u32, (u32, u32))>,
+    cameras: Vec<(CameraKey, u32)>,
+    /// Name, image id and keypoint count of each photo written.
+    photos: Vec<(String, u32, usize)>,
+}
+
+impl<W: Write> FolderWriter<W> {
+    /// Creates the database at `database` (an existing file is an error) and writes the match list
+    /// to `match_list`. `camera`: one camera for every photo, or `None` for one per size and focal.
+    pub fn create(
+        database: &Path,
+        match_list: W,
+        camera: Option<&PinholeCamera>,
+    ) -> Result<Self, ColmapError> {
+        let mut db = Database::create(database)?;
+        let shared = camera
+            .map(|c| db.add_camera(c).map(|id| (id, (c.width, c.height))))
+            .transpose()?;
+        Ok(Self {
+            db,
+            list: MatchList::new(match_list),
+            shared,
+            cameras: Vec::new(),
+            photos: Vec::new(),
+        })
+    }
+
+    /// Adds the next photo (its camera, its image row and its keypoints); returns its index, the one
+    /// [`FolderWriter::add_matches`] takes (its COLMAP image id is that plus 1).
+    pub fn add_photo(&mut self, photo: &Photo) -> Result<usize, ColmapError> {
+        let size = (photo.width, photo.height);
+        let camera_id = match self.shared {
+            Some((id, want)) if want == size => id,
+            Some((_, (want_w, want_h))) => {
+                return Err(ColmapError::ImageSizeMismatch {
+                    path: photo.name.clone().into(),
+                    got_w: photo.width,
+                    got_h: photo.height,
+                    want_w,
+                    want_h,
+                });
+            }
+            None => {
+                let key = (size, photo.focal_35mm);
+                match self.cameras.iter().find(|(k, _)| *k == key) {
+                    Some(&(_, id)) => id,
+                    None => {
+                        let camera = photo_camera(photo.width, photo.height, photo.focal_35mm)?;
+                        let id = self.db.add_camera(&camera)?;
+                        self.cameras.push((key, id));
+                        id
+                    }
+                }
+            }
+        };
+        let image_id = self.db.add_image(&photo.name, camera_id)?;
+        self.db.set_keypoints(image_id, &photo.keypoints)?;
+        self.photos
+            .push((photo.name.clone(), image_id, photo.keypoints.len()));
+        Ok(self.photos.len() - 1)
+    }
+
+    /// Appends the matches of photos `i` and `j` (indices of [`FolderWriter::add_photo`]; `query`
+    /// indexes `i`'s keypoints, `train` `j`'s) to the match list, every index checked. A pair without
+    /// matches is left out of the list, as COLMAP needs nothing of it.
+    pub fn add_matches(
+        &mut self,
+        i: usize,
+        j: usize,
+        matches: &[Match],
+    ) -> Result<(), ColmapError> {
+        let photos = self.photos.len();
+        let bad = |reason| ColmapError::BadPair {
+            i,
+            j,
+            photos,
+            reason,
+        };
+        if i == j {
+            return Err(bad("a pair needs two different photos"));
+        }
+        let (Some((name_i, id_i, n_i)), Some((name_j, id_j, n_j))) =
+            (self.photos.get(i), self.photos.get(j))
+        else {
+            return Err(bad("an index is not one of the photos written"));
+        };
+        check_match_indices(*id_i, *id_j, matches, *n_i, *n_j)?;
+        if !matches.is_empty() {
+            self.list.add_pair(name_i, name_j, matches)?;
+        }
+        Ok(())
+    }
+
+    /// Photos written so far.
+    pub fn photos(&self) -> usize {
+        self.photos.len()
+    }
+
+    /// Commits the database, flushes the match list and returns its writer.
+    pub fn finish(self) -> Result<W, ColmapError> {
+        self.db.finish()?;
+        self.list.into_inner()
+    }
+}

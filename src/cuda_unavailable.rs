@@ -35,6 +35,11 @@ impl GpuStream {
         Err(cuda_unavailable(ordinal, NOT_BUILT))
     }
 
+    /// A stream of the device's pool: always [`crate::Error::BackendUnavailable`] in this build.
+    pub(crate) fn pooled(ordinal: usize) -> Result<Self> {
+        Self::new(ordinal)
+    }
+
     /// The device ordinal.
     pub fn ordinal(&self) -> usize {
         match self.never {}

@@ -9,17 +9,24 @@ use cudarc::driver::{
 };
 
 use super::device::driver_error;
+use crate::parallel::*;
 use crate::error::{Error, Result};
 
 // With the `internals` feature, tests can make the `n`-th device allocation of a thread fail
 // ([`hooks::fail_allocation`]), so that every allocation site's error path runs on a real device.
+// They also count this thread's allocations ([`hooks::allocations`]), so that tests can check that a
+// warm steady state allocates nothing.
 #[cfg(feature = "internals")]
 thread_local! {
     static FAIL_AFTER: std::cell::Cell<Option<usize>> = const { std::cell::Cell::new(None) };
+    static ALLOCATIONS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
 }
 
 /// The failure injected at this allocation, if any (always none without the `internals` feature).
+/// Every device and pinned host allocation of the crate passes here first.
 fn injected_failure(operation: &str, bytes: usize) -> Result<()> {
+    #[cfg(feature = "internals")]
+    ALLOCATIONS.set(ALLOCATIONS.get() + 1);
     #[cfg(feature = "internals")]
     if let Some(remaining) = FAIL_AFTER.get() {
         if remaining == 0 {
@@ -64,6 +71,22 @@ pub(crate) fn alloc_zeros<T: DeviceRepr + ValidAsZeroBits>(
         .map_err(|e| with_bytes(driver_error(operation)(e), bytes))
 }
 
+/// `len` elements of page-locked host memory for copies queued on `stream`'s device (contents unset:
+/// the caller writes before any copy reads, or reads only what a copy wrote).
+pub(crate) fn alloc_pinned<T: DeviceRepr>(
+    stream: &Arc<CudaStream>,
+    len: usize,
+    operation: &str,
+) -> Result<PinnedHostSlice<T>> {
+    let len = len.max(1);
+    let bytes = len.saturating_mul(size_of::<T>());
+    injected_failure(operation, bytes)?;
+    // SAFETY: every user of the buffer writes it (or lets a copy write it) before reading it; pinned
+    // buffers only hold plain old data (`ValidAsZeroBits` at the read sites).
+    unsafe { stream.context().alloc_pinned::<T>(len) }
+        .map_err(|e| with_bytes(driver_error(operation)(e), bytes))
+}
+
 /// A copy of `data` on the device, queued on `stream` (from pageable memory: for small uploads).
 pub(crate) fn upload<T: DeviceRepr>(
     stream: &Arc<CudaStream>,
@@ -99,18 +122,13 @@ fn pool() -> &'static Pool {
     POOL.get_or_init(Default::default)
 }
 
-/// Uploads `len` bytes written by `fill` into a pinned staging buffer, then copied to a new device
-/// buffer on `stream`. The staging buffer returns to the pool; a later user takes it once this copy has
-/// finished reading it (and cudarc's own event makes any user wait for that in any case).
-pub(crate) fn upload_staged(
-    stream: &Arc<CudaStream>,
-    len: usize,
-    operation: &str,
-    fill: impl FnOnce(&mut [u8]),
-) -> Result<CudaSlice<u8>> {
-    injected_failure(operation, len)?;
-    let ctx = stream.context();
-    let key = (ctx.ordinal(), len);
+/// Rows of a band of a staged upload: about this many bytes, so that the host fills band `k + 1`
+/// into one staging buffer while the copy engine moves band `k` out of another.
+const BAND_BYTES: usize = 1 << 20;
+
+/// A staging buffer of `len` bytes whose last copy has finished, from the pool or new.
+fn staging(stream: &Arc<CudaStream>, len: usize, operation: &str) -> Result<PinnedHostSlice<u8>> {
+    let key = (stream.context().ordinal(), len);
     let reused = pool()
         .lock()
         .unwrap_or_else(|p| p.into_inner())
@@ -119,28 +137,69 @@ pub(crate) fn upload_staged(
             let idle = kept.iter().position(|(_, copied)| copied.is_complete())?;
             Some(kept.swap_remove(idle).0)
         });
-    let mut staging = match reused {
-        Some(buffer) => buffer,
-        // SAFETY: the buffer is fully written by `fill` below before it is read.
-        None => unsafe { ctx.alloc_pinned::<u8>(len) }
-            .map_err(|e| with_bytes(driver_error("pinned staging allocation")(e), len))?,
-    };
-    let host = staging
-        .as_mut_slice()
-        .map_err(driver_error("waiting for a staging buffer"))?;
-    fill(host);
-    let device = stream
-        .clone_htod(&staging)
-        .map_err(|e| with_bytes(driver_error(operation)(e), len))?;
-    let copied = stream
-        .record_event(None)
-        .map_err(driver_error("event record"))?;
-    let mut pool = pool().lock().unwrap_or_else(|p| p.into_inner());
-    let kept = pool.entry(key).or_default();
-    if kept.len() < kept_for(len) {
-        kept.push((staging, copied));
+    match reused {
+        Some(buffer) => Ok(buffer),
+        None => alloc_pinned::<u8>(stream, len, operation),
     }
-    Ok(device)
+}
+
+/// Copies `rows` rows of `pitch` bytes, each written by `fill(y, row)`, into `dst` (at least
+/// `rows * pitch` bytes) on `stream`, in bands through pinned staging buffers: the host fills a band
+/// (rows in parallel) while the copies of the bands before it run. The staging buffers return to the
+/// pool; a later user takes one once its copy has finished reading it (cudarc's own event makes any
+/// user wait for that in any case). Returns when every band is queued, with the copies in flight.
+pub(crate) fn upload_rows(
+    stream: &Arc<CudaStream>,
+    dst: &mut CudaSlice<u8>,
+    (rows, pitch): (usize, usize),
+    operation: &str,
+    fill: impl Fn(usize, &mut [u8]) + Sync,
+) -> Result<()> {
+    super::invariant(
+        pitch > 0 && dst.len() >= rows * pitch,
+        "image upload",
+        || {
+            format!(
+                "{rows} rows of {pitch} bytes into {} bytes",
+                dst.len()
+            )
+        },
+    )?;
+    let band_rows = (BAND_BYTES / pitch).max(1);
+    let mut y0 = 0;
+    while y0 < rows {
+        let y1 = (y0 + band_rows).min(rows);
+        let len = (y1 - y0) * pitch;
+        let mut staged = staging(stream, len, "pinned staging allocation")?;
+        let host = staged
+            .as_mut_slice()
+            .map_err(driver_error("waiting for a staging buffer"))?;
+        host.par_chunks_exact_mut(pitch)
+            .with_min_len(64)
+            .enumerate()
+            .for_each(|(i, row)| fill(y0 + i, row));
+        // The staging buffer is exactly `len` bytes, the destination band too: the copy's length
+        // check holds.
+        stream
+            .memcpy_htod(&staged, &mut dst.slice_mut(y0 * pitch..y1 * pitch))
+            .map_err(driver_error(operation))?;
+        let copied = stream
+            .record_event(None)
+            .map_err(driver_error("event record"))?;
+        let mut pool = pool().lock().unwrap_or_else(|p| p.into_inner());
+        let kept = pool.entry((stream.context().ordinal(), len)).or_default();
+        if kept.len() < kept_for(len) {
+            kept.push((staged, copied));
+        }
+        y0 = y1;
+    }
+    Ok(())
+}
+
+/// Drops every idle staging buffer (test hooks: a cold start).
+#[cfg(feature = "internals")]
+pub(crate) fn clear_staging() {
+    pool().lock().unwrap_or_else(|p| p.into_inner()).clear();
 }
 
 #[cfg(feature = "internals")]

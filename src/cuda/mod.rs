@@ -8,6 +8,7 @@
 //! tests in `tests/cuda_*.rs` compare the two bit for bit. The driver is loaded at run time, so a binary
 //! built with `cuda` still starts on a machine without one and reports `no CUDA driver` as a typed error.
 
+mod arena;
 mod describe;
 mod describe_opencv;
 mod detect;

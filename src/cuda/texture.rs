@@ -2,15 +2,14 @@
 
 use std::sync::Arc;
 
-use crate::parallel::*;
-
 use cudarc::driver::{CudaSlice, CudaStream, DevicePtr, LaunchConfig, PushKernelArg, sys};
 
+use super::arena::{Lane, Scratch};
 use super::device::{GpuDevice, driver_error};
 use super::header::{
     CLATCH_PYRAMID_TILE_X, CLATCH_PYRAMID_TILE_Y, CLATCH_SMOOTH_TILE_X, CLATCH_SMOOTH_TILE_Y,
 };
-use super::memory::{alloc_zeros, upload_staged};
+use super::memory::upload_rows;
 use crate::describe::Smoothing;
 use crate::error::{Error, Result};
 use crate::gray_view::GrayView;
@@ -29,7 +28,7 @@ impl TextureObject {
 impl Drop for TextureObject {
     fn drop(&mut self) {
         // SAFETY: the handle came from cuTexObjectCreate and is destroyed once. Launches that use it
-        // were synchronised by the owner before dropping (DeviceImage keeps the buffer alive longer).
+        // have run: its owner (an arena's buffer) waits for its stream before replacing or dropping it.
         unsafe {
             sys::cuTexObjectDestroy(self.0);
         }
@@ -73,16 +72,15 @@ fn texture_object(
 /// A gray image uploaded once, read by kernels through `texture` (one byte per texel, see
 /// [`texture_object`]), and, for description, through the quad texture built by
 /// `clatch_build_quads` (kernels/describe.cu): four bilinear neighbours per texel, of the pixels
-/// themselves or of their smoothed copy ([`Smoothing`]).
+/// themselves or of their smoothed copy ([`Smoothing`]). Its buffers come from a lane's arena, with
+/// the texture objects over them (kept with the buffers for the next image of the same shape), and
+/// are used only on that lane's stream.
 #[derive(Debug)]
 pub struct DeviceImage {
-    // Textures are declared before the buffers they read, so they are destroyed first.
-    texture: TextureObject,
-    quads: Option<TextureObject>,
-    #[allow(dead_code)]
-    pixels: CudaSlice<u8>,
-    #[allow(dead_code)]
-    quad_texels: Option<CudaSlice<u8>>,
+    texture: u64,
+    quads: Option<u64>,
+    pixels: Scratch<u8>,
+    quad_texels: Option<Scratch<u8>>,
     /// The smoothing the quad texture was built with.
     quads_smoothing: Smoothing,
     pitch: usize,
@@ -91,32 +89,37 @@ pub struct DeviceImage {
 }
 
 impl DeviceImage {
-    /// Copies `image` to the device on `stream` with the row pitch the texture unit needs.
-    pub fn upload(dev: &GpuDevice, stream: &Arc<CudaStream>, image: &GrayView) -> Result<Self> {
+    /// Copies `image` to the device on `lane`'s stream with the row pitch the texture unit needs, in
+    /// bands through pinned staging buffers ([`upload_rows`]).
+    pub(crate) fn upload(dev: &GpuDevice, lane: &Lane, image: &GrayView) -> Result<Self> {
         let (width, height) = (image.width(), image.height());
         let pitch = width.div_ceil(dev.pitch_alignment) * dev.pitch_alignment;
+        let mut pixels = lane.scratch::<u8>(pitch * height, "image upload")?;
         // The copy into pinned memory is host time every queued image pays (about 0.2 ms for 1080p on
-        // one core): rows in parallel.
-        let pixels = upload_staged(stream, pitch * height, "image upload", |staged| {
-            staged
-                .par_chunks_exact_mut(pitch)
-                .with_min_len(64)
-                .enumerate()
-                .for_each(|(y, row)| {
-                    row[..width].copy_from_slice(image.row(y));
-                    row[width..].fill(0);
-                });
-        })?;
-        Self::from_pixels(pixels, stream, (width, height, pitch))
+        // one core): rows in parallel, band after band.
+        upload_rows(
+            lane,
+            pixels.whole_mut(),
+            (height, pitch),
+            "image upload",
+            |y, row| {
+                row[..width].copy_from_slice(image.row(y));
+                row[width..].fill(0);
+            },
+        )?;
+        Self::from_pixels(pixels, lane, (width, height, pitch))
     }
 
     /// Wraps `height` rows of `pitch` bytes (the first `width` of each are the image) with its texture.
     fn from_pixels(
-        pixels: CudaSlice<u8>,
+        mut pixels: Scratch<u8>,
         stream: &Arc<CudaStream>,
         (width, height, pitch): (usize, usize, usize),
     ) -> Result<Self> {
-        let texture = texture_object(&pixels, stream, (width, height, pitch), 1)?;
+        let shape = (width, height, pitch);
+        let texture = pixels.texture((shape, 1), |buffer| {
+            texture_object(buffer, stream, shape, 1)
+        })?;
         Ok(Self {
             texture,
             quads: None,
@@ -134,21 +137,21 @@ impl DeviceImage {
     pub(crate) fn downscale(
         &self,
         dev: &GpuDevice,
-        stream: &Arc<CudaStream>,
+        lane: &Lane,
         step: i64,
         (width, height): (usize, usize),
     ) -> Result<Self> {
         let pitch = width.div_ceil(dev.pitch_alignment) * dev.pitch_alignment;
-        let mut pixels = alloc_zeros::<u8>(stream, pitch * height, "pyramid level")?;
+        let mut pixels = lane.scratch::<u8>(pitch * height, "pyramid level")?;
         let (src_pitch, src_w, src_h) = (self.pitch as i32, self.width as i32, self.height as i32);
         let (dst_pitch, dst_w, dst_h) = (pitch as i32, width as i32, height as i32);
-        let mut launch = stream.launch_builder(dev.kernel("clatch_downscale"));
+        let mut launch = lane.launch_builder(dev.kernel("clatch_downscale"));
         launch
-            .arg(&self.pixels)
+            .arg(self.pixels.whole())
             .arg(&src_pitch)
             .arg(&src_w)
             .arg(&src_h)
-            .arg(&mut pixels)
+            .arg(pixels.whole_mut())
             .arg(&dst_pitch)
             .arg(&dst_w)
             .arg(&dst_h)
@@ -166,11 +169,12 @@ impl DeviceImage {
             block_dim: (tile.0 as u32, tile.1 as u32, 1),
             shared_mem_bytes: 0,
         };
-        // SAFETY: matches clatch_downscale's signature; the source holds `self.height` rows of
-        // `self.pitch` bytes and every read is clamped inside it (taps are below the source sides);
-        // `pixels` holds `height` rows of `pitch` bytes, of which the first `width` are written.
+        // SAFETY: matches clatch_downscale's signature; the source holds at least `self.height` rows
+        // of `self.pitch` bytes and every read is clamped inside them (taps are below the source
+        // sides); `pixels` holds at least `height` rows of `pitch` bytes, of which the first `width`
+        // are written (and only those are read, through the texture's width).
         unsafe { launch.launch(config) }.map_err(driver_error("clatch_downscale"))?;
-        Self::from_pixels(pixels, stream, (width, height, pitch))
+        Self::from_pixels(pixels, lane, (width, height, pitch))
     }
 
     /// Queues a smoothed copy of the pixels (same size and pitch) on `stream`:
@@ -179,23 +183,23 @@ impl DeviceImage {
     pub(crate) fn smoothed(
         &self,
         dev: &GpuDevice,
-        stream: &Arc<CudaStream>,
+        lane: &Lane,
         smoothing: Smoothing,
-    ) -> Result<Option<CudaSlice<u8>>> {
+    ) -> Result<Option<Scratch<u8>>> {
         let kernel = match smoothing {
             Smoothing::None => return Ok(None),
             Smoothing::Binomial3 => "clatch_smooth_binomial3",
             Smoothing::Binomial5 => "clatch_smooth_binomial5",
         };
-        let mut smoothed = alloc_zeros::<u8>(stream, self.pitch * self.height, "smoothed image")?;
+        let mut smoothed = lane.scratch::<u8>(self.pitch * self.height, "smoothed image")?;
         let (pitch, width, height) = (self.pitch as i32, self.width as i32, self.height as i32);
-        let mut launch = stream.launch_builder(dev.kernel(kernel));
+        let mut launch = lane.launch_builder(dev.kernel(kernel));
         launch
-            .arg(&self.pixels)
+            .arg(self.pixels.whole())
             .arg(&pitch)
             .arg(&width)
             .arg(&height)
-            .arg(&mut smoothed)
+            .arg(smoothed.whole_mut())
             .arg(&pitch);
         let tile = (CLATCH_SMOOTH_TILE_X as usize, CLATCH_SMOOTH_TILE_Y as usize);
         let config = LaunchConfig {
@@ -208,8 +212,8 @@ impl DeviceImage {
             shared_mem_bytes: 0,
         };
         // SAFETY: matches the kernel's signature (source, pitch, width, height, destination, pitch);
-        // both buffers hold `height` rows of `pitch` bytes; every read is clamped inside the image and
-        // only pixels with x < width, y < height are written.
+        // both buffers hold at least `height` rows of `pitch` bytes; every read is clamped inside the
+        // image and only pixels with x < width, y < height are written (and read afterwards).
         unsafe { launch.launch(config) }.map_err(driver_error(kernel))?;
         Ok(Some(smoothed))
     }
@@ -220,7 +224,7 @@ impl DeviceImage {
     pub fn build_quads(
         &mut self,
         dev: &GpuDevice,
-        stream: &Arc<CudaStream>,
+        lane: &Lane,
         smoothing: Smoothing,
     ) -> Result<()> {
         if self.quads.is_some() {
@@ -235,34 +239,38 @@ impl DeviceImage {
                 ),
             });
         }
-        // The smoothed copy is freed when it goes out of scope below, in stream order (cudarc frees
-        // on the stream, after clatch_build_quads has read it).
-        let smoothed = self.smoothed(dev, stream, smoothing)?;
-        let source = smoothed.as_ref().unwrap_or(&self.pixels);
+        // The smoothed copy goes back to the arena when it goes out of scope below: the next user of
+        // it queues on this stream, after clatch_build_quads has read it.
+        let smoothed = self.smoothed(dev, lane, smoothing)?;
+        let source = smoothed.as_ref().unwrap_or(&self.pixels).whole();
         let (qw, qh) = (self.width + 1, self.height + 1);
         let row_bytes = qw * 4;
         let pitch = row_bytes.div_ceil(dev.pitch_alignment) * dev.pitch_alignment;
-        let mut texels = alloc_zeros::<u8>(stream, pitch * qh, "quad texture")?;
+        let mut texels = lane.scratch::<u8>(pitch * qh, "quad texture")?;
         let (pitch_i, width, height) = (self.pitch as i32, self.width as i32, self.height as i32);
         let quad_pitch = (pitch / 4) as i32;
-        let mut launch = stream.launch_builder(dev.kernel("clatch_build_quads"));
+        let mut launch = lane.launch_builder(dev.kernel("clatch_build_quads"));
         launch
             .arg(source)
             .arg(&pitch_i)
             .arg(&width)
             .arg(&height)
-            .arg(&mut texels)
+            .arg(texels.whole_mut())
             .arg(&quad_pitch);
         let config = LaunchConfig {
             grid_dim: (qw.div_ceil(32) as u32, qh.div_ceil(8) as u32, 1),
             block_dim: (32, 8, 1),
             shared_mem_bytes: 0,
         };
-        // SAFETY: matches clatch_build_quads's signature; `source` holds height rows of `pitch`
-        // bytes, `texels` (height + 1) rows of `quad_pitch` 4-byte texels, of which width + 1 are
-        // written per row (pitch is a multiple of the texture pitch alignment, itself of 4).
+        // SAFETY: matches clatch_build_quads's signature; `source` holds at least height rows of
+        // `pitch` bytes, `texels` at least (height + 1) rows of `quad_pitch` 4-byte texels, of which
+        // width + 1 are written per row (pitch is a multiple of the texture pitch alignment, itself of
+        // 4), and only those are read, through the texture's width.
         unsafe { launch.launch(config) }.map_err(driver_error("clatch_build_quads"))?;
-        self.quads = Some(texture_object(&texels, stream, (qw, qh, pitch), 4)?);
+        let shape = (qw, qh, pitch);
+        self.quads = Some(texels.texture((shape, 4), |buffer| {
+            texture_object(buffer, lane, shape, 4)
+        })?);
         self.quad_texels = Some(texels);
         self.quads_smoothing = smoothing;
         Ok(())
@@ -278,10 +286,10 @@ impl DeviceImage {
     pub(crate) fn download_like(
         &self,
         stream: &Arc<CudaStream>,
-        buffer: &CudaSlice<u8>,
+        buffer: &Scratch<u8>,
     ) -> Result<Vec<u8>> {
         let pitched = stream
-            .clone_dtoh(buffer)
+            .clone_dtoh(&buffer.whole().slice(..self.pitch * self.height))
             .map_err(driver_error("reading an image back"))?;
         Ok(pitched
             .chunks_exact(self.pitch)
@@ -292,12 +300,12 @@ impl DeviceImage {
 
     /// The quad texture's handle, once [`Self::build_quads`] was queued.
     pub fn quads(&self) -> Option<u64> {
-        self.quads.as_ref().map(TextureObject::handle)
+        self.quads
     }
 
     /// The texture handle for kernel arguments.
     pub fn texture(&self) -> u64 {
-        self.texture.handle()
+        self.texture
     }
 
     /// Width in pixels.

@@ -254,7 +254,7 @@ impl Extractor {
                 self.describe(image, &keypoints)
             }
             Backend::Cuda { device } => self
-                .detect_and_describe_async(&GpuStream::new(device)?, image)?
+                .detect_and_describe_async(&GpuStream::pooled(device)?, image)?
                 .wait(),
         }
     }

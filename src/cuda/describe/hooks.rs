@@ -14,8 +14,8 @@ pub fn time_describe_kernel(
     repeats: usize,
 ) -> Result<Vec<f32>> {
     let mut job = Job::prepare(dev, image, keypoints, config)?;
-    let stream = job.stream.clone();
-    time_launches(dev, &stream, warmup, repeats, || job.launch(dev))
+    let lane: crate::cuda::arena::Lane = (*job.lane).clone();
+    time_launches(dev, &lane, warmup, repeats, || job.launch(dev))
 }
 
 /// `image` smoothed by `smoothing` as the GPU smooths it before description
@@ -26,10 +26,10 @@ pub fn debug_smoothed(
     image: &GrayView,
     smoothing: crate::describe::Smoothing,
 ) -> Result<Vec<u8>> {
-    let stream = dev.new_stream()?;
-    let device_image = DeviceImage::upload(dev, &stream, image)?;
-    match device_image.smoothed(dev, &stream, smoothing)? {
-        Some(smoothed) => device_image.download_like(&stream, &smoothed),
-        None => device_image.download(&stream),
+    let lane = Leased::take(dev)?;
+    let device_image = DeviceImage::upload(dev, &lane, image)?;
+    match device_image.smoothed(dev, &lane, smoothing)? {
+        Some(smoothed) => device_image.download_like(&lane, &smoothed),
+        None => device_image.download(&lane),
     }
 }

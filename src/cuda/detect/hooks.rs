@@ -13,7 +13,7 @@ pub fn time_detect(
     warmup: usize,
     repeats: usize,
 ) -> Result<(Vec<f32>, Vec<KeyPoint>)> {
-    let stream = dev.new_stream()?;
+    let stream = Leased::take(dev)?;
     let device_image = DeviceImage::upload(dev, &stream, image)?;
     let mut job = DetectJob::new(&stream, image.width(), image.height(), config)?;
     let times = time_launches(dev, &stream, warmup, repeats, || {
@@ -50,10 +50,11 @@ pub fn debug_detect_stages(
     config: &DetectorConfig,
 ) -> Result<DetectStages> {
     dev.load_bench_kernels()?;
-    let stream = dev.new_stream()?;
+    let stream = Leased::take(dev)?;
     let device_image = DeviceImage::upload(dev, &stream, image)?;
     let (width, height) = (image.width(), image.height());
-    let mut texels = alloc_zeros::<u8>(&stream, width * height, "debug texels")?;
+    let mut texels =
+        crate::cuda::memory::alloc_zeros::<u8>(&stream, width * height, "debug texels")?;
     let mut read = stream.launch_builder(dev.kernel("clatch_debug_read_texture"));
     let texture = device_image.texture();
     let (w, h) = (width as i32, height as i32);
@@ -73,15 +74,15 @@ pub fn debug_detect_stages(
     let mut job = DetectJob::new(&stream, width, height, config)?;
     job.launch_stages(dev, &stream, &device_image, Stage::Suppress)?;
     let kept = stream
-        .clone_dtoh(&job.kept)
+        .clone_dtoh(&job.kept.view())
         .map_err(driver_error("debug kept map"))?;
     let mut job = DetectJob::new(&stream, width, height, config)?;
     job.launch_stages(dev, &stream, &device_image, Stage::Scan)?;
     let offsets = stream
-        .clone_dtoh(&job.counts)
+        .clone_dtoh(&job.counts.view())
         .map_err(driver_error("debug offsets"))?;
     let total = stream
-        .clone_dtoh(&job.output.total)
+        .clone_dtoh(&job.output.total.view())
         .map_err(driver_error("debug total"))?[0];
     let mut job = DetectJob::new(&stream, width, height, config)?;
     job.launch_stages(dev, &stream, &device_image, Stage::Scatter)?;
@@ -110,17 +111,21 @@ pub fn debug_subpixel_offsets(
     if keypoints.is_empty() {
         return Ok(Vec::new());
     }
-    let stream = dev.new_stream()?;
+    let stream = Leased::take(dev)?;
     let device_image = DeviceImage::upload(dev, &stream, image)?;
     let on_device = super::super::memory::upload(&stream, keypoints, "debug keypoint upload")?;
-    let mut offsets = alloc_zeros(&stream, 2 * keypoints.len(), "debug sub-pixel offsets")?;
+    let mut offsets = crate::cuda::memory::alloc_zeros::<i32>(
+        &stream,
+        2 * keypoints.len(),
+        "debug sub-pixel offsets",
+    )?;
     launch_subpixel(
         dev,
         &stream,
         &device_image,
-        &on_device,
+        &on_device.as_view(),
         keypoints.len(),
-        &mut offsets,
+        &mut offsets.as_view_mut(),
     )?;
     let flat = stream
         .clone_dtoh(&offsets)

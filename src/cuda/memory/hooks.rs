@@ -31,3 +31,21 @@ pub fn device_memory(ordinal: usize) -> Result<(usize, usize)> {
         .mem_get_info()
         .map_err(driver_error("reading free device memory"))
 }
+
+/// How many device and pinned host allocations this thread's calls have made so far (every
+/// allocation site of the crate counts, arena growth included): a warm steady state adds none.
+pub fn allocations() -> usize {
+    ALLOCATIONS.get()
+}
+
+/// Frees every buffer the crate keeps between calls on device `ordinal` that no call holds now: the
+/// device's idle streams with their scratch arenas, and the pinned staging buffers. The next call
+/// starts cold and allocates again (so allocation-failure tests reach every site).
+pub fn release_cached_memory(ordinal: usize) -> Result<()> {
+    let dev = crate::cuda::device(ordinal)?;
+    dev.lanes.clear();
+    clear_staging();
+    dev.ctx
+        .synchronize()
+        .map_err(driver_error("releasing cached memory"))
+}

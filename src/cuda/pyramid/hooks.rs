@@ -10,7 +10,7 @@ pub fn debug_pyramid_levels(
     p: &Pyramid,
     margin: usize,
 ) -> Result<Vec<Vec<u8>>> {
-    let stream = dev.new_stream()?;
+    let stream = Leased::take(dev)?;
     let plan = Plan::new(p, image.width(), image.height(), margin);
     let mut level = DeviceImage::upload(dev, &stream, image)?;
     let mut out = vec![level.download(&stream)?];

@@ -50,6 +50,10 @@ impl GpuStream {
         match self.never {}
     }
 
+    pub(crate) fn settle<T>(&self, _: Result<T>) -> Result<T> {
+        match self.never {}
+    }
+
     pub(crate) fn check_device(&self, _device: usize) -> Result<()> {
         match self.never {}
     }
@@ -164,8 +168,16 @@ pub(crate) fn detect_and_describe_async(
     _: &DetectorConfig,
     _: &DescriptorConfig,
     _: Option<&Pyramid>,
+    _: ImageLife,
 ) -> Result<PendingFeatures> {
     match stream.never {}
+}
+
+/// How long the caller's image stays valid (see the real module's `ImageLife`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum ImageLife {
+    Call,
+    Work,
 }
 
 pub(crate) fn match_async(

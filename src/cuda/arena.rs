@@ -210,6 +210,17 @@ impl Lane {
     }
 }
 
+/// `result`, after waiting for `lane`'s stream when it is an error: work queued before the error may
+/// still read the caller's image ([`super::texture::ImageLife::Work`]), which must not be released
+/// before that work has run. (On success the caller's last read-back has waited already.)
+pub(crate) fn settled<T>(lane: &Lane, result: Result<T>) -> Result<T> {
+    if result.is_err() {
+        // The error being returned is the one that matters; a failed wait says the same thing.
+        let _ = lane.synchronize();
+    }
+    result
+}
+
 /// The index of the smallest capacity of `capacities` that holds `len`, if any.
 fn best_fit(capacities: impl Iterator<Item = usize>, len: usize) -> Option<usize> {
     capacities

@@ -4,10 +4,10 @@ use std::sync::Arc;
 
 use cudarc::driver::{CudaSlice, CudaStream, CudaView, CudaViewMut, DeviceRepr, LaunchConfig, PushKernelArg};
 
-use super::arena::{Leased, PinnedScratch, Scratch};
+use super::arena::{Lane, Leased, PinnedScratch, Scratch, settled};
 use super::device::{GpuDevice, driver_error};
 use super::header::CLATCH_DESCRIBE_WARPS;
-use super::texture::DeviceImage;
+use super::texture::{DeviceImage, ImageLife};
 use crate::describe::{Described, DescriptorConfig, SamplingFrame, SkipReason, Skipped};
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
@@ -48,12 +48,15 @@ pub(crate) fn describe(
         });
     }
     let selected: Vec<KeyPoint> = keypoint_index.iter().map(|&i| keypoints[i]).collect();
-    let mut job = Job::prepare(dev, image, &selected, config)?;
-    job.launch(dev)?;
-    let words = selected.len() * width.words();
-    let mut host = job.lane.pinned::<u64>(words, "descriptor read-back buffer")?;
-    host.queue_download(0, &job.out.view())?;
-    let words = host.wait(words)?.to_vec();
+    let lane = Leased::take(dev)?;
+    let result = Job::prepare(dev, &lane, image, &selected, config).and_then(|mut job| {
+        job.launch(dev)?;
+        let words = selected.len() * width.words();
+        let mut host = lane.pinned::<u64>(words, "descriptor read-back buffer")?;
+        host.queue_download(0, &job.out.view())?;
+        Ok(host.wait(words)?.to_vec())
+    });
+    let words = settled(&lane, result)?;
     Ok(Described {
         descriptors: DescriptorSet::from_words(width, words)?,
         keypoint_index,
@@ -62,27 +65,28 @@ pub(crate) fn describe(
 }
 
 /// Everything one launch of `clatch_describe` on host-supplied keypoints needs, on the device.
-struct Job<'a> {
-    // Declared first: the buffers below go back to its arena before it goes back to the pool.
+struct Job {
     image: DeviceImage,
     keypoints: Scratch<KeyPoint>,
     count: Scratch<u32>,
     weights: DeviceWeights,
     out: Scratch<u64>,
     bits: i32,
-    lane: Leased<'a>,
+    lane: Lane,
 }
 
-impl<'a> Job<'a> {
-    /// Uploads the image and keypoints (all of which must fit) on a lane of the device's pool.
+impl Job {
+    /// Uploads the image and keypoints (all of which must fit) on `lane`. The image must stay valid
+    /// until the work queued on `lane` has run ([`ImageLife::Work`]).
     fn prepare(
-        dev: &'a GpuDevice,
+        dev: &GpuDevice,
+        lane: &Lane,
         image: &GrayView,
         keypoints: &[KeyPoint],
         config: &DescriptorConfig,
     ) -> Result<Self> {
-        let lane = Leased::take(dev)?;
-        let mut device_image = DeviceImage::upload(dev, &lane, image)?;
+        let lane = lane.clone();
+        let mut device_image = DeviceImage::upload(dev, &lane, image, ImageLife::Work)?;
         device_image.build_quads(dev, &lane, config.smoothing)?;
         let n = keypoints.len();
         let mut staged = lane.pinned::<KeyPoint>(n, "keypoint staging buffer")?;

@@ -12,13 +12,13 @@ use std::sync::Arc;
 
 use cudarc::driver::{CudaStream, CudaView, CudaViewMut, LaunchConfig, PushKernelArg, ValidAsZeroBits};
 
-use super::arena::{Lane, Leased, Scratch};
+use super::arena::{Lane, Leased, Scratch, settled};
 use super::device::{GpuDevice, driver_error};
 use super::header::{
     CLATCH_DETECT_ROW_ALIGN, CLATCH_DETECT_TILE_X, CLATCH_DETECT_TILE_Y, CLATCH_DETECT_WARPS,
     CLATCH_SCAN_CHUNK, CLATCH_SCAN_THREADS, CLATCH_SCAN_TOP_THREADS, CLATCH_SUBPIXEL_THREADS,
 };
-use super::texture::DeviceImage;
+use super::texture::{DeviceImage, ImageLife};
 use crate::detect::DetectorConfig;
 use crate::error::Result;
 use crate::gray_view::GrayView;
@@ -378,8 +378,10 @@ pub(crate) fn detect(
     config: &DetectorConfig,
 ) -> Result<Vec<KeyPoint>> {
     let lane = Leased::take(dev)?;
-    let device_image = DeviceImage::upload(dev, &lane, image)?;
-    detect_on_device(dev, &lane, &device_image, config)?.download(&lane)
+    let result = DeviceImage::upload(dev, &lane, image, ImageLife::Work).and_then(|device_image| {
+        detect_on_device(dev, &lane, &device_image, config)?.download(&lane)
+    });
+    settled(&lane, result)
 }
 
 #[cfg(feature = "internals")]

@@ -5,7 +5,8 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use cudarc::driver::{
-    CudaEvent, CudaSlice, CudaStream, DeviceRepr, PinnedHostSlice, ValidAsZeroBits,
+    CudaEvent, CudaSlice, CudaStream, DevicePtrMut, DeviceRepr, PinnedHostSlice, ValidAsZeroBits,
+    sys,
 };
 
 use super::device::driver_error;
@@ -126,8 +127,13 @@ fn pool() -> &'static Pool {
 /// into one staging buffer while the copy engine moves band `k` out of another.
 const BAND_BYTES: usize = 1 << 20;
 
-/// A staging buffer of `len` bytes whose last copy has finished, from the pool or new.
-fn staging(stream: &Arc<CudaStream>, len: usize, operation: &str) -> Result<PinnedHostSlice<u8>> {
+/// A staging buffer of `len` bytes whose last copy has finished, from the pool (with its event, to be
+/// recorded again) or new.
+fn staging(
+    stream: &Arc<CudaStream>,
+    len: usize,
+    operation: &str,
+) -> Result<(PinnedHostSlice<u8>, Option<CudaEvent>)> {
     let key = (stream.context().ordinal(), len);
     let reused = pool()
         .lock()
@@ -135,11 +141,11 @@ fn staging(stream: &Arc<CudaStream>, len: usize, operation: &str) -> Result<Pinn
         .get_mut(&key)
         .and_then(|kept| {
             let idle = kept.iter().position(|(_, copied)| copied.is_complete())?;
-            Some(kept.swap_remove(idle).0)
+            Some(kept.swap_remove(idle))
         });
     match reused {
-        Some(buffer) => Ok(buffer),
-        None => alloc_pinned::<u8>(stream, len, operation),
+        Some((buffer, copied)) => Ok((buffer, Some(copied))),
+        None => Ok((alloc_pinned::<u8>(stream, len, operation)?, None)),
     }
 }
 
@@ -170,7 +176,7 @@ pub(crate) fn upload_rows(
     while y0 < rows {
         let y1 = (y0 + band_rows).min(rows);
         let len = (y1 - y0) * pitch;
-        let mut staged = staging(stream, len, "pinned staging allocation")?;
+        let (mut staged, event) = staging(stream, len, "pinned staging allocation")?;
         let host = staged
             .as_mut_slice()
             .map_err(driver_error("waiting for a staging buffer"))?;
@@ -183,9 +189,15 @@ pub(crate) fn upload_rows(
         stream
             .memcpy_htod(&staged, &mut dst.slice_mut(y0 * pitch..y1 * pitch))
             .map_err(driver_error(operation))?;
-        let copied = stream
-            .record_event(None)
-            .map_err(driver_error("event record"))?;
+        let copied = match event {
+            Some(event) => {
+                event.record(stream).map_err(driver_error("event record"))?;
+                event
+            }
+            None => stream
+                .record_event(None)
+                .map_err(driver_error("event record"))?,
+        };
         let mut pool = pool().lock().unwrap_or_else(|p| p.into_inner());
         let kept = pool.entry((stream.context().ordinal(), len)).or_default();
         if kept.len() < kept_for(len) {
@@ -194,6 +206,87 @@ pub(crate) fn upload_rows(
         y0 = y1;
     }
     Ok(())
+}
+
+/// Whether `bytes` lies in page-locked host memory the driver knows (allocated with
+/// `cuMemHostAlloc` or registered with `cuMemHostRegister`, by clatch or anyone else in the
+/// process): its first and last byte are both host memory of the unified address space.
+pub(crate) fn is_pinned(bytes: &[u8]) -> bool {
+    let (Some(first), Some(last)) = (bytes.first(), bytes.last()) else {
+        return false;
+    };
+    [first as *const u8, last as *const u8].iter().all(|&p| {
+        let mut kind: u32 = 0;
+        // SAFETY: asks the driver about an address (never dereferenced); `kind` receives one
+        // CUmemorytype value. Memory the driver does not know is an error, i.e. "not pinned".
+        let known = unsafe {
+            sys::cuPointerGetAttribute(
+                (&mut kind as *mut u32).cast(),
+                sys::CUpointer_attribute::CU_POINTER_ATTRIBUTE_MEMORY_TYPE,
+                p as sys::CUdeviceptr,
+            )
+        };
+        known == sys::cudaError_enum::CUDA_SUCCESS
+            && kind == sys::CUmemorytype::CU_MEMORYTYPE_HOST as u32
+    })
+}
+
+/// Queues one 2-D copy of `rows` rows of `width` bytes, `stride` apart from `src` on the host, into
+/// `dst` (rows `pitch` apart) on `stream`: the copy engine reads the host memory directly.
+///
+/// # Safety
+/// `src` must stay valid and unchanged until the copy has run (the caller waits for the stream, or
+/// keeps the memory alive until work queued after the copy has completed). Page-locked memory makes
+/// the copy asynchronous; pageable memory is correct too, just slower.
+pub(crate) unsafe fn copy_rows_2d(
+    stream: &Arc<CudaStream>,
+    dst: &mut CudaSlice<u8>,
+    pitch: usize,
+    (src, width, rows, stride): (&[u8], usize, usize, usize),
+    operation: &str,
+) -> Result<()> {
+    super::invariant(
+        rows > 0
+            && width <= pitch
+            && width <= stride
+            && src.len() >= stride * (rows - 1) + width
+            && dst.len() >= pitch * rows,
+        "image upload",
+        || {
+            format!(
+                "{rows} rows of {width} bytes (stride {stride}, {} bytes) into {} bytes of pitch {pitch}",
+                src.len(),
+                dst.len()
+            )
+        },
+    )?;
+    let (device, _sync) = dst.device_ptr_mut(stream);
+    let copy = sys::CUDA_MEMCPY2D {
+        srcXInBytes: 0,
+        srcY: 0,
+        srcMemoryType: sys::CUmemorytype::CU_MEMORYTYPE_HOST,
+        srcHost: src.as_ptr().cast(),
+        srcDevice: 0,
+        srcArray: std::ptr::null_mut(),
+        srcPitch: stride,
+        dstXInBytes: 0,
+        dstY: 0,
+        dstMemoryType: sys::CUmemorytype::CU_MEMORYTYPE_DEVICE,
+        dstHost: std::ptr::null_mut(),
+        dstDevice: device,
+        dstArray: std::ptr::null_mut(),
+        dstPitch: pitch,
+        WidthInBytes: width,
+        Height: rows,
+    };
+    stream
+        .context()
+        .bind_to_thread()
+        .map_err(driver_error(operation))?;
+    // SAFETY: both extents were checked above; the caller keeps `src` alive (see above).
+    unsafe { sys::cuMemcpy2DAsync_v2(&copy, stream.cu_stream()) }
+        .result()
+        .map_err(driver_error(operation))
 }
 
 /// Drops every idle staging buffer (test hooks: a cold start).

@@ -41,6 +41,7 @@ pub(crate) use matching::{knn, match_descriptors};
 pub(crate) use pyramid::{pyramid_detect, pyramid_detect_and_describe};
 pub use stream::{GpuStream, PendingFeatures, PendingMatches};
 pub(crate) use stream::{detect_and_describe_async, match_async};
+pub(crate) use texture::ImageLife;
 
 /// The test suites' and benches' hooks into the CUDA backend (`internals` feature; not public API).
 #[cfg(feature = "internals")]

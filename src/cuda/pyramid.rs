@@ -11,11 +11,11 @@
 
 use cudarc::driver::CudaView;
 
-use super::arena::{Lane, Leased, Scratch};
+use super::arena::{Lane, Leased, Scratch, settled};
 use super::describe::{launch_describe, upload_counts, weights};
 use super::detect::{DeviceKeypoints, detect_on_device, download_counts, launch_subpixel};
 use super::device::GpuDevice;
-use super::texture::DeviceImage;
+use super::texture::{DeviceImage, ImageLife};
 use crate::describe::DescriptorConfig;
 use crate::descriptor::DescriptorSet;
 use crate::detect::{DetectorConfig, Ranking, Subpixel};
@@ -36,16 +36,18 @@ pub(crate) struct QueuedPyramid {
     lane: Lane,
 }
 
-/// Queues the levels of `image` and the detection on each on `lane` (no synchronisation).
+/// Queues the levels of `image` and the detection on each on `lane` (no synchronisation); `life`
+/// says how long `image` stays valid.
 pub(crate) fn queue(
     dev: &GpuDevice,
     lane: &Lane,
     image: &GrayView,
     config: &DetectorConfig,
     p: &Pyramid,
+    life: ImageLife,
 ) -> Result<QueuedPyramid> {
     let plan = Plan::new(p, image.width(), image.height(), config.margin());
-    let mut levels = vec![DeviceImage::upload(dev, lane, image)?];
+    let mut levels = vec![DeviceImage::upload(dev, lane, image, life)?];
     for &size in &plan.sizes[1..] {
         let next = levels
             .last()
@@ -297,7 +299,9 @@ pub(crate) fn pyramid_detect(
     p: &Pyramid,
 ) -> Result<Vec<KeyPoint>> {
     let lane = Leased::take(dev)?;
-    queue(dev, &lane, image, config, p)?.keypoints(dev)
+    let result = queue(dev, &lane, image, config, p, ImageLife::Work)
+        .and_then(|queued| queued.keypoints(dev));
+    settled(&lane, result)
 }
 
 /// Multi-scale detection and description on the GPU: the same features as
@@ -310,7 +314,9 @@ pub(crate) fn pyramid_detect_and_describe(
     p: &Pyramid,
 ) -> Result<Features> {
     let lane = Leased::take(dev)?;
-    queue(dev, &lane, image, detector, p)?.features(dev, descriptor)
+    let result = queue(dev, &lane, image, detector, p, ImageLife::Work)
+        .and_then(|queued| queued.features(dev, descriptor));
+    settled(&lane, result)
 }
 
 #[cfg(feature = "internals")]

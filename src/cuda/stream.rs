@@ -17,7 +17,7 @@ use super::detect::{DeviceKeypoints, detect_on_device, download_counts};
 use super::device::{GpuDevice, driver_error};
 use super::matching::{MatchJob, check_rows};
 use super::pyramid::QueuedPyramid;
-use super::texture::DeviceImage;
+use super::texture::{DeviceImage, ImageLife};
 use crate::describe::DescriptorConfig;
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::detect::DetectorConfig;
@@ -87,6 +87,11 @@ impl GpuStream {
 
     fn lane(&self) -> &Lane {
         &self.hold.lane
+    }
+
+    /// `result`, after waiting for the stream when it is an error (see [`ImageLife::Work`]).
+    pub(crate) fn settle<T>(&self, result: Result<T>) -> Result<T> {
+        super::arena::settled(self.lane(), result)
     }
 
     /// The device ordinal.
@@ -188,17 +193,20 @@ impl PendingFeatures {
     }
 }
 
-/// Queues detection and description of `image` (validated) on `stream`.
+/// Queues detection and description of `image` (validated) on `stream`; `life` says how long `image`
+/// stays valid. With [`ImageLife::Work`] the caller waits for the stream (or the result) before the
+/// image is released, errors included ([`GpuStream::settle`]).
 pub(crate) fn detect_and_describe_async(
     stream: &GpuStream,
     image: &GrayView,
     detector: &DetectorConfig,
     descriptor: &DescriptorConfig,
     pyramid: Option<&Pyramid>,
+    life: ImageLife,
 ) -> Result<PendingFeatures> {
     let (dev, s) = (&*stream.dev, stream.lane());
     if let Some(p) = pyramid {
-        let queued = super::pyramid::queue(dev, s, image, detector, p)?;
+        let queued = super::pyramid::queue(dev, s, image, detector, p, life)?;
         return Ok(PendingFeatures {
             done: stream.mark()?,
             stream: stream.clone(),
@@ -208,7 +216,7 @@ pub(crate) fn detect_and_describe_async(
             },
         });
     }
-    let mut device_image = DeviceImage::upload(dev, s, image)?;
+    let mut device_image = DeviceImage::upload(dev, s, image, life)?;
     let keypoints = detect_on_device(dev, s, &device_image, detector)?;
     device_image.build_quads(dev, s, descriptor.smoothing)?;
     let width = descriptor.width;

@@ -1,6 +1,7 @@
 //! Test and bench hooks of `cuda/describe.rs` (the `internals` feature only): not part of the API.
 
 use super::*;
+use crate::cuda::texture::ImageLife;
 use crate::cuda::device::time_launches;
 
 /// Kernel times in milliseconds of `repeats` launches after `warmup` launches, measured with CUDA
@@ -13,9 +14,10 @@ pub fn time_describe_kernel(
     warmup: usize,
     repeats: usize,
 ) -> Result<Vec<f32>> {
-    let mut job = Job::prepare(dev, image, keypoints, config)?;
-    let lane: crate::cuda::arena::Lane = (*job.lane).clone();
-    time_launches(dev, &lane, warmup, repeats, || job.launch(dev))
+    let lane = Leased::take(dev)?;
+    let result = Job::prepare(dev, &lane, image, keypoints, config)
+        .and_then(|mut job| time_launches(dev, &lane, warmup, repeats, || job.launch(dev)));
+    settled(&lane, result)
 }
 
 /// `image` smoothed by `smoothing` as the GPU smooths it before description
@@ -27,7 +29,7 @@ pub fn debug_smoothed(
     smoothing: crate::describe::Smoothing,
 ) -> Result<Vec<u8>> {
     let lane = Leased::take(dev)?;
-    let device_image = DeviceImage::upload(dev, &lane, image)?;
+    let device_image = DeviceImage::upload(dev, &lane, image, ImageLife::Call)?;
     match device_image.smoothed(dev, &lane, smoothing)? {
         Some(smoothed) => device_image.download_like(&lane, &smoothed),
         None => device_image.download(&lane),

@@ -1,6 +1,7 @@
 //! Test and bench hooks of `cuda/detect.rs` (the `internals` feature only): not part of the API.
 
 use super::*;
+use crate::cuda::texture::ImageLife;
 use crate::cuda::device::time_launches;
 
 /// Times the detector: `repeats` runs of all its launches after `warmup` runs, each measured with CUDA
@@ -14,7 +15,7 @@ pub fn time_detect(
     repeats: usize,
 ) -> Result<(Vec<f32>, Vec<KeyPoint>)> {
     let stream = Leased::take(dev)?;
-    let device_image = DeviceImage::upload(dev, &stream, image)?;
+    let device_image = DeviceImage::upload(dev, &stream, image, ImageLife::Call)?;
     let mut job = DetectJob::new(&stream, image.width(), image.height(), config)?;
     let times = time_launches(dev, &stream, warmup, repeats, || {
         job.launch(dev, &stream, &device_image)
@@ -51,7 +52,7 @@ pub fn debug_detect_stages(
 ) -> Result<DetectStages> {
     dev.load_bench_kernels()?;
     let stream = Leased::take(dev)?;
-    let device_image = DeviceImage::upload(dev, &stream, image)?;
+    let device_image = DeviceImage::upload(dev, &stream, image, ImageLife::Call)?;
     let (width, height) = (image.width(), image.height());
     let mut texels =
         crate::cuda::memory::alloc_zeros::<u8>(&stream, width * height, "debug texels")?;
@@ -112,7 +113,7 @@ pub fn debug_subpixel_offsets(
         return Ok(Vec::new());
     }
     let stream = Leased::take(dev)?;
-    let device_image = DeviceImage::upload(dev, &stream, image)?;
+    let device_image = DeviceImage::upload(dev, &stream, image, ImageLife::Call)?;
     let on_device = super::super::memory::upload(&stream, keypoints, "debug keypoint upload")?;
     let mut offsets = crate::cuda::memory::alloc_zeros::<i32>(
         &stream,

@@ -194,7 +194,8 @@ impl Lane {
         let kept = match reused {
             Some(kept) => kept,
             None => KeptHost {
-                buffer: alloc_pinned::<T>(&self.stream, capacity_for(len), operation)?,
+                // Read by the host (results) or written once (selections): cached memory.
+                buffer: alloc_pinned::<T>(&self.stream, capacity_for(len), false, operation)?,
                 copied: self
                     .stream
                     .context()
@@ -356,6 +357,11 @@ impl<T: Pooled> PinnedScratch<T> {
         if src.is_empty() {
             return Ok(());
         }
+        // Raw driver calls below: the stream's context must be this thread's current one.
+        stream
+            .context()
+            .bind_to_thread()
+            .map_err(driver_error("copying results back"))?;
         let (ptr, _sync) = src.device_ptr(&stream);
         // Raw pointer: cudarc's copies into a PinnedHostSlice move the whole buffer, not a range.
         let host = kept
@@ -366,9 +372,11 @@ impl<T: Pooled> PinnedScratch<T> {
         // allocated and untouched by the host until the event recorded below completes: the buffer
         // is only reachable through this guard and the arena, and both wait for `copied` first.
         let range = unsafe { std::slice::from_raw_parts_mut(host.add(at), src.len()) };
+        super::spans::start(&stream);
         // SAFETY: `ptr` holds src.len() elements of T on this stream's device.
         unsafe { cudarc::driver::result::memcpy_dtoh_async(range, ptr, stream.cu_stream()) }
             .map_err(driver_error("copying results back"))?;
+        super::spans::end(&stream);
         kept.copied
             .record(&stream)
             .map_err(driver_error("event record"))
@@ -387,6 +395,10 @@ impl<T: Pooled> PinnedScratch<T> {
         if len == 0 {
             return Ok(());
         }
+        stream
+            .context()
+            .bind_to_thread()
+            .map_err(driver_error("uploading keypoints"))?;
         let (ptr, _sync) = dst.device_ptr_mut(&stream);
         let host = kept
             .buffer
@@ -395,9 +407,11 @@ impl<T: Pooled> PinnedScratch<T> {
         // SAFETY: as in `queue_download`: the range is inside the buffer, which the host does not
         // write again before the event recorded below completes.
         let range = unsafe { std::slice::from_raw_parts(host.add(at), len) };
+        super::spans::start(&stream);
         // SAFETY: `ptr` holds `len` elements of T on this stream's device.
         unsafe { cudarc::driver::result::memcpy_htod_async(ptr, range, stream.cu_stream()) }
             .map_err(driver_error("uploading keypoints"))?;
+        super::spans::end(&stream);
         kept.copied
             .record(&stream)
             .map_err(driver_error("event record"))

@@ -54,7 +54,7 @@ impl DeviceKeypoints {
     /// the count, then the records).
     pub(crate) fn download(&self, lane: &Lane) -> Result<Vec<KeyPoint>> {
         let count = download_counts(lane, &[self])?[0];
-        let mut host = lane.pinned::<KeyPoint>(count, "keypoint read-back buffer")?;
+        let mut host = lane.pinned::<KeyPoint>(self.capacity, "keypoint read-back buffer")?;
         host.queue_download(0, &self.records().slice(..count))?;
         Ok(host.wait(count)?.to_vec())
     }

@@ -73,18 +73,32 @@ pub(crate) fn alloc_zeros<T: DeviceRepr + ValidAsZeroBits>(
 }
 
 /// `len` elements of page-locked host memory for copies queued on `stream`'s device (contents unset:
-/// the caller writes before any copy reads, or reads only what a copy wrote).
+/// the caller writes before any copy reads, or reads only what a copy wrote). `write_combined` for
+/// buffers the host only writes (uploads: faster writes and copies, very slow host reads).
 pub(crate) fn alloc_pinned<T: DeviceRepr>(
     stream: &Arc<CudaStream>,
     len: usize,
+    write_combined: bool,
     operation: &str,
 ) -> Result<PinnedHostSlice<T>> {
     let len = len.max(1);
     let bytes = len.saturating_mul(size_of::<T>());
+    if bytes >= isize::MAX as usize {
+        // cudarc asserts below this size: refuse it as a typed error first.
+        return Err(Error::DeviceOutOfMemory {
+            operation: operation.to_string(),
+            bytes,
+        });
+    }
     injected_failure(operation, bytes)?;
+    let flags = if write_combined {
+        sys::CU_MEMHOSTALLOC_WRITECOMBINED
+    } else {
+        0
+    };
     // SAFETY: every user of the buffer writes it (or lets a copy write it) before reading it; pinned
     // buffers only hold plain old data (`ValidAsZeroBits` at the read sites).
-    unsafe { stream.context().alloc_pinned::<T>(len) }
+    unsafe { stream.context().alloc_pinned_with_flags::<T>(len, flags) }
         .map_err(|e| with_bytes(driver_error(operation)(e), bytes))
 }
 
@@ -100,60 +114,102 @@ pub(crate) fn upload<T: DeviceRepr>(
         .map_err(|e| with_bytes(driver_error(operation)(e), size_of_val(data)))
 }
 
-/// Reusable page-locked host buffers, by exact size, so repeated uploads of same-sized images (video,
-/// batches) are true asynchronous DMA without a fresh `cuMemHostAlloc` each time. Each comes with an
-/// event recorded after its last copy, so a caller takes a buffer whose copy has finished instead of
-/// waiting for the one just queued (which made images in flight queue one upload at a time).
-type Pool = Mutex<HashMap<(usize, usize), Vec<(PinnedHostSlice<u8>, CudaEvent)>>>;
+/// Rows of a band of a staged upload: at most this many bytes, so that the host fills band `k + 1`
+/// into one staging buffer while the copy engine moves band `k` out of another. Every staging buffer
+/// has this size (a row is at most 32 KiB, so a band holds at least 128 rows), so any buffer serves
+/// any upload and a steady state allocates none.
+const BAND_BYTES: usize = 4 << 20;
 
-/// Most buffers kept per size, and most bytes kept per size: as many images of one size as are
-/// commonly in flight keep their staging buffers (allocating and freeing pinned memory per call
-/// costs more than the copy: with 4 kept, 8 images of 1080p in flight spent most of their host time
-/// there); more in flight at once are allocated and dropped.
-const KEPT_PER_SIZE: usize = 16;
-const KEPT_BYTES_PER_SIZE: usize = 256 << 20;
+/// Most staging buffers a process keeps (128 MiB): enough for the bands of the images commonly in
+/// flight at once; when all are in use and none idle has finished its copy, an upload waits for the
+/// oldest idle one rather than allocating more.
+const KEPT_STAGING: usize = 32;
 
-/// Buffers of `len` bytes the pool keeps.
-fn kept_for(len: usize) -> usize {
-    (KEPT_BYTES_PER_SIZE / len.max(1)).clamp(1, KEPT_PER_SIZE)
+/// A staging buffer and the event recorded after the last copy out of it.
+struct Staging {
+    buffer: PinnedHostSlice<u8>,
+    copied: CudaEvent,
 }
 
-fn pool() -> &'static Pool {
-    static POOL: OnceLock<Pool> = OnceLock::new();
+impl Drop for Staging {
+    fn drop(&mut self) {
+        // The buffer is freed after this: its copy must have read it.
+        let _ = self.copied.synchronize();
+    }
+}
+
+/// Reusable page-locked staging buffers, per device: repeated uploads are true asynchronous DMA
+/// without a fresh `cuMemHostAlloc` each time. A caller takes a buffer whose copy has finished
+/// instead of waiting for the one just queued (which made images in flight queue one upload at a
+/// time).
+#[derive(Default)]
+struct Pool {
+    idle: HashMap<usize, Vec<Staging>>,
+    /// Buffers of each device, idle or in use.
+    made: HashMap<usize, usize>,
+}
+
+fn pool() -> &'static Mutex<Pool> {
+    static POOL: OnceLock<Mutex<Pool>> = OnceLock::new();
     POOL.get_or_init(Default::default)
 }
 
-/// Rows of a band of a staged upload: about this many bytes, so that the host fills band `k + 1`
-/// into one staging buffer while the copy engine moves band `k` out of another.
-const BAND_BYTES: usize = 1 << 20;
-
-/// A staging buffer of `len` bytes whose last copy has finished, from the pool (with its event, to be
-/// recorded again) or new.
-fn staging(
-    stream: &Arc<CudaStream>,
-    len: usize,
-    operation: &str,
-) -> Result<(PinnedHostSlice<u8>, Option<CudaEvent>)> {
-    let key = (stream.context().ordinal(), len);
-    let reused = pool()
+/// A staging buffer of `BAND_BYTES` for device `stream`'s: an idle one whose copy has finished, else
+/// a new one while fewer than `KEPT_STAGING` exist, else the oldest idle one once its copy finishes.
+fn staging(stream: &Arc<CudaStream>, operation: &str) -> Result<Staging> {
+    let ordinal = stream.context().ordinal();
+    let waited = {
+        let mut pool = pool().lock().unwrap_or_else(|p| p.into_inner());
+        let made = pool.made.get(&ordinal).copied().unwrap_or(0);
+        let idle = pool.idle.entry(ordinal).or_default();
+        if let Some(i) = idle.iter().position(|s| s.copied.is_complete()) {
+            return Ok(idle.swap_remove(i));
+        }
+        if made >= KEPT_STAGING && !idle.is_empty() {
+            Some(idle.remove(0))
+        } else {
+            None
+        }
+    };
+    if let Some(staging) = waited {
+        staging
+            .copied
+            .synchronize()
+            .map_err(driver_error("waiting for a staging buffer"))?;
+        return Ok(staging);
+    }
+    let buffer = alloc_pinned::<u8>(stream, BAND_BYTES, true, operation)?;
+    let copied = stream
+        .context()
+        .new_event(None)
+        .map_err(driver_error("event creation"))?;
+    *pool()
         .lock()
         .unwrap_or_else(|p| p.into_inner())
-        .get_mut(&key)
-        .and_then(|kept| {
-            let idle = kept.iter().position(|(_, copied)| copied.is_complete())?;
-            Some(kept.swap_remove(idle))
-        });
-    match reused {
-        Some((buffer, copied)) => Ok((buffer, Some(copied))),
-        None => Ok((alloc_pinned::<u8>(stream, len, operation)?, None)),
+        .made
+        .entry(ordinal)
+        .or_default() += 1;
+    Ok(Staging { buffer, copied })
+}
+
+/// Gives `staging` back to the pool (its copy may still run: the next user waits for its event).
+fn give_back(ordinal: usize, staging: Staging) {
+    let mut pool = pool().lock().unwrap_or_else(|p| p.into_inner());
+    let idle = pool.idle.entry(ordinal).or_default();
+    if idle.len() < KEPT_STAGING {
+        idle.push(staging);
+    } else {
+        // Kept no longer (dropped after its copy).
+        *pool.made.entry(ordinal).or_default() -= 1;
+        drop(pool);
+        drop(staging);
     }
 }
 
 /// Copies `rows` rows of `pitch` bytes, each written by `fill(y, row)`, into `dst` (at least
 /// `rows * pitch` bytes) on `stream`, in bands through pinned staging buffers: the host fills a band
 /// (rows in parallel) while the copies of the bands before it run. The staging buffers return to the
-/// pool; a later user takes one once its copy has finished reading it (cudarc's own event makes any
-/// user wait for that in any case). Returns when every band is queued, with the copies in flight.
+/// pool with the event of their copy. Returns when every band is queued, with the copies in flight.
 pub(crate) fn upload_rows(
     stream: &Arc<CudaStream>,
     dst: &mut CudaSlice<u8>,
@@ -162,47 +218,46 @@ pub(crate) fn upload_rows(
     fill: impl Fn(usize, &mut [u8]) + Sync,
 ) -> Result<()> {
     super::invariant(
-        pitch > 0 && dst.len() >= rows * pitch,
+        pitch > 0 && pitch <= BAND_BYTES && dst.len() >= rows * pitch,
         "image upload",
-        || {
-            format!(
-                "{rows} rows of {pitch} bytes into {} bytes",
-                dst.len()
-            )
-        },
+        || format!("{rows} rows of {pitch} bytes into {} bytes", dst.len()),
     )?;
-    let band_rows = (BAND_BYTES / pitch).max(1);
+    let ordinal = stream.context().ordinal();
+    let band_rows = BAND_BYTES / pitch;
     let mut y0 = 0;
     while y0 < rows {
         let y1 = (y0 + band_rows).min(rows);
         let len = (y1 - y0) * pitch;
-        let (mut staged, event) = staging(stream, len, "pinned staging allocation")?;
+        let mut staged = staging(stream, "pinned staging allocation")?;
         let host = staged
+            .buffer
             .as_mut_slice()
             .map_err(driver_error("waiting for a staging buffer"))?;
-        host.par_chunks_exact_mut(pitch)
-            .with_min_len(64)
+        host[..len]
+            .par_chunks_exact_mut(pitch)
+            .with_min_len(16)
             .enumerate()
             .for_each(|(i, row)| fill(y0 + i, row));
-        // The staging buffer is exactly `len` bytes, the destination band too: the copy's length
-        // check holds.
-        stream
-            .memcpy_htod(&staged, &mut dst.slice_mut(y0 * pitch..y1 * pitch))
-            .map_err(driver_error(operation))?;
-        let copied = match event {
-            Some(event) => {
-                event.record(stream).map_err(driver_error("event record"))?;
-                event
-            }
-            None => stream
-                .record_event(None)
-                .map_err(driver_error("event record"))?,
-        };
-        let mut pool = pool().lock().unwrap_or_else(|p| p.into_inner());
-        let kept = pool.entry((stream.context().ordinal(), len)).or_default();
-        if kept.len() < kept_for(len) {
-            kept.push((staged, copied));
-        }
+        let band = &host[..len];
+        let result = (|| -> Result<()> {
+            stream
+                .context()
+                .bind_to_thread()
+                .map_err(driver_error(operation))?;
+            let mut target = dst.slice_mut(y0 * pitch..y1 * pitch);
+            let (device, _sync) = target.device_ptr_mut(stream);
+            // SAFETY: `band` and the target range are both `len` bytes; the staging buffer is not
+            // written again before `copied` (recorded next) completes: every user of a pooled
+            // buffer waits for it first, and dropping one waits too.
+            unsafe { cudarc::driver::result::memcpy_htod_async(device, band, stream.cu_stream()) }
+                .map_err(driver_error(operation))?;
+            staged
+                .copied
+                .record(stream)
+                .map_err(driver_error("event record"))
+        })();
+        give_back(ordinal, staged);
+        result?;
         y0 = y1;
     }
     Ok(())
@@ -211,10 +266,13 @@ pub(crate) fn upload_rows(
 /// Whether `bytes` lies in page-locked host memory the driver knows (allocated with
 /// `cuMemHostAlloc` or registered with `cuMemHostRegister`, by clatch or anyone else in the
 /// process): its first and last byte are both host memory of the unified address space.
-pub(crate) fn is_pinned(bytes: &[u8]) -> bool {
+pub(crate) fn is_pinned(stream: &Arc<CudaStream>, bytes: &[u8]) -> bool {
     let (Some(first), Some(last)) = (bytes.first(), bytes.last()) else {
         return false;
     };
+    if stream.context().bind_to_thread().is_err() {
+        return false;
+    }
     [first as *const u8, last as *const u8].iter().all(|&p| {
         let mut kind: u32 = 0;
         // SAFETY: asks the driver about an address (never dereferenced); `kind` receives one
@@ -292,7 +350,10 @@ pub(crate) unsafe fn copy_rows_2d(
 /// Drops every idle staging buffer (test hooks: a cold start).
 #[cfg(feature = "internals")]
 pub(crate) fn clear_staging() {
-    pool().lock().unwrap_or_else(|p| p.into_inner()).clear();
+    let mut pool = pool().lock().unwrap_or_else(|p| p.into_inner());
+    for (ordinal, idle) in std::mem::take(&mut pool.idle) {
+        *pool.made.entry(ordinal).or_default() -= idle.len();
+    }
 }
 
 #[cfg(feature = "internals")]

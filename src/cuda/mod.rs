@@ -17,6 +17,7 @@ mod matching;
 mod matching_tensor;
 mod memory;
 mod pyramid;
+mod spans;
 mod stream;
 mod texture;
 
@@ -55,6 +56,7 @@ pub mod hooks {
     pub use super::matching_tensor::hooks::*;
     pub use super::memory::hooks::*;
     pub use super::pyramid::hooks::*;
+    pub use super::spans::hooks::*;
 }
 
 use crate::error::Result;

@@ -46,6 +46,21 @@ pub(crate) fn queue(
     p: &Pyramid,
     life: ImageLife,
 ) -> Result<QueuedPyramid> {
+    super::spans::start(lane);
+    let queued = queue_spanned(dev, lane, image, config, p, life);
+    super::spans::end(lane);
+    queued
+}
+
+/// [`queue`], within its device-time span.
+fn queue_spanned(
+    dev: &GpuDevice,
+    lane: &Lane,
+    image: &GrayView,
+    config: &DetectorConfig,
+    p: &Pyramid,
+    life: ImageLife,
+) -> Result<QueuedPyramid> {
     let plan = Plan::new(p, image.width(), image.height(), config.margin());
     let mut levels = vec![DeviceImage::upload(dev, lane, image, life)?];
     for &size in &plan.sizes[1..] {
@@ -81,12 +96,21 @@ struct Selection {
 }
 
 impl Selection {
-    /// Uploads `selected` (of `levels` levels) at once through a pinned buffer.
-    fn upload(lane: &Lane, selected: &[LevelKeypoint], levels: usize) -> Result<Self> {
+    /// Uploads `selected` (of `levels` levels, at most `bound` keypoints) at once through a pinned
+    /// buffer.
+    fn upload(
+        lane: &Lane,
+        selected: &[LevelKeypoint],
+        levels: usize,
+        bound: usize,
+    ) -> Result<Self> {
         let per_level: Vec<Vec<KeyPoint>> =
             (0..levels).map(|l| pyramid::of_level(selected, l)).collect();
-        let total = per_level.iter().map(Vec::len).sum();
-        let mut staged = lane.pinned::<KeyPoint>(total, "keypoint staging buffer")?;
+        let total: usize = per_level.iter().map(Vec::len).sum();
+        super::invariant(total <= bound, "pyramid selection", || {
+            format!("{total} keypoints selected of at most {bound} found")
+        })?;
+        let mut staged = lane.pinned::<KeyPoint>(bound, "keypoint staging buffer")?;
         let host = staged.host()?;
         let mut ranges = Vec::with_capacity(levels);
         let mut at = 0;
@@ -95,7 +119,7 @@ impl Selection {
             ranges.push((at, keypoints.len()));
             at += keypoints.len();
         }
-        let mut keypoints = lane.scratch::<KeyPoint>(total, "pyramid keypoint upload")?;
+        let mut keypoints = lane.scratch::<KeyPoint>(bound, "pyramid keypoint upload")?;
         staged.queue_upload(0, &mut keypoints.whole_mut().slice_mut(..total))?;
         let counts: Vec<usize> = ranges.iter().map(|&(_, n)| n).collect();
         Ok(Self {
@@ -114,6 +138,13 @@ impl Selection {
 }
 
 impl QueuedPyramid {
+    /// The most keypoints the levels can hold together: what buffers whose need depends on the image's
+    /// content are sized by, so that images of one size and configuration reuse them whatever they
+    /// show.
+    fn bound(&self) -> usize {
+        self.found.iter().map(|f| f.capacity).sum()
+    }
+
     /// Reads every level's keypoints back (waits for the stream) and keeps the strongest over all.
     fn select(&self) -> Result<Vec<LevelKeypoint>> {
         let found: Vec<&DeviceKeypoints> = self.found.iter().collect();
@@ -121,7 +152,7 @@ impl QueuedPyramid {
         let total = counts.iter().sum();
         let mut host = self
             .lane
-            .pinned::<KeyPoint>(total, "keypoint read-back buffer")?;
+            .pinned::<KeyPoint>(self.bound(), "keypoint read-back buffer")?;
         let mut at = 0;
         for (f, &n) in self.found.iter().zip(&counts) {
             host.queue_download(at, &f.records().slice(..n))?;
@@ -181,7 +212,7 @@ impl QueuedPyramid {
         }
         let mut offsets = self
             .lane
-            .scratch::<i32>(2 * selection.total, "sub-pixel offsets")?;
+            .scratch::<i32>(2 * self.bound(), "sub-pixel offsets")?;
         for (l, level) in self.levels.iter().enumerate() {
             let (at, n) = selection.ranges[l];
             if n == 0 {
@@ -198,12 +229,13 @@ impl QueuedPyramid {
     pub(crate) fn keypoints(self, dev: &GpuDevice) -> Result<Vec<KeyPoint>> {
         let mut selected = self.select()?;
         if self.config.subpixel != Subpixel::None {
-            let selection = Selection::upload(&self.lane, &selected, self.levels.len())?;
+            let selection =
+                Selection::upload(&self.lane, &selected, self.levels.len(), self.bound())?;
             if let Some(offsets) = self.queue_offsets(dev, &selection)? {
                 let mut host = self
                     .lane
-                    .pinned::<i32>(2 * selection.total, "offset read-back buffer")?;
-                host.queue_download(0, &offsets.view())?;
+                    .pinned::<i32>(2 * self.bound(), "offset read-back buffer")?;
+                host.queue_download(0, &offsets.whole().slice(..2 * selection.total))?;
                 apply_offsets(&mut selected, &selection, host.wait(2 * selection.total)?);
             }
         }
@@ -222,9 +254,12 @@ impl QueuedPyramid {
         let width = descriptor.width;
         let words = width.words();
         let weights = weights(dev, descriptor)?;
-        let selection = Selection::upload(&lane, &selected, self.levels.len())?;
+        let bound = self.bound();
+        // The device works from here to the read-backs without waiting for the host.
+        super::spans::start(&lane);
+        let selection = Selection::upload(&lane, &selected, self.levels.len(), bound)?;
         let total = selection.total;
-        let mut out = lane.scratch::<u64>(total * words, "pyramid descriptors")?;
+        let mut out = lane.scratch::<u64>(bound * words, "pyramid descriptors")?;
         for (l, level) in self.levels.iter_mut().enumerate() {
             let (at, n) = selection.ranges[l];
             if n == 0 {
@@ -247,16 +282,17 @@ impl QueuedPyramid {
         }
         // Orientation and descriptor stay those of the whole pixel; only the position moves.
         let offsets = self.queue_offsets(dev, &selection)?;
-        let mut host_words = lane.pinned::<u64>(total * words, "descriptor read-back buffer")?;
+        let mut host_words = lane.pinned::<u64>(bound * words, "descriptor read-back buffer")?;
         host_words.queue_download(0, &out.whole().slice(..total * words))?;
         let mut host_offsets = match &offsets {
             Some(offsets) => {
-                let mut host = lane.pinned::<i32>(2 * total, "offset read-back buffer")?;
-                host.queue_download(0, &offsets.view())?;
+                let mut host = lane.pinned::<i32>(2 * bound, "offset read-back buffer")?;
+                host.queue_download(0, &offsets.whole().slice(..2 * total))?;
                 Some(host)
             }
             None => None,
         };
+        super::spans::end(&lane);
         // One wait: the offsets were queued last, so waiting for them waits for everything.
         if let Some(host) = &mut host_offsets {
             apply_offsets(&mut selected, &selection, host.wait(2 * total)?);

@@ -180,9 +180,13 @@ impl PendingFeatures {
         };
         let count = download_counts(lane, &[&keypoints])?[0];
         let words = count * width.words();
-        let mut host_keypoints = lane.pinned::<KeyPoint>(count, "keypoint read-back buffer")?;
+        // Sized by the capacity, not the count: images of one size reuse them whatever they show.
+        let capacity = keypoints.capacity;
+        let mut host_keypoints =
+            lane.pinned::<KeyPoint>(capacity, "keypoint read-back buffer")?;
         host_keypoints.queue_download(0, &keypoints.records().slice(..count))?;
-        let mut host_words = lane.pinned::<u64>(words, "descriptor read-back buffer")?;
+        let mut host_words =
+            lane.pinned::<u64>(capacity * width.words(), "descriptor read-back buffer")?;
         host_words.queue_download(0, &descriptors.whole().slice(..words))?;
         // The descriptors were queued last: waiting for them waits for both.
         let words = host_words.wait(words)?.to_vec();
@@ -216,6 +220,21 @@ pub(crate) fn detect_and_describe_async(
             },
         });
     }
+    super::spans::start(s);
+    let queued = queue_single(stream, image, detector, descriptor, life);
+    super::spans::end(s);
+    queued
+}
+
+/// The single-scale part of [`detect_and_describe_async`], within its device-time span.
+fn queue_single(
+    stream: &GpuStream,
+    image: &GrayView,
+    detector: &DetectorConfig,
+    descriptor: &DescriptorConfig,
+    life: ImageLife,
+) -> Result<PendingFeatures> {
+    let (dev, s) = (&*stream.dev, stream.lane());
     let mut device_image = DeviceImage::upload(dev, s, image, life)?;
     let keypoints = detect_on_device(dev, s, &device_image, detector)?;
     device_image.build_quads(dev, s, descriptor.smoothing)?;

@@ -114,7 +114,7 @@ impl DeviceImage {
         let mut pixels = lane.scratch::<u8>(pitch * height, "image upload")?;
         let stride = image.stride();
         let bytes = &image.data()[..stride * (height - 1) + width];
-        if life == ImageLife::Work && is_pinned(bytes) {
+        if life == ImageLife::Work && is_pinned(lane, bytes) {
             // SAFETY: ImageLife::Work: the image stays valid until the work queued after this copy
             // has completed, which the caller waits for before returning.
             unsafe {

@@ -49,3 +49,40 @@ pub fn release_cached_memory(ordinal: usize) -> Result<()> {
         .synchronize()
         .map_err(driver_error("releasing cached memory"))
 }
+
+/// Page-locked host bytes (tests and benches: images in pinned memory, as a camera or a decoder
+/// writing into `cuMemHostAlloc` memory would hold them). Counts as an allocation.
+pub struct PinnedBytes(PinnedHostSlice<u8>);
+
+impl PinnedBytes {
+    /// `len` bytes (at least one) of cached page-locked memory for device `ordinal`, zeroed.
+    pub fn new(ordinal: usize, len: usize) -> Result<Self> {
+        let dev = crate::cuda::device(ordinal)?;
+        let stream = dev.ctx.default_stream();
+        let mut bytes = alloc_pinned::<u8>(&stream, len, false, "pinned host buffer")?;
+        bytes
+            .as_mut_slice()
+            .map_err(driver_error("pinned host buffer"))?
+            .fill(0);
+        Ok(Self(bytes))
+    }
+
+    /// The bytes.
+    pub fn as_slice(&self) -> Result<&[u8]> {
+        self.0.as_slice().map_err(driver_error("pinned host buffer"))
+    }
+
+    /// The bytes, to write.
+    pub fn as_mut_slice(&mut self) -> Result<&mut [u8]> {
+        self.0
+            .as_mut_slice()
+            .map_err(driver_error("pinned host buffer"))
+    }
+}
+
+/// Whether the GPU upload would read `bytes` straight from where they are (page-locked memory the
+/// driver knows), for device `ordinal`.
+pub fn is_pinned_for_upload(ordinal: usize, bytes: &[u8]) -> Result<bool> {
+    let dev = crate::cuda::device(ordinal)?;
+    Ok(is_pinned(&dev.ctx.default_stream(), bytes))
+}

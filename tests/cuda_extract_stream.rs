@@ -30,7 +30,10 @@ fn trials() -> Vec<Trial> {
         Trial::test("stream_of_images_in_input_order", gpu::stream_in_order),
         Trial::test("stream_stops_at_the_first_error", gpu::stream_errors),
         Trial::test("pinned_and_pageable_images", gpu::pinned_and_pageable),
-        Trial::test("threads_sharing_one_stream", gpu::threads_sharing_one_stream),
+        Trial::test(
+            "threads_sharing_one_stream",
+            gpu::threads_sharing_one_stream,
+        ),
     ]
 }
 
@@ -107,12 +110,19 @@ mod gpu {
             // A stream the caller holds.
             let stream = GpuStream::new(0)?;
             for _ in 0..2 {
-                gpu.detect_and_describe_async(&stream, &warm.view())?.wait()?;
+                gpu.detect_and_describe_async(&stream, &warm.view())?
+                    .wait()?;
             }
             let before = allocations();
             for (i, image) in images.iter().enumerate() {
-                let got = gpu.detect_and_describe_async(&stream, &image.view())?.wait()?;
-                compare(&format!("{name}, own stream, image {i}"), &got, &expected[i])?;
+                let got = gpu
+                    .detect_and_describe_async(&stream, &image.view())?
+                    .wait()?;
+                compare(
+                    &format!("{name}, own stream, image {i}"),
+                    &got,
+                    &expected[i],
+                )?;
             }
             let own = allocations() - before;
 
@@ -146,7 +156,9 @@ mod gpu {
                 )
                 .into());
             }
-            println!("{name}: {calls} warm calls on each path, 0 allocations, identical to the CPU");
+            println!(
+                "{name}: {calls} warm calls on each path, 0 allocations, identical to the CPU"
+            );
         }
         Ok(())
     }
@@ -179,7 +191,9 @@ mod gpu {
                 } else {
                     rectangles(w, h, 200 + i as u64)
                 };
-                let got = gpu.detect_and_describe_async(&stream, &image.view())?.wait()?;
+                let got = gpu
+                    .detect_and_describe_async(&stream, &image.view())?
+                    .wait()?;
                 let expected = cpu.detect_and_describe(&image.view())?;
                 compare(&format!("{name}, {w}x{h}"), &got, &expected)?;
                 compared += got.keypoints.len();
@@ -224,7 +238,10 @@ mod gpu {
                 if made.get() > i + 1 + 8 {
                     return Err(Error::Internal {
                         operation: "test",
-                        message: format!("{} images taken while handing back image {i}", made.get()),
+                        message: format!(
+                            "{} images taken while handing back image {i}",
+                            made.get()
+                        ),
                     });
                 }
                 let expected = cpu.detect_and_describe(&image.0.view())?;
@@ -383,15 +400,19 @@ mod gpu {
                     scope.spawn(move || -> Result<usize, String> {
                         let mut compared = 0;
                         for round in 0..rounds {
-                            let image = rectangles(480 + 32 * t, 360 + 8 * round, (t * 10 + round) as u64);
+                            let image =
+                                rectangles(480 + 32 * t, 360 + 8 * round, (t * 10 + round) as u64);
                             let pending = gpu
                                 .detect_and_describe_async(&stream, &image.view())
                                 .map_err(|e| e.to_string())?;
-                            let expected =
-                                cpu.detect_and_describe(&image.view()).map_err(|e| e.to_string())?;
+                            let expected = cpu
+                                .detect_and_describe(&image.view())
+                                .map_err(|e| e.to_string())?;
                             let got = pending.wait().map_err(|e| e.to_string())?;
                             if got != expected {
-                                return Err(format!("thread {t}, round {round}: GPU and CPU differ"));
+                                return Err(format!(
+                                    "thread {t}, round {round}: GPU and CPU differ"
+                                ));
                             }
                             compared += got.keypoints.len();
                         }

@@ -295,14 +295,19 @@ mod gpu {
         let (w, h) = scale::pick((1280, 960), (640, 480));
         let large = rectangles(w, h, 4);
         let single = ExtractorConfig::single_scale();
-        for (name, config) in [("pyramid", ExtractorConfig::default()), ("single scale", single)] {
+        for (name, config) in [
+            ("pyramid", ExtractorConfig::default()),
+            ("single scale", single),
+        ] {
             let gpu = Extractor::new(GPU, config.clone())?;
-            let expected = Extractor::new(Backend::Cpu, config)?.detect_and_describe(&large.view())?;
+            let expected =
+                Extractor::new(Backend::Cpu, config)?.detect_and_describe(&large.view())?;
             let mut sites = Vec::new();
             for n in 0.. {
                 // A fresh stream warmed on the small image: its arena must grow for the large one.
                 let stream = GpuStream::new(0)?;
-                gpu.detect_and_describe_async(&stream, &small.view())?.wait()?;
+                gpu.detect_and_describe_async(&stream, &small.view())?
+                    .wait()?;
                 fail_allocation(Some(n));
                 let result = gpu
                     .detect_and_describe_async(&stream, &large.view())
@@ -310,7 +315,9 @@ mod gpu {
                 let injected = fail_allocation(None);
                 match (injected, result) {
                     (true, Err(Error::DeviceOutOfMemory { operation, .. })) => {
-                        let again = gpu.detect_and_describe_async(&stream, &large.view())?.wait()?;
+                        let again = gpu
+                            .detect_and_describe_async(&stream, &large.view())?
+                            .wait()?;
                         if again != expected {
                             return Err(format!(
                                 "{name}: after the failure at {operation}, the stream's answer differs from the CPU's"
@@ -335,7 +342,10 @@ mod gpu {
             if sites.is_empty() {
                 return Err(format!("{name}: the larger image grew nothing").into());
             }
-            println!("{name}: {} growth sites fail cleanly: {sites:?}", sites.len());
+            println!(
+                "{name}: {} growth sites fail cleanly: {sites:?}",
+                sites.len()
+            );
         }
         Ok(())
     }

@@ -6,20 +6,21 @@ use std::path::{Path, PathBuf};
 
 use clatch::colmap::{Database, MatchList, PinholeCamera};
 use clatch::{Backend, Extractor, Features, GrayView, Match, Matcher};
-use rayon::prelude::*;
 
 use crate::ColmapArgs;
 use crate::colmap_program::{ColmapProgram, ModelStats, parse_model_analyzer};
 use crate::cpu_time::{StageTime, Stopwatch};
 use crate::error::CliError;
 use crate::exif;
+use crate::extract_stream::extract_decoded;
 use crate::image_dir::{colmap_name, list_images};
 use crate::input::{check_detectable, load_gray_with_exif, probe_detectable};
 use crate::output::{Staged, TempDir, check_distinct, check_writable};
+use crate::prefetch::Prefetched;
 use crate::progress::Progress;
-use crate::settings;
 use crate::subpixel;
 use crate::text_input::read_text;
+use crate::{report, settings};
 use clatch::decode::DecodeLimits;
 
 /// One photo's features.
@@ -36,6 +37,8 @@ struct Photo {
 #[derive(Default)]
 struct Times {
     extract: StageTime,
+    /// The decoders' side of `extract`.
+    decoding: Prefetched,
     matching: StageTime,
     write: StageTime,
     verify: StageTime,
@@ -74,7 +77,7 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let progress = Progress::counter(plan.images.len() as u64, "extracting features");
     let watch = Stopwatch::start();
     let limits = args.input.limits();
-    let photos = extract_all(
+    let (photos, decoding) = extract_all(
         &extractor,
         (&plan.images, &plan.names),
         &limits,
@@ -82,6 +85,7 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
         &progress,
     )?;
     times.extract = watch.stop();
+    times.decoding = decoding;
     progress.finish();
 
     // Match every pair.
@@ -300,71 +304,46 @@ fn extraction_config(settings: &crate::pipeline::Settings, grid: u32) -> clatch:
     config
 }
 
-/// Photos decoded at a time: the next group is decoded on the CPU threads while the extractor works
-/// on this one (with several images in flight on the GPU).
-const DECODE_GROUP: usize = 8;
-
 /// A decoded photo waiting for extraction.
 struct Decoded {
     img: image::GrayImage,
     exif_block: Option<Vec<u8>>,
-    path: PathBuf,
     name: String,
 }
 
-/// Reads and checks a group of photos in parallel.
-fn decode_group(
-    group: &[(&PathBuf, &String)],
-    limits: &DecodeLimits,
-) -> Result<Vec<Decoded>, CliError> {
-    group
-        .par_iter()
-        .map(|&(path, name)| {
-            let (img, exif_block) = load_gray_with_exif(path, limits)?;
-            check_detectable(path, img.width(), img.height())?;
-            Ok(Decoded {
-                img,
-                exif_block,
-                path: path.clone(),
-                name: name.clone(),
-            })
-        })
-        .collect()
+impl clatch::AsGrayView for Decoded {
+    fn gray_view(&self) -> clatch::Result<GrayView<'_>> {
+        GrayView::try_from(&self.img)
+    }
 }
 
-/// Reads, detects (spread over the extractor's grid) and describes every photo, in order: groups of
-/// photos through [`Extractor::detect_and_describe_batch`], the next group decoded meanwhile.
+/// Reads and checks one photo.
+fn decode_one(path: &Path, name: &str, limits: &DecodeLimits) -> Result<Decoded, CliError> {
+    let (img, exif_block) = load_gray_with_exif(path, limits)?;
+    check_detectable(path, img.width(), img.height())?;
+    Ok(Decoded {
+        img,
+        exif_block,
+        name: name.to_string(),
+    })
+}
+
+/// Reads, detects (spread over the extractor's grid) and describes every photo, in order: the photos
+/// decoded on worker threads ahead of the extractor, which takes them as a stream (on the GPU several
+/// in flight). Returns the photos and the decoders' timings.
 fn extract_all(
     extractor: &Extractor,
     (paths, names): (&[PathBuf], &[String]),
     limits: &DecodeLimits,
     (method, subpixel_radius): (subpixel::Subpixel, u32),
     progress: &Progress,
-) -> Result<Vec<Photo>, CliError> {
-    let all: Vec<(&PathBuf, &String)> = paths.iter().zip(names).collect();
-    let groups: Vec<&[(&PathBuf, &String)]> = all.chunks(DECODE_GROUP).collect();
-    let mut photos = Vec::with_capacity(all.len());
-    let mut current = match groups.first() {
-        Some(group) => decode_group(group, limits)?,
-        None => return Ok(photos),
-    };
-    for g in 0..groups.len() {
-        let (next, extracted) = rayon::join(
-            || {
-                groups
-                    .get(g + 1)
-                    .map(|group| decode_group(group, limits))
-                    .transpose()
-            },
-            || -> Result<Vec<Features>, CliError> {
-                let views = current
-                    .iter()
-                    .map(|d| GrayView::try_from(&d.img).map_err(CliError::in_image(&d.path)))
-                    .collect::<Result<Vec<_>, _>>()?;
-                Ok(extractor.detect_and_describe_batch(&views, &|_| progress.done())?)
-            },
-        );
-        for (decoded, features) in current.into_iter().zip(extracted?) {
+) -> Result<(Vec<Photo>, Prefetched), CliError> {
+    let mut photos = Vec::with_capacity(paths.len());
+    let decoding = extract_decoded(
+        extractor,
+        paths.len(),
+        |i| decode_one(&paths[i], &names[i], limits),
+        |_, decoded, features| {
             photos.push(Photo {
                 focal_35mm: decoded
                     .exif_block
@@ -383,10 +362,11 @@ fn extract_all(
                 },
                 name: decoded.name,
             });
-        }
-        current = next?.unwrap_or_default();
-    }
-    Ok(photos)
+            progress.done();
+            Ok(())
+        },
+    )?;
+    Ok((photos, decoding))
 }
 
 /// Cameras, images and keypoints. With K, one camera shared by every photo (which all have its size,
@@ -575,8 +555,22 @@ fn print_extraction_report(
         matches.iter().filter(|m| m.is_empty()).count()
     );
     println!("  database    {}", args.database.display());
-    println!("  extract     {}", times.extract);
-    println!("  match       {}", times.matching);
+    println!(
+        "  extract     {} ({})",
+        times.extract,
+        report::per_second(photos.len(), times.extract.wall, "images")
+    );
+    println!(
+        "  decode      {} summed over {} threads; extraction waited {} for it",
+        report::ms(times.decoding.produce),
+        times.decoding.threads,
+        report::ms(times.decoding.waited)
+    );
+    println!(
+        "  match       {} ({})",
+        times.matching,
+        report::per_second(pairs.len(), times.matching.wall, "pairs")
+    );
     println!("  write       {}", times.write);
 }
 

@@ -184,7 +184,11 @@ impl Lane {
     /// A pinned host buffer of at least `len` elements (at least one), taken from the arena until the
     /// returned guard drops. Its contents are stale; the host touches it only through
     /// [`PinnedScratch::host`] and [`PinnedScratch::wait`], which wait for the copies queued on it.
-    pub(crate) fn pinned<T: Pooled>(&self, len: usize, operation: &str) -> Result<PinnedScratch<T>> {
+    pub(crate) fn pinned<T: Pooled>(
+        &self,
+        len: usize,
+        operation: &str,
+    ) -> Result<PinnedScratch<T>> {
         let len = len.max(1);
         let reused = {
             let mut free = self.arena.lock();
@@ -497,7 +501,19 @@ mod tests {
 
     #[test]
     fn capacities_grow_geometrically_and_hold_the_request() {
-        for len in [0usize, 1, 2, 7, 8, 9, 100, 1000, 1 << 20, (1 << 20) + 1, 21_026_304] {
+        for len in [
+            0usize,
+            1,
+            2,
+            7,
+            8,
+            9,
+            100,
+            1000,
+            1 << 20,
+            (1 << 20) + 1,
+            21_026_304,
+        ] {
             let c = capacity_for(len);
             assert!(c >= len.max(1), "{len}");
             assert!(c as f64 <= len.max(1) as f64 * 1.25 + 1.0, "{len} -> {c}");

@@ -10,7 +10,9 @@
 
 use std::sync::Arc;
 
-use cudarc::driver::{CudaStream, CudaView, CudaViewMut, LaunchConfig, PushKernelArg, ValidAsZeroBits};
+use cudarc::driver::{
+    CudaStream, CudaView, CudaViewMut, LaunchConfig, PushKernelArg, ValidAsZeroBits,
+};
 
 use super::arena::{Lane, Leased, Scratch, settled};
 use super::device::{GpuDevice, driver_error};

@@ -138,7 +138,6 @@ pub struct GpuDevice {
     weights: Mutex<HashMap<Vec<i32>, Arc<CudaSlice<i32>>>>,
 }
 
-
 /// Maps a driver error to ours, naming the operation and keeping the driver's error as the source.
 pub(crate) fn driver_error(operation: &str) -> impl Fn(DriverError) -> Error + '_ {
     move |source| {

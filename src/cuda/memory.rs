@@ -10,8 +10,8 @@ use cudarc::driver::{
 };
 
 use super::device::driver_error;
-use crate::parallel::*;
 use crate::error::{Error, Result};
+use crate::parallel::*;
 
 // With the `internals` feature, tests can make the `n`-th device allocation of a thread fail
 // ([`hooks::fail_allocation`]), so that every allocation site's error path runs on a real device.

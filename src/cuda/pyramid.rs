@@ -104,8 +104,9 @@ impl Selection {
         levels: usize,
         bound: usize,
     ) -> Result<Self> {
-        let per_level: Vec<Vec<KeyPoint>> =
-            (0..levels).map(|l| pyramid::of_level(selected, l)).collect();
+        let per_level: Vec<Vec<KeyPoint>> = (0..levels)
+            .map(|l| pyramid::of_level(selected, l))
+            .collect();
         let total: usize = per_level.iter().map(Vec::len).sum();
         super::invariant(total <= bound, "pyramid selection", || {
             format!("{total} keypoints selected of at most {bound} found")
@@ -206,7 +207,11 @@ impl QueuedPyramid {
     /// [`DetectorConfig::subpixel`] refines positions: `clatch_subpixel` through [`launch_subpixel`],
     /// which reproduces [`crate::detect::cpu::subpixel_offset`], as [`crate::pyramid::cpu`] applies it
     /// after selection. `[dx, dy]` per keypoint, in selection order.
-    fn queue_offsets(&self, dev: &GpuDevice, selection: &Selection) -> Result<Option<Scratch<i32>>> {
+    fn queue_offsets(
+        &self,
+        dev: &GpuDevice,
+        selection: &Selection,
+    ) -> Result<Option<Scratch<i32>>> {
         if self.config.subpixel == Subpixel::None || selection.total == 0 {
             return Ok(None);
         }
@@ -305,7 +310,10 @@ impl QueuedPyramid {
                 if n == 0 {
                     Ok(DescriptorSet::empty(width))
                 } else {
-                    DescriptorSet::from_words(width, all_words[at * words..(at + n) * words].to_vec())
+                    DescriptorSet::from_words(
+                        width,
+                        all_words[at * words..(at + n) * words].to_vec(),
+                    )
                 }
             })
             .collect::<Result<Vec<_>>>()?;

@@ -147,7 +147,7 @@ enum Work {
     Single {
         // Its buffers go back to the stream's arena when the result is read or dropped; the next user
         // queues on the same stream, after the kernels that read them.
-        _image: DeviceImage,
+        _image: Box<DeviceImage>,
         keypoints: DeviceKeypoints,
         descriptors: Scratch<u64>,
         width: DescriptorWidth,
@@ -182,8 +182,7 @@ impl PendingFeatures {
         let words = count * width.words();
         // Sized by the capacity, not the count: images of one size reuse them whatever they show.
         let capacity = keypoints.capacity;
-        let mut host_keypoints =
-            lane.pinned::<KeyPoint>(capacity, "keypoint read-back buffer")?;
+        let mut host_keypoints = lane.pinned::<KeyPoint>(capacity, "keypoint read-back buffer")?;
         host_keypoints.queue_download(0, &keypoints.records().slice(..count))?;
         let mut host_words =
             lane.pinned::<u64>(capacity * width.words(), "descriptor read-back buffer")?;
@@ -258,7 +257,7 @@ fn queue_single(
         done: stream.mark()?,
         stream: stream.clone(),
         work: Work::Single {
-            _image: device_image,
+            _image: Box::new(device_image),
             keypoints,
             descriptors,
             width,

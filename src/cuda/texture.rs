@@ -301,9 +301,8 @@ impl DeviceImage {
         // 4), and only those are read, through the texture's width.
         unsafe { launch.launch(config) }.map_err(driver_error("clatch_build_quads"))?;
         let shape = (qw, qh, pitch);
-        self.quads = Some(texels.texture((shape, 4), |buffer| {
-            texture_object(buffer, lane, shape, 4)
-        })?);
+        self.quads =
+            Some(texels.texture((shape, 4), |buffer| texture_object(buffer, lane, shape, 4))?);
         self.quad_texels = Some(texels);
         self.quads_smoothing = smoothing;
         Ok(())

@@ -1,8 +1,8 @@
 //! Test and bench hooks of `cuda/describe.rs` (the `internals` feature only): not part of the API.
 
 use super::*;
-use crate::cuda::texture::ImageLife;
 use crate::cuda::device::time_launches;
+use crate::cuda::texture::ImageLife;
 
 /// Kernel times in milliseconds of `repeats` launches after `warmup` launches, measured with CUDA
 /// events on the job's stream (upload and download excluded). Keypoints must all fit.

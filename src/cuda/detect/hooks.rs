@@ -1,8 +1,8 @@
 //! Test and bench hooks of `cuda/detect.rs` (the `internals` feature only): not part of the API.
 
 use super::*;
-use crate::cuda::texture::ImageLife;
 use crate::cuda::device::time_launches;
+use crate::cuda::texture::ImageLife;
 
 /// Times the detector: `repeats` runs of all its launches after `warmup` runs, each measured with CUDA
 /// events on its stream (image upload, allocation and read-back excluded). Returns the times in

@@ -69,7 +69,9 @@ impl PinnedBytes {
 
     /// The bytes.
     pub fn as_slice(&self) -> Result<&[u8]> {
-        self.0.as_slice().map_err(driver_error("pinned host buffer"))
+        self.0
+            .as_slice()
+            .map_err(driver_error("pinned host buffer"))
     }
 
     /// The bytes, to write.

@@ -38,24 +38,17 @@ fn main() {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
-    let single = |threshold: u8, max_keypoints: usize| {
-        let mut c = ExtractorConfig::single_scale();
-        c.detector = DetectorConfig {
+    // `base` with another threshold and keypoint cap.
+    let with = |mut base: ExtractorConfig, threshold: u8, max_keypoints: usize| {
+        base.detector = DetectorConfig {
             threshold,
             max_keypoints,
-            ..c.detector
+            ..base.detector
         };
-        c
+        base
     };
-    let pyramid = |threshold: u8, max_keypoints: usize| {
-        let mut c = ExtractorConfig::default();
-        c.detector = DetectorConfig {
-            threshold,
-            max_keypoints,
-            ..c.detector
-        };
-        c
-    };
+    let single = |threshold, max| with(ExtractorConfig::single_scale(), threshold, max);
+    let pyramid = |threshold, max| with(ExtractorConfig::default(), threshold, max);
     // Pinned copies of `frames` (rows packed).
     let pin = |frames: &[Vec<u8>]| -> Vec<PinnedBytes> {
         frames

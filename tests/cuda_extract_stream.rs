@@ -46,7 +46,7 @@ mod gpu {
     };
     use libtest_mimic::Failed;
 
-    use super::common::{Gray, astronaut, rectangles, scale};
+    use super::common::{Gray, astronaut, on_threads, rectangles, scale};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
 
@@ -393,42 +393,24 @@ mod gpu {
         let stream = GpuStream::new(0)?;
         let gpu = Extractor::new(GPU, ExtractorConfig::default())?;
         let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
-        let results: Vec<Result<usize, String>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = (0..threads)
-                .map(|t| {
-                    let (stream, gpu, cpu) = (stream.clone(), &gpu, &cpu);
-                    scope.spawn(move || -> Result<usize, String> {
-                        let mut compared = 0;
-                        for round in 0..rounds {
-                            let image =
-                                rectangles(480 + 32 * t, 360 + 8 * round, (t * 10 + round) as u64);
-                            let pending = gpu
-                                .detect_and_describe_async(&stream, &image.view())
-                                .map_err(|e| e.to_string())?;
-                            let expected = cpu
-                                .detect_and_describe(&image.view())
-                                .map_err(|e| e.to_string())?;
-                            let got = pending.wait().map_err(|e| e.to_string())?;
-                            if got != expected {
-                                return Err(format!(
-                                    "thread {t}, round {round}: GPU and CPU differ"
-                                ));
-                            }
-                            compared += got.keypoints.len();
-                        }
-                        Ok(compared)
-                    })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| h.join().unwrap_or(Err("thread panicked".into())))
-                .collect()
-        });
-        let mut total = 0;
-        for r in results {
-            total += r?;
-        }
+        let total = on_threads(threads, |t| {
+            let mut compared = 0;
+            for round in 0..rounds {
+                let image = rectangles(480 + 32 * t, 360 + 8 * round, (t * 10 + round) as u64);
+                let pending = gpu
+                    .detect_and_describe_async(&stream, &image.view())
+                    .map_err(|e| e.to_string())?;
+                let expected = cpu
+                    .detect_and_describe(&image.view())
+                    .map_err(|e| e.to_string())?;
+                let got = pending.wait().map_err(|e| e.to_string())?;
+                if got != expected {
+                    return Err(format!("thread {t}, round {round}: GPU and CPU differ"));
+                }
+                compared += got.keypoints.len();
+            }
+            Ok(compared)
+        })?;
         println!("{threads} threads x {rounds} rounds on one stream: {total} keypoints identical");
         Ok(())
     }

@@ -35,7 +35,7 @@ mod gpu {
     use clatch::{Backend, Error, Extractor, ExtractorConfig, GrayView, KeyPoint};
     use libtest_mimic::Failed;
 
-    use super::common::{rectangles, scale};
+    use super::common::{on_threads, rectangles, scale};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
 
@@ -379,40 +379,24 @@ mod gpu {
     pub fn many_threads() -> Result<(), Failed> {
         // Under CLATCH_TEST_SCALE=sanitizer, 4 threads of 1 round.
         let (threads, rounds) = scale::pick((16, 5), (4, 1));
-        let results: Vec<Result<usize, String>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = (0..threads)
-                .map(|t| {
-                    scope.spawn(move || -> Result<usize, String> {
-                        let image = rectangles(640 + 16 * t, 480, 100 + t as u64);
-                        let view = image.view();
-                        let mut compared = 0;
-                        for round in 0..rounds {
-                            let gpu = Extractor::new(GPU, ExtractorConfig::default())
-                                .map_err(|e| e.to_string())?;
-                            let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())
-                                .map_err(|e| e.to_string())?;
-                            let a = gpu.detect_and_describe(&view).map_err(|e| e.to_string())?;
-                            let b = cpu.detect_and_describe(&view).map_err(|e| e.to_string())?;
-                            if a != b {
-                                return Err(format!(
-                                    "thread {t}, round {round}: GPU and CPU differ"
-                                ));
-                            }
-                            compared += a.descriptors.len();
-                        }
-                        Ok(compared)
-                    })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| h.join().unwrap_or(Err("thread panicked".into())))
-                .collect()
-        });
-        let mut total = 0;
-        for r in results {
-            total += r?;
-        }
+        let total = on_threads(threads, |t| {
+            let image = rectangles(640 + 16 * t, 480, 100 + t as u64);
+            let view = image.view();
+            let mut compared = 0;
+            for round in 0..rounds {
+                let gpu =
+                    Extractor::new(GPU, ExtractorConfig::default()).map_err(|e| e.to_string())?;
+                let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())
+                    .map_err(|e| e.to_string())?;
+                let a = gpu.detect_and_describe(&view).map_err(|e| e.to_string())?;
+                let b = cpu.detect_and_describe(&view).map_err(|e| e.to_string())?;
+                if a != b {
+                    return Err(format!("thread {t}, round {round}: GPU and CPU differ"));
+                }
+                compared += a.descriptors.len();
+            }
+            Ok(compared)
+        })?;
         println!("{threads} threads x {rounds} rounds: {total} descriptors identical to the CPU");
         Ok(())
     }

@@ -99,7 +99,10 @@ pooled!(u8 => bytes, u32 => words, i32 => ints, u64 => longs, KeyPoint => keypoi
 /// reuses what an earlier one allocated.
 pub(crate) fn capacity_for(len: usize) -> usize {
     let len = len.max(1);
-    let unit = (len.next_power_of_two() / 8).max(1);
+    let power = len
+        .checked_next_power_of_two()
+        .unwrap_or(1 << (usize::BITS - 1));
+    let unit = (power / 8).max(1);
     len.div_ceil(unit).saturating_mul(unit)
 }
 
@@ -376,11 +379,11 @@ impl<T: Pooled> PinnedScratch<T> {
         // allocated and untouched by the host until the event recorded below completes: the buffer
         // is only reachable through this guard and the arena, and both wait for `copied` first.
         let range = unsafe { std::slice::from_raw_parts_mut(host.add(at), src.len()) };
-        super::spans::start(&stream);
+        let span = super::spans::Span::open(&stream);
         // SAFETY: `ptr` holds src.len() elements of T on this stream's device.
         unsafe { cudarc::driver::result::memcpy_dtoh_async(range, ptr, stream.cu_stream()) }
             .map_err(driver_error("copying results back"))?;
-        super::spans::end(&stream);
+        drop(span);
         kept.copied
             .record(&stream)
             .map_err(driver_error("event record"))
@@ -411,11 +414,11 @@ impl<T: Pooled> PinnedScratch<T> {
         // SAFETY: as in `queue_download`: the range is inside the buffer, which the host does not
         // write again before the event recorded below completes.
         let range = unsafe { std::slice::from_raw_parts(host.add(at), len) };
-        super::spans::start(&stream);
+        let span = super::spans::Span::open(&stream);
         // SAFETY: `ptr` holds `len` elements of T on this stream's device.
         unsafe { cudarc::driver::result::memcpy_htod_async(ptr, range, stream.cu_stream()) }
             .map_err(driver_error("uploading keypoints"))?;
-        super::spans::end(&stream);
+        drop(span);
         kept.copied
             .record(&stream)
             .map_err(driver_error("event record"))

@@ -15,6 +15,7 @@ use super::arena::{Lane, Leased, Scratch, settled};
 use super::describe::{launch_describe, upload_counts, weights};
 use super::detect::{DeviceKeypoints, detect_on_device, download_counts, launch_subpixel};
 use super::device::GpuDevice;
+use super::spans::Span;
 use super::texture::{DeviceImage, ImageLife};
 use crate::describe::DescriptorConfig;
 use crate::descriptor::DescriptorSet;
@@ -46,21 +47,7 @@ pub(crate) fn queue(
     p: &Pyramid,
     life: ImageLife,
 ) -> Result<QueuedPyramid> {
-    super::spans::start(lane);
-    let queued = queue_spanned(dev, lane, image, config, p, life);
-    super::spans::end(lane);
-    queued
-}
-
-/// [`queue`], within its device-time span.
-fn queue_spanned(
-    dev: &GpuDevice,
-    lane: &Lane,
-    image: &GrayView,
-    config: &DetectorConfig,
-    p: &Pyramid,
-    life: ImageLife,
-) -> Result<QueuedPyramid> {
+    let _span = Span::open(lane);
     let plan = Plan::new(p, image.width(), image.height(), config.margin());
     let mut levels = vec![DeviceImage::upload(dev, lane, image, life)?];
     for &size in &plan.sizes[1..] {
@@ -261,7 +248,7 @@ impl QueuedPyramid {
         let weights = weights(dev, descriptor)?;
         let bound = self.bound();
         // The device works from here to the read-backs without waiting for the host.
-        super::spans::start(&lane);
+        let span = Span::open(&lane);
         let selection = Selection::upload(&lane, &selected, self.levels.len(), bound)?;
         let total = selection.total;
         let mut out = lane.scratch::<u64>(bound * words, "pyramid descriptors")?;
@@ -297,7 +284,7 @@ impl QueuedPyramid {
             }
             None => None,
         };
-        super::spans::end(&lane);
+        drop(span);
         // One wait: the offsets were queued last, so waiting for them waits for everything.
         if let Some(host) = &mut host_offsets {
             apply_offsets(&mut selected, &selection, host.wait(2 * total)?);

@@ -30,8 +30,25 @@ struct Collecting {
     depth: usize,
 }
 
+/// An open span: [`start`] when made, [`end`] when dropped (errors included).
+pub(crate) struct Span<'a>(&'a Arc<CudaStream>);
+
+impl<'a> Span<'a> {
+    /// Opens a span on `stream`.
+    pub(crate) fn open(stream: &'a Arc<CudaStream>) -> Self {
+        start(stream);
+        Self(stream)
+    }
+}
+
+impl Drop for Span<'_> {
+    fn drop(&mut self) {
+        end(self.0);
+    }
+}
+
 /// Marks the start of device work queued next on `stream` (when collecting).
-pub(crate) fn start(stream: &Arc<CudaStream>) {
+fn start(stream: &Arc<CudaStream>) {
     #[cfg(feature = "internals")]
     SPANS.with_borrow_mut(|spans| {
         if let Some(c) = spans {
@@ -45,7 +62,7 @@ pub(crate) fn start(stream: &Arc<CudaStream>) {
 }
 
 /// Marks the end of the device work queued so far on `stream` since the last [`start`].
-pub(crate) fn end(stream: &Arc<CudaStream>) {
+fn end(stream: &Arc<CudaStream>) {
     #[cfg(feature = "internals")]
     SPANS.with_borrow_mut(|spans| {
         if let Some(c) = spans {

@@ -17,6 +17,7 @@ use super::detect::{DeviceKeypoints, detect_on_device, download_counts};
 use super::device::{GpuDevice, driver_error};
 use super::matching::{MatchJob, check_rows};
 use super::pyramid::QueuedPyramid;
+use super::spans::Span;
 use super::texture::{DeviceImage, ImageLife};
 use crate::describe::DescriptorConfig;
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
@@ -219,21 +220,7 @@ pub(crate) fn detect_and_describe_async(
             },
         });
     }
-    super::spans::start(s);
-    let queued = queue_single(stream, image, detector, descriptor, life);
-    super::spans::end(s);
-    queued
-}
-
-/// The single-scale part of [`detect_and_describe_async`], within its device-time span.
-fn queue_single(
-    stream: &GpuStream,
-    image: &GrayView,
-    detector: &DetectorConfig,
-    descriptor: &DescriptorConfig,
-    life: ImageLife,
-) -> Result<PendingFeatures> {
-    let (dev, s) = (&*stream.dev, stream.lane());
+    let _span = Span::open(s);
     let mut device_image = DeviceImage::upload(dev, s, image, life)?;
     let keypoints = detect_on_device(dev, s, &device_image, detector)?;
     device_image.build_quads(dev, s, descriptor.smoothing)?;

@@ -30,6 +30,7 @@ fn trials() -> Vec<Trial> {
         Trial::test("stream_of_images_in_input_order", gpu::stream_in_order),
         Trial::test("stream_stops_at_the_first_error", gpu::stream_errors),
         Trial::test("pinned_and_pageable_images", gpu::pinned_and_pageable),
+        Trial::test("large_images_arrive_in_bands", gpu::large_images_in_bands),
         Trial::test(
             "threads_sharing_one_stream",
             gpu::threads_sharing_one_stream,
@@ -382,6 +383,74 @@ mod gpu {
                 "{name}: {} images of {w}x{h} (stride {stride}) from page-locked and pageable memory, identical",
                 sources.len()
             );
+        }
+        Ok(())
+    }
+
+    /// Images larger than one upload band (4 MiB) are copied band by band on the stream's copy stream
+    /// while the detector suppresses the bands that have arrived: from pageable and from page-locked
+    /// memory, through the blocking call, the asynchronous call (two in flight on one stream) and the
+    /// stream, with every configuration, the results are the CPU's.
+    pub fn large_images_in_bands() -> Result<(), Failed> {
+        let sizes = scale::pick(vec![(4000, 3000), (2400, 1801)], vec![(2100, 2100)]);
+        for (w, h) in sizes {
+            let pageable: Vec<Gray> = (0..2)
+                .map(|i| varied(&rectangles(w, h, 500 + i as u64), i))
+                .collect();
+            let mut pinned = Vec::new();
+            for g in &pageable {
+                let mut bytes = PinnedBytes::new(0, w * h)?;
+                bytes.as_mut_slice()?.copy_from_slice(&g.pixels);
+                pinned.push(bytes);
+            }
+            let pinned_views: Vec<GrayView> = pinned
+                .iter()
+                .map(|b| GrayView::new(b.as_slice().expect("pinned bytes"), w, h, w))
+                .collect::<Result<_, _>>()?;
+            for (name, config) in configs() {
+                let gpu = Extractor::new(GPU, config.clone())?;
+                let cpu = Extractor::new(Backend::Cpu, config)?;
+                let expected: Vec<Features> = pageable
+                    .iter()
+                    .map(|g| cpu.detect_and_describe(&g.view()))
+                    .collect::<Result<_, _>>()?;
+                let stream = GpuStream::new(0)?;
+                let in_flight = [
+                    gpu.detect_and_describe_async(&stream, &pageable[0].view())?,
+                    gpu.detect_and_describe_async(&stream, &pinned_views[1])?,
+                ];
+                for (i, pending) in in_flight.into_iter().enumerate() {
+                    compare(
+                        &format!("{name}, {w}x{h}, async {i}"),
+                        &pending.wait()?,
+                        &expected[i],
+                    )?;
+                }
+                for i in 0..2 {
+                    compare(
+                        &format!("{name}, {w}x{h}, pageable, blocking {i}"),
+                        &gpu.detect_and_describe(&pageable[i].view())?,
+                        &expected[i],
+                    )?;
+                    compare(
+                        &format!("{name}, {w}x{h}, pinned, blocking {i}"),
+                        &gpu.detect_and_describe(&pinned_views[i])?,
+                        &expected[i],
+                    )?;
+                }
+                let mut streamed = Vec::new();
+                gpu.detect_and_describe_stream(
+                    pinned_views.iter().map(Ok::<_, Error>),
+                    |_, _, f| {
+                        streamed.push(f);
+                        Ok(())
+                    },
+                )?;
+                for (i, f) in streamed.iter().enumerate() {
+                    compare(&format!("{name}, {w}x{h}, stream {i}"), f, &expected[i])?;
+                }
+                println!("{name}: {w}x{h} in bands, pageable and page-locked, identical");
+            }
         }
         Ok(())
     }

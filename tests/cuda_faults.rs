@@ -292,7 +292,8 @@ mod gpu {
         use clatch::cuda::GpuStream;
         use clatch::cuda::hooks::fail_allocation;
         let small = rectangles(320, 240, 3);
-        let (w, h) = scale::pick((1280, 960), (640, 480));
+        // Larger than one 4 MiB upload band: the copy stream and its band events are in the growth.
+        let (w, h) = scale::pick((2400, 1800), (2100, 2100));
         let large = rectangles(w, h, 4);
         let single = ExtractorConfig::single_scale();
         for (name, config) in [

@@ -141,6 +141,9 @@ impl Arena {
 #[derive(Clone, Debug)]
 pub(crate) struct Lane {
     stream: Arc<CudaStream>,
+    /// Copies of large images go here, so that detection on their first bands overlaps the copy of
+    /// the rest (`DeviceImage::upload`); ordered against `stream` by events only.
+    copy: Arc<CudaStream>,
     arena: Arc<Arena>,
 }
 
@@ -156,8 +159,24 @@ impl Lane {
     pub(crate) fn new(dev: &GpuDevice) -> Result<Self> {
         Ok(Self {
             stream: dev.new_stream()?,
+            copy: dev.new_stream()?,
             arena: Arc::default(),
         })
+    }
+
+    /// The lane's copy stream (see the field).
+    pub(crate) fn copy_stream(&self) -> &Arc<CudaStream> {
+        &self.copy
+    }
+
+    /// Waits until everything queued on the lane (its stream and its copy stream) has run.
+    pub(crate) fn synchronize_all(&self) -> Result<()> {
+        self.copy
+            .synchronize()
+            .map_err(driver_error("copy stream synchronisation"))?;
+        self.stream
+            .synchronize()
+            .map_err(driver_error("stream synchronisation"))
     }
 
     /// A device buffer of `len` elements (at least one) for work queued on this lane's stream: a free
@@ -224,7 +243,7 @@ impl Lane {
 pub(crate) fn settled<T>(lane: &Lane, result: Result<T>) -> Result<T> {
     if result.is_err() {
         // The error being returned is the one that matters; a failed wait says the same thing.
-        let _ = lane.synchronize();
+        let _ = lane.synchronize_all();
     }
     result
 }

@@ -6,12 +6,15 @@
 //! ascending) order, which gives every (score, row) its first output position, a scatter that ranks
 //! equal scores within a row left to right, and the orientation of the kept keypoints. The output stays
 //! on the device ([`DeviceKeypoints`]) until the caller reads it back, so a GPU `detect_and_describe`
-//! can hand it to the describe kernel together with the same [`DeviceImage`].
+//! can hand it to the describe kernel together with the same [`DeviceImage`]. An image large enough
+//! to be uploaded in bands on its lane's copy stream ([`DeviceImage::arrivals`]) is suppressed band by
+//! band as the bands arrive, so the copy of the rest overlaps the suppression of the first rows; the
+//! stages after suppression wait for the whole image.
 
 use std::sync::Arc;
 
 use cudarc::driver::{
-    CudaStream, CudaView, CudaViewMut, LaunchConfig, PushKernelArg, ValidAsZeroBits,
+    CudaEvent, CudaStream, CudaView, CudaViewMut, LaunchConfig, PushKernelArg, ValidAsZeroBits,
 };
 
 use super::arena::{Lane, Leased, Scratch, settled};
@@ -28,6 +31,11 @@ use crate::keypoint::KeyPoint;
 
 // SAFETY: KeyPoint is #[repr(C)] f32s and an i32; all-zero bits are a valid value.
 unsafe impl ValidAsZeroBits for KeyPoint {}
+
+/// Rows `clatch_detect_nms` reads past a tile on each side (`kernels/detect.cu`: IMAGE_H is
+/// TILE_Y + 8, from 4 rows above the tile): a tile row can be scored once its rows and this many more
+/// have arrived.
+const NMS_HALO: usize = 4;
 
 /// Distinct scores a survivor can have (1..=255): the counts have this many rows per image row.
 const SCORES: usize = 255;
@@ -203,28 +211,58 @@ impl DetectJob {
             .map_err(driver_error("detection: clearing the counts"))?;
 
         let tile = (CLATCH_DETECT_TILE_X as usize, CLATCH_DETECT_TILE_Y as usize);
-        let mut nms = stream.launch_builder(dev.kernel("clatch_detect_nms"));
-        nms.arg(&texture)
-            .arg(&width)
-            .arg(&height)
-            .arg(&margin)
-            .arg(&self.threshold)
-            .arg(self.kept.whole_mut())
-            .arg(&pitch)
-            .arg(self.counts.whole_mut());
-        let config = LaunchConfig {
-            grid_dim: (
-                (g.pitch / tile.0) as u32,
-                g.height.div_ceil(tile.1) as u32,
-                1,
-            ),
-            block_dim: (tile.0 as u32, tile.1 as u32, 1),
-            shared_mem_bytes: 0,
+        let tile_rows = g.height.div_ceil(tile.1);
+        // One launch per band of the image as it arrives (one launch when it is all there): a tile row
+        // is scored once every row it reads, NMS_HALO past its own, has arrived.
+        let arrivals = image.arrivals();
+        let steps: Vec<(usize, Option<&CudaEvent>)> = if arrivals.is_empty() {
+            vec![(g.height, None)]
+        } else {
+            arrivals.iter().map(|(rows, e)| (*rows, Some(e))).collect()
         };
-        // SAFETY: arguments match the kernel's signature; the grid covers exactly `pitch` x `height`
-        // (rows past the image return) and writes every byte of it, within `kept` (at least that
-        // size: a reused buffer's stale bytes are all overwritten); counts holds at least 255 x height.
-        unsafe { nms.launch(config) }.map_err(driver_error("launching clatch_detect_nms"))?;
+        let mut done = 0usize;
+        for (rows, arrived) in steps {
+            if let Some(event) = arrived {
+                stream
+                    .wait(event)
+                    .map_err(driver_error("detection: waiting for a band of the image"))?;
+            }
+            let ready = if rows >= g.height {
+                tile_rows
+            } else {
+                (rows.saturating_sub(NMS_HALO) / tile.1).min(tile_rows)
+            };
+            if ready <= done {
+                continue;
+            }
+            let first_tile_row = done as i32;
+            let mut nms = stream.launch_builder(dev.kernel("clatch_detect_nms"));
+            nms.arg(&texture)
+                .arg(&width)
+                .arg(&height)
+                .arg(&margin)
+                .arg(&self.threshold)
+                .arg(self.kept.whole_mut())
+                .arg(&pitch)
+                .arg(self.counts.whole_mut())
+                .arg(&first_tile_row);
+            let config = LaunchConfig {
+                grid_dim: ((g.pitch / tile.0) as u32, (ready - done) as u32, 1),
+                block_dim: (tile.0 as u32, tile.1 as u32, 1),
+                shared_mem_bytes: 0,
+            };
+            // SAFETY: arguments match the kernel's signature; the launches together cover exactly
+            // `pitch` x `height` once (tile rows `done..ready` here; rows past the image return) and
+            // write every byte of it, within `kept` (at least that size: a reused buffer's stale bytes
+            // are all overwritten); counts holds at least 255 x height. The texels these tile rows
+            // read (their rows and NMS_HALO below, clamped at the image) have arrived: the stream
+            // waited for their band above.
+            unsafe { nms.launch(config) }.map_err(driver_error("launching clatch_detect_nms"))?;
+            done = ready;
+        }
+        super::invariant(done == tile_rows, "detection", || {
+            format!("{done} of {tile_rows} tile rows suppressed")
+        })?;
         if last == Stage::Suppress {
             return Ok(());
         }
@@ -349,6 +387,7 @@ pub(crate) fn launch_subpixel(
     if count == 0 {
         return Ok(());
     }
+    image.arrived(stream)?;
     let texture = image.texture();
     let (width, height) = (image.width() as i32, image.height() as i32);
     let n = count as u32;

@@ -206,27 +206,28 @@ fn give_back(ordinal: usize, staging: Staging) {
     }
 }
 
-/// Copies `rows` rows of `pitch` bytes, each written by `fill(y, row)`, into `dst` (at least
-/// `rows * pitch` bytes) on `stream`, in bands through pinned staging buffers: the host fills a band
-/// (rows in parallel) while the copies of the bands before it run. The staging buffers return to the
-/// pool with the event of their copy. Returns when every band is queued, with the copies in flight.
+/// Copies rows `rows` of `pitch` bytes, each written by `fill(y, row)`, into the same rows of `dst`
+/// (at least `rows.end * pitch` bytes) on `stream`, in bands through pinned staging buffers: the host
+/// fills a band (rows in parallel) while the copies of the bands before it run. The staging buffers
+/// return to the pool with the event of their copy. Returns when every band is queued, with the
+/// copies in flight.
 pub(crate) fn upload_rows(
     stream: &Arc<CudaStream>,
     dst: &mut CudaSlice<u8>,
-    (rows, pitch): (usize, usize),
+    (rows, pitch): (std::ops::Range<usize>, usize),
     operation: &str,
     fill: impl Fn(usize, &mut [u8]) + Sync,
 ) -> Result<()> {
     super::invariant(
-        pitch > 0 && pitch <= BAND_BYTES && dst.len() >= rows * pitch,
+        pitch > 0 && pitch <= BAND_BYTES && dst.len() >= rows.end * pitch,
         "image upload",
-        || format!("{rows} rows of {pitch} bytes into {} bytes", dst.len()),
+        || format!("rows {rows:?} of {pitch} bytes into {} bytes", dst.len()),
     )?;
     let ordinal = stream.context().ordinal();
     let band_rows = BAND_BYTES / pitch;
-    let mut y0 = 0;
-    while y0 < rows {
-        let y1 = (y0 + band_rows).min(rows);
+    let mut y0 = rows.start;
+    while y0 < rows.end {
+        let y1 = (y0 + band_rows).min(rows.end);
         let len = (y1 - y0) * pitch;
         let mut staged = staging(stream, "pinned staging allocation")?;
         let host = staged
@@ -289,8 +290,14 @@ pub(crate) fn is_pinned(stream: &Arc<CudaStream>, bytes: &[u8]) -> bool {
     })
 }
 
-/// Queues one 2-D copy of `rows` rows of `width` bytes, `stride` apart from `src` on the host, into
-/// `dst` (rows `pitch` apart) on `stream`: the copy engine reads the host memory directly.
+/// The most rows of `pitch` bytes one band of an upload holds (at least one).
+pub(crate) fn band_rows(pitch: usize) -> usize {
+    (BAND_BYTES / pitch.max(1)).max(1)
+}
+
+/// Queues one 2-D copy of rows `rows` (each `width` bytes, `stride` apart from `src` on the host)
+/// into the same rows of `dst` (rows `pitch` apart) on `stream`: the copy engine reads the host memory
+/// directly.
 ///
 /// # Safety
 /// `src` must stay valid and unchanged until the copy has run (the caller waits for the stream, or
@@ -300,19 +307,19 @@ pub(crate) unsafe fn copy_rows_2d(
     stream: &Arc<CudaStream>,
     dst: &mut CudaSlice<u8>,
     pitch: usize,
-    (src, width, rows, stride): (&[u8], usize, usize, usize),
+    (src, width, rows, stride): (&[u8], usize, std::ops::Range<usize>, usize),
     operation: &str,
 ) -> Result<()> {
     super::invariant(
-        rows > 0
+        rows.start < rows.end
             && width <= pitch
             && width <= stride
-            && src.len() >= stride * (rows - 1) + width
-            && dst.len() >= pitch * rows,
+            && src.len() >= stride * (rows.end - 1) + width
+            && dst.len() >= pitch * rows.end,
         "image upload",
         || {
             format!(
-                "{rows} rows of {width} bytes (stride {stride}, {} bytes) into {} bytes of pitch {pitch}",
+                "rows {rows:?} of {width} bytes (stride {stride}, {} bytes) into {} bytes of pitch {pitch}",
                 src.len(),
                 dst.len()
             )
@@ -323,7 +330,8 @@ pub(crate) unsafe fn copy_rows_2d(
         srcXInBytes: 0,
         srcY: 0,
         srcMemoryType: sys::CUmemorytype::CU_MEMORYTYPE_HOST,
-        srcHost: src.as_ptr().cast(),
+        // Row `rows.start` of the source, in bounds: checked above.
+        srcHost: src[rows.start * stride..].as_ptr().cast(),
         srcDevice: 0,
         srcArray: std::ptr::null_mut(),
         srcPitch: stride,
@@ -331,11 +339,11 @@ pub(crate) unsafe fn copy_rows_2d(
         dstY: 0,
         dstMemoryType: sys::CUmemorytype::CU_MEMORYTYPE_DEVICE,
         dstHost: std::ptr::null_mut(),
-        dstDevice: device,
+        dstDevice: device + (rows.start * pitch) as sys::CUdeviceptr,
         dstArray: std::ptr::null_mut(),
         dstPitch: pitch,
         WidthInBytes: width,
-        Height: rows,
+        Height: rows.end - rows.start,
     };
     stream
         .context()

@@ -49,19 +49,20 @@ pub(crate) fn queue(
 ) -> Result<QueuedPyramid> {
     let _span = Span::open(lane);
     let plan = Plan::new(p, image.width(), image.height(), config.margin());
+    let candidates = config.candidates();
+    // Level 0 is detected first, band by band as it arrives (a large image's copy overlaps its
+    // suppression), then each level is built from the one before and detected. The order of launches
+    // on the stream changes no result.
     let mut levels = vec![DeviceImage::upload(dev, lane, image, life)?];
+    let mut found = vec![detect_on_device(dev, lane, &levels[0], &candidates)?];
     for &size in &plan.sizes[1..] {
         let next = levels
             .last()
             .expect("level 0 is there")
             .downscale(dev, lane, plan.step, size)?;
+        found.push(detect_on_device(dev, lane, &next, &candidates)?);
         levels.push(next);
     }
-    let candidates = config.candidates();
-    let found = levels
-        .iter()
-        .map(|level| detect_on_device(dev, lane, level, &candidates))
-        .collect::<Result<Vec<_>>>()?;
     Ok(QueuedPyramid {
         lane: lane.clone(),
         plan,

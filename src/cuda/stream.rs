@@ -107,9 +107,7 @@ impl GpuStream {
 
     /// Blocks until everything queued so far has run.
     pub fn synchronize(&self) -> Result<()> {
-        self.lane()
-            .synchronize()
-            .map_err(driver_error("stream synchronisation"))
+        self.lane().synchronize_all()
     }
 
     /// An event recorded now: complete once everything queued so far has run.

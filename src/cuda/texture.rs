@@ -2,14 +2,19 @@
 
 use std::sync::Arc;
 
-use cudarc::driver::{CudaSlice, CudaStream, DevicePtr, LaunchConfig, PushKernelArg, sys};
+use std::ops::Range;
+
+use cudarc::driver::{
+    CudaEvent, CudaSlice, CudaStream, DevicePtr, LaunchConfig, PushKernelArg, sys,
+};
 
 use super::arena::{Lane, Scratch};
 use super::device::{GpuDevice, driver_error};
 use super::header::{
-    CLATCH_PYRAMID_TILE_X, CLATCH_PYRAMID_TILE_Y, CLATCH_SMOOTH_TILE_X, CLATCH_SMOOTH_TILE_Y,
+    CLATCH_DETECT_TILE_Y, CLATCH_PYRAMID_TILE_X, CLATCH_PYRAMID_TILE_Y, CLATCH_SMOOTH_TILE_X,
+    CLATCH_SMOOTH_TILE_Y,
 };
-use super::memory::{copy_rows_2d, is_pinned, upload_rows};
+use super::memory::{band_rows, copy_rows_2d, is_pinned, upload_rows};
 use crate::describe::Smoothing;
 use crate::error::{Error, Result};
 use crate::gray_view::GrayView;
@@ -86,6 +91,21 @@ pub struct DeviceImage {
     pitch: usize,
     width: usize,
     height: usize,
+    /// See [`DeviceImage::arrivals`].
+    arrivals: Vec<(usize, CudaEvent)>,
+    /// The lane's stream, when the image arrives on the copy stream: it waits for the last band
+    /// before the buffer goes back to the arena ([`Drop`]).
+    waits: Option<Arc<CudaStream>>,
+}
+
+impl Drop for DeviceImage {
+    fn drop(&mut self) {
+        // The pixel buffer goes back to the lane's arena after this; its next user queues on the
+        // lane's stream, which must not overtake a copy still writing it on the copy stream.
+        if let (Some(stream), Some((_, last))) = (&self.waits, self.arrivals.last()) {
+            let _ = stream.wait(last);
+        }
+    }
 }
 
 /// How long the caller's image stays valid, which decides how it is uploaded.
@@ -100,9 +120,13 @@ pub(crate) enum ImageLife {
 }
 
 impl DeviceImage {
-    /// Copies `image` to the device on `lane`'s stream with the row pitch the texture unit needs: in
-    /// one 2-D copy straight from the image when it is in page-locked memory and outlives the work
-    /// ([`ImageLife::Work`]), else in bands through pinned staging buffers ([`upload_rows`]).
+    /// Copies `image` to the device with the row pitch the texture unit needs: straight from the image
+    /// by the copy engine (2-D copies) when it is in page-locked memory and outlives the work
+    /// ([`ImageLife::Work`]), else through pinned staging buffers ([`upload_rows`]). An image of one
+    /// band is copied on `lane`'s stream. A larger one is copied band by band on the lane's copy
+    /// stream, each band announced by an event ([`Self::arrivals`]), so that detection can start on
+    /// the first bands while the others are still on their way; every other use of the pixels on the
+    /// lane's stream waits for the last band first ([`Self::arrived`]).
     pub(crate) fn upload(
         dev: &GpuDevice,
         lane: &Lane,
@@ -114,47 +138,96 @@ impl DeviceImage {
         let mut pixels = lane.scratch::<u8>(pitch * height, "image upload")?;
         let stride = image.stride();
         let bytes = &image.data()[..stride * (height - 1) + width];
-        if life == ImageLife::Work && is_pinned(lane, bytes) {
-            // SAFETY: ImageLife::Work: the image stays valid until the work queued after this copy
-            // has completed, which the caller waits for before returning.
-            unsafe {
-                copy_rows_2d(
-                    lane,
+        let direct = life == ImageLife::Work && is_pinned(lane, bytes);
+        let copy_band = |stream: &Arc<CudaStream>, pixels: &mut Scratch<u8>, rows: Range<usize>| {
+            if direct {
+                // SAFETY: ImageLife::Work: the image stays valid until the work queued after this
+                // copy has completed, which the caller waits for before returning (errors included).
+                unsafe {
+                    copy_rows_2d(
+                        stream,
+                        pixels.whole_mut(),
+                        pitch,
+                        (bytes, width, rows, stride),
+                        "image upload",
+                    )
+                }
+            } else {
+                // The copy into pinned memory is host time every queued image pays (about 0.2 ms for
+                // 1080p on one core): rows in parallel.
+                upload_rows(
+                    stream,
                     pixels.whole_mut(),
-                    pitch,
-                    (bytes, width, height, stride),
+                    (rows, pitch),
                     "image upload",
-                )?;
+                    |y, row| {
+                        row[..width].copy_from_slice(image.row(y));
+                        row[width..].fill(0);
+                    },
+                )
             }
-            return Self::from_pixels(pixels, lane, (width, height, pitch));
+        };
+        let bands = height.div_ceil(band_rows(pitch));
+        if bands <= 1 {
+            copy_band(lane, &mut pixels, 0..height)?;
+            return Self::from_pixels(pixels, lane, (width, height, pitch), Vec::new());
         }
-        // The copy into pinned memory is host time every queued image pays (about 0.2 ms for 1080p on
-        // one core): rows in parallel, band after band.
-        upload_rows(
-            lane,
-            pixels.whole_mut(),
-            (height, pitch),
-            "image upload",
-            |y, row| {
-                row[..width].copy_from_slice(image.row(y));
-                row[width..].fill(0);
-            },
-        )?;
-        Self::from_pixels(pixels, lane, (width, height, pitch))
+        // Bands of equal height, whole tile rows of the detector each.
+        let tile = CLATCH_DETECT_TILE_Y as usize;
+        let rows_per_band = height.div_ceil(bands).div_ceil(tile) * tile;
+        // The buffer may come from an earlier call on the lane's stream: the copy stream writes it
+        // only after that call's work there.
+        let copy = lane.copy_stream();
+        let free = lane
+            .record_event(None)
+            .map_err(driver_error("event record"))?;
+        copy.wait(&free)
+            .map_err(driver_error("image upload: ordering the copy stream"))?;
+        let mut arrivals = Vec::with_capacity(bands);
+        let mut y0 = 0;
+        let mut queued = Ok(());
+        while y0 < height && queued.is_ok() {
+            let y1 = (y0 + rows_per_band).min(height);
+            let band = copy_band(copy, &mut pixels, y0..y1).and_then(|()| {
+                copy.record_event(None)
+                    .map_err(driver_error("event record"))
+            });
+            match band {
+                Ok(arrived) => {
+                    arrivals.push((y1, arrived));
+                    y0 = y1;
+                }
+                Err(e) => queued = Err(e),
+            }
+        }
+        if queued.is_err() {
+            // Part of the failed band may be queued already: one more event, after it, for the drop
+            // to wait for (the rows it announces are those of the bands before).
+            if let Ok(after) = copy.record_event(None) {
+                arrivals.push((y0, after));
+            }
+        }
+        // Even on an error, the image (and its arrivals so far) is built, so that dropping it makes
+        // the lane's stream wait for the bands queued before the buffer goes back to the arena.
+        let image = Self::from_pixels(pixels, lane, (width, height, pitch), arrivals);
+        queued?;
+        image
     }
 
-    /// Wraps `height` rows of `pitch` bytes (the first `width` of each are the image) with its texture.
+    /// Wraps `height` rows of `pitch` bytes (the first `width` of each are the image) with its
+    /// texture; `arrivals` as [`Self::arrivals`].
     fn from_pixels(
         mut pixels: Scratch<u8>,
         stream: &Arc<CudaStream>,
         (width, height, pitch): (usize, usize, usize),
+        arrivals: Vec<(usize, CudaEvent)>,
     ) -> Result<Self> {
         let shape = (width, height, pitch);
         let texture = pixels.texture((shape, 1), |buffer| {
             texture_object(buffer, stream, shape, 1)
-        })?;
-        Ok(Self {
-            texture,
+        });
+        let image = Self {
+            texture: *texture.as_ref().unwrap_or(&0),
             quads: None,
             pixels,
             quad_texels: None,
@@ -162,7 +235,30 @@ impl DeviceImage {
             pitch,
             width,
             height,
-        })
+            waits: (!arrivals.is_empty()).then(|| stream.clone()),
+            arrivals,
+        };
+        texture?;
+        Ok(image)
+    }
+
+    /// The bands of the image still arriving on the copy stream: after event `e` of `(rows, e)`, the
+    /// first `rows` rows are on the device. Empty when the whole image was copied on the lane's
+    /// stream. Detection waits for each band in turn ([`super::detect`]).
+    pub(crate) fn arrivals(&self) -> &[(usize, CudaEvent)] {
+        &self.arrivals
+    }
+
+    /// Makes `stream` (the lane's) wait until the whole image has arrived: before any use of its
+    /// pixels but the detector's band by band suppression. Does nothing for an image copied on the
+    /// lane's stream itself.
+    pub(crate) fn arrived(&self, stream: &Arc<CudaStream>) -> Result<()> {
+        match self.arrivals.last() {
+            Some((_, last)) => stream
+                .wait(last)
+                .map_err(driver_error("waiting for the image's upload")),
+            None => Ok(()),
+        }
     }
 
     /// Queues the next pyramid level: `width` x `height` pixels downscaled from this image by the 16.16
@@ -174,6 +270,7 @@ impl DeviceImage {
         step: i64,
         (width, height): (usize, usize),
     ) -> Result<Self> {
+        self.arrived(lane)?;
         let pitch = width.div_ceil(dev.pitch_alignment) * dev.pitch_alignment;
         let mut pixels = lane.scratch::<u8>(pitch * height, "pyramid level")?;
         let (src_pitch, src_w, src_h) = (self.pitch as i32, self.width as i32, self.height as i32);
@@ -207,7 +304,7 @@ impl DeviceImage {
         // sides); `pixels` holds at least `height` rows of `pitch` bytes, of which the first `width`
         // are written (and only those are read, through the texture's width).
         unsafe { launch.launch(config) }.map_err(driver_error("clatch_downscale"))?;
-        Self::from_pixels(pixels, lane, (width, height, pitch))
+        Self::from_pixels(pixels, lane, (width, height, pitch), Vec::new())
     }
 
     /// Queues a smoothed copy of the pixels (same size and pitch) on `stream`:
@@ -224,6 +321,7 @@ impl DeviceImage {
             Smoothing::Binomial3 => "clatch_smooth_binomial3",
             Smoothing::Binomial5 => "clatch_smooth_binomial5",
         };
+        self.arrived(lane)?;
         let mut smoothed = lane.scratch::<u8>(self.pitch * self.height, "smoothed image")?;
         let (pitch, width, height) = (self.pitch as i32, self.width as i32, self.height as i32);
         let mut launch = lane.launch_builder(dev.kernel(kernel));
@@ -272,6 +370,7 @@ impl DeviceImage {
                 ),
             });
         }
+        self.arrived(lane)?;
         // The smoothed copy goes back to the arena when it goes out of scope below: the next user of
         // it queues on this stream, after clatch_build_quads has read it.
         let smoothed = self.smoothed(dev, lane, smoothing)?;
@@ -320,6 +419,7 @@ impl DeviceImage {
         stream: &Arc<CudaStream>,
         buffer: &Scratch<u8>,
     ) -> Result<Vec<u8>> {
+        self.arrived(stream)?;
         let pitched = stream
             .clone_dtoh(&buffer.whole().slice(..self.pitch * self.height))
             .map_err(driver_error("reading an image back"))?;
@@ -335,7 +435,8 @@ impl DeviceImage {
         self.quads
     }
 
-    /// The texture handle for kernel arguments.
+    /// The texture handle for kernel arguments. Kernels that read it wait for [`Self::arrived`]
+    /// first (or, the detector's suppression, for the bands they read).
     pub fn texture(&self) -> u64 {
         self.texture
     }

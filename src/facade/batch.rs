@@ -206,3 +206,90 @@ impl Extractor {
         result
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ExtractorConfig;
+
+    struct Owned(Vec<u8>, usize, usize);
+
+    impl AsGrayView for Owned {
+        fn gray_view(&self) -> Result<GrayView<'_>> {
+            GrayView::new(&self.0, self.1, self.2, self.1)
+        }
+    }
+
+    fn image(i: usize) -> Owned {
+        let (w, h) = (96 + 8 * (i % 5), 80 + 4 * (i % 3));
+        Owned(
+            crate::synthetic::rectangles(w, h, i as u64).expect("synthetic image"),
+            w,
+            h,
+        )
+    }
+
+    #[test]
+    fn a_stream_on_the_cpu_gives_each_image_its_own_result_in_order() {
+        let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
+        // More images than one group of threads.
+        let n = 2 * crate::parallel::threads() + 3;
+        let mut seen = Vec::new();
+        let count = extractor
+            .detect_and_describe_stream((0..n).map(|i| Ok::<_, Error>(image(i))), |i, item, f| {
+                assert_eq!(f, extractor.detect_and_describe(&item.gray_view()?)?);
+                assert_eq!(
+                    item.0,
+                    image(i).0,
+                    "image {i} handed back with its features"
+                );
+                seen.push(i);
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!(count, n);
+        assert_eq!(seen, (0..n).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn a_stream_stops_at_the_first_error() {
+        let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
+        let producer = (0..10).map(|i| {
+            if i == 6 {
+                Err(Error::EmptyGallery)
+            } else {
+                Ok(image(i))
+            }
+        });
+        let mut handed = 0;
+        let result = extractor.detect_and_describe_stream(producer, |_, _, _| {
+            handed += 1;
+            Ok(())
+        });
+        assert!(matches!(result, Err(Error::EmptyGallery)));
+        assert!(handed <= 6);
+        let tiny = (0..3).map(|i| {
+            Ok::<_, Error>(if i == 1 {
+                Owned(vec![0; 16 * 16], 16, 16)
+            } else {
+                image(i)
+            })
+        });
+        let result = extractor.detect_and_describe_stream(tiny, |_, _, _| Ok(()));
+        assert!(
+            matches!(result, Err(Error::ImageTooSmall { .. })),
+            "{result:?}"
+        );
+        let result = extractor.detect_and_describe_stream(
+            (0..5).map(|i| Ok::<_, Error>(image(i))),
+            |i, _, _| {
+                if i == 2 {
+                    Err(Error::EmptyGallery)
+                } else {
+                    Ok(())
+                }
+            },
+        );
+        assert!(matches!(result, Err(Error::EmptyGallery)));
+    }
+}

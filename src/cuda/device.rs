@@ -268,6 +268,15 @@ impl GpuDevice {
         })
     }
 
+    /// Forgets the uploaded weight tables (test hooks: a cold start; only while no call is queued).
+    #[cfg(feature = "internals")]
+    pub(crate) fn clear_weights(&self) {
+        self.weights
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clear();
+    }
+
     /// `values` (a descriptor weight table) on the device, uploaded on first use. Like the tables of
     /// [`GpuDevice::load`], the upload runs on the default stream and is complete before the buffer is
     /// shared with any stream, so it never needs event tracking; it is never written afterwards.

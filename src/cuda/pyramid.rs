@@ -254,11 +254,14 @@ impl QueuedPyramid {
         let total = selection.total;
         let mut out = lane.scratch::<u64>(bound * words, "pyramid descriptors")?;
         for (l, level) in self.levels.iter_mut().enumerate() {
+            // Every level's quad texture, even one without selected keypoints: the buffers a call
+            // takes then depend on the image's size, not on what it shows, so a warm stream serves
+            // every image of that size without allocating.
+            level.build_quads(dev, &lane, descriptor.smoothing)?;
             let (at, n) = selection.ranges[l];
             if n == 0 {
                 continue;
             }
-            level.build_quads(dev, &lane, descriptor.smoothing)?;
             // Detection's margin makes every window fit on its level, as on the CPU.
             launch_describe(
                 dev,

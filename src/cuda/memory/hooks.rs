@@ -39,15 +39,21 @@ pub fn allocations() -> usize {
 }
 
 /// Frees every buffer the crate keeps between calls on device `ordinal` that no call holds now: the
-/// device's idle streams with their scratch arenas, and the pinned staging buffers. The next call
-/// starts cold and allocates again (so allocation-failure tests reach every site).
+/// device's idle streams with their scratch arenas, the pinned staging buffers and the descriptor
+/// weight tables. The next call starts cold and allocates again (so allocation-failure tests reach
+/// every site). Only between calls: nothing may be queued on the device.
 pub fn release_cached_memory(ordinal: usize) -> Result<()> {
     let dev = crate::cuda::device(ordinal)?;
+    let sync = || {
+        dev.ctx
+            .synchronize()
+            .map_err(driver_error("releasing cached memory"))
+    };
+    sync()?;
     dev.lanes.clear();
     clear_staging();
-    dev.ctx
-        .synchronize()
-        .map_err(driver_error("releasing cached memory"))
+    dev.clear_weights();
+    sync()
 }
 
 /// Page-locked host bytes (tests and benches: images in pinned memory, as a camera or a decoder

@@ -21,6 +21,13 @@ use crate::parallel::*;
 thread_local! {
     static FAIL_AFTER: std::cell::Cell<Option<usize>> = const { std::cell::Cell::new(None) };
     static ALLOCATIONS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    static DEVICE_ALLOCATIONS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+/// Counts a device allocation for [`hooks::device_allocations`] (nothing without `internals`).
+fn count_device() {
+    #[cfg(feature = "internals")]
+    DEVICE_ALLOCATIONS.set(DEVICE_ALLOCATIONS.get() + 1);
 }
 
 /// The failure injected at this allocation, if any (always none without the `internals` feature).
@@ -67,6 +74,7 @@ pub(crate) fn alloc_zeros<T: DeviceRepr + ValidAsZeroBits>(
         });
     }
     injected_failure(operation, bytes)?;
+    count_device();
     stream
         .alloc_zeros::<T>(len)
         .map_err(|e| with_bytes(driver_error(operation)(e), bytes))
@@ -109,6 +117,7 @@ pub(crate) fn upload<T: DeviceRepr>(
     operation: &str,
 ) -> Result<CudaSlice<T>> {
     injected_failure(operation, size_of_val(data))?;
+    count_device();
     stream
         .clone_htod(data)
         .map_err(|e| with_bytes(driver_error(operation)(e), size_of_val(data)))

@@ -38,6 +38,12 @@ pub fn allocations() -> usize {
     ALLOCATIONS.get()
 }
 
+/// Of [`allocations`], those of device memory (arena growth, uploads of tables), not pinned host
+/// memory.
+pub fn device_allocations() -> usize {
+    DEVICE_ALLOCATIONS.get()
+}
+
 /// Frees every buffer the crate keeps between calls on device `ordinal` that no call holds now: the
 /// device's idle streams with their scratch arenas, the pinned staging buffers and the descriptor
 /// weight tables. The next call starts cold and allocates again (so allocation-failure tests reach

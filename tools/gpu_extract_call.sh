@@ -4,11 +4,12 @@
 #
 # 1. Correctness. Prepare here: bash tools/pack_gpu_suite.sh
 #    then with the device tool: run `bash tools/gpu_extract_call.sh tests`, carry [".gpu/suite.tar.xz"],
-#    timeout 600 (about 6 minutes). Every GPU suite (tests/cuda_extract_stream.rs among them: no
-#    allocation when warm, shrinking and growing sizes, iterator stream, pinned and pageable, threads on
-#    one stream; cuda_faults with the arena-growth trial), then memcheck, initcheck and synccheck on
-#    cuda_extract_stream and cuda_faults with CLATCH_TEST_SCALE=sanitizer. Logs: $OUT/suite.txt,
-#    $OUT/sanitize.txt.
+#    timeout 600 (about 5 minutes): every GPU suite but the soak, the changed paths first
+#    (tests/cuda_extract_stream.rs: no allocation when warm, shrinking and growing sizes, iterator
+#    stream, pinned and pageable, images in bands, threads on one stream; cuda_faults with cold starts
+#    and the arena-growth trial). Log: $OUT/suite.txt. Then `bash tools/gpu_extract_call.sh sanitize`,
+#    same carry (about 5 minutes): memcheck, initcheck and synccheck on cuda_extract_stream and
+#    cuda_faults with CLATCH_TEST_SCALE=sanitizer. Log: $OUT/sanitize.txt.
 #
 # 2. Measurements. Prepare here: bash tools/pack_gpu_extract.sh
 #    then: run `bash tools/gpu_extract_call.sh bench`, carry [".gpu/extract.tar.xz", ".gpu/folders"],
@@ -34,19 +35,24 @@ if [ "$part" = tests ]; then
              cuda_describe_opencv cuda_match cuda_pool clatch_unit backend; do
         echo "== $t" >> "$OUT/suite.txt"
         start=$(date +%s)
-        timeout 300 "$B/$t" >> "$OUT/suite.txt" 2>&1; rc=$?
+        timeout 150 "$B/$t" >> "$OUT/suite.txt" 2>&1; rc=$?
         summary+=("$t rc=$rc $(( $(date +%s) - start ))s: $(grep -E '^test result' "$OUT/suite.txt" | tail -1)")
     done
+    grep -E "allocations|growth sites|streamed|page-locked|on one stream|in bands" "$OUT/suite.txt" | head -24
+fi
+if [ "$part" = sanitize ]; then
+    mkdir -p .gpu/bin
+    [ .gpu/bin/.unpacked -nt .gpu/suite.tar.xz ] || { tar -xJf .gpu/suite.tar.xz -C .gpu/bin && touch .gpu/bin/.unpacked; }
+    B=.gpu/bin
     for tool in memcheck initcheck synccheck; do
         for t in cuda_extract_stream cuda_faults; do
             echo "== $tool $t (CLATCH_TEST_SCALE=sanitizer)" >> "$OUT/sanitize.txt"
-            CLATCH_TEST_SCALE=sanitizer timeout 150 compute-sanitizer --tool "$tool" "$B/$t" > /tmp/san.txt 2>&1; rc=$?
+            CLATCH_TEST_SCALE=sanitizer timeout 80 compute-sanitizer --tool "$tool" "$B/$t" > /tmp/san.txt 2>&1; rc=$?
             grep -E "^test result|SUMMARY" /tmp/san.txt >> "$OUT/sanitize.txt"
             [ $rc -ne 0 ] && tail -30 /tmp/san.txt >> "$OUT/sanitize.txt"
             summary+=("$tool $t rc=$rc: $(grep -E '^test result' /tmp/san.txt | tail -1 | cut -c1-60) $(grep -E 'ERROR SUMMARY' /tmp/san.txt | tail -1)")
         done
     done
-    grep -E "allocations|growth sites|streamed|page-locked|on one stream" "$OUT/suite.txt" | head -20
 fi
 if [ "$part" = bench ]; then
     mkdir -p .gpu/xbin

@@ -19,7 +19,7 @@ use std::sync::{Arc, Mutex};
 
 use cudarc::driver::{
     CudaEvent, CudaSlice, CudaStream, CudaView, CudaViewMut, DevicePtr, DevicePtrMut, DeviceRepr,
-    PinnedHostSlice, ValidAsZeroBits,
+    DriverError, PinnedHostSlice, ValidAsZeroBits,
 };
 
 use super::device::{GpuDevice, driver_error};
@@ -371,76 +371,75 @@ impl<T: Pooled> PinnedScratch<T> {
         Ok(&host[..len])
     }
 
-    /// Queues a copy of `src` into elements `at..at + src.len()` of the buffer on the lane's stream
-    /// (the one `src` belongs to). The host reads them after [`Self::wait`].
-    pub(crate) fn queue_download(&mut self, at: usize, src: &CudaView<'_, T>) -> Result<()> {
+    /// Queues `copy(host, stream)` on the lane's stream, `host` pointing at element `at` of the
+    /// buffer with room for `len` more, then records the buffer's event after it. (Raw pointers:
+    /// cudarc's copies to and from a `PinnedHostSlice` move the whole buffer, not a range.)
+    fn queue_copy(
+        &mut self,
+        (at, len): (usize, usize),
+        operation: &'static str,
+        copy: impl FnOnce(*mut T, &Arc<CudaStream>) -> std::result::Result<(), DriverError>,
+    ) -> Result<()> {
         let stream = self.stream.clone();
         let kept = self.kept();
         let capacity = kept.buffer.len();
-        super::invariant(at + src.len() <= capacity, "reading results back", || {
-            format!("{} elements at {at} into {capacity}", src.len())
+        super::invariant(at + len <= capacity, operation, || {
+            format!("{len} elements at {at} of a {capacity}-element pinned buffer")
         })?;
-        if src.is_empty() {
+        if len == 0 {
             return Ok(());
         }
-        // Raw driver calls below: the stream's context must be this thread's current one.
+        // Raw driver calls: the stream's context must be this thread's current one.
         stream
             .context()
             .bind_to_thread()
-            .map_err(driver_error("copying results back"))?;
-        let (ptr, _sync) = src.device_ptr(&stream);
-        // Raw pointer: cudarc's copies into a PinnedHostSlice move the whole buffer, not a range.
+            .map_err(driver_error(operation))?;
         let host = kept
             .buffer
             .as_mut_ptr()
             .map_err(driver_error("waiting for a copy"))?;
-        // SAFETY: `at + src.len()` elements fit in the pinned buffer (checked above), which stays
-        // allocated and untouched by the host until the event recorded below completes: the buffer
-        // is only reachable through this guard and the arena, and both wait for `copied` first.
-        let range = unsafe { std::slice::from_raw_parts_mut(host.add(at), src.len()) };
         let span = super::spans::Span::open(&stream);
-        // SAFETY: `ptr` holds src.len() elements of T on this stream's device.
-        unsafe { cudarc::driver::result::memcpy_dtoh_async(range, ptr, stream.cu_stream()) }
-            .map_err(driver_error("copying results back"))?;
+        // SAFETY: element `at` is inside the buffer (checked above).
+        copy(unsafe { host.add(at) }, &stream).map_err(driver_error(operation))?;
         drop(span);
         kept.copied
             .record(&stream)
             .map_err(driver_error("event record"))
     }
 
+    /// Queues a copy of `src` into elements `at..at + src.len()` of the buffer on the lane's stream
+    /// (the one `src` belongs to). The host reads them after [`Self::wait`].
+    pub(crate) fn queue_download(&mut self, at: usize, src: &CudaView<'_, T>) -> Result<()> {
+        let stream = self.stream.clone();
+        let (ptr, _sync) = src.device_ptr(&stream);
+        let len = src.len();
+        self.queue_copy((at, len), "copying results back", |host, stream| {
+            // SAFETY: `len` elements from `host` are in the pinned buffer (checked by queue_copy),
+            // which stays allocated and untouched by the host until the event recorded after this
+            // copy completes: it is only reachable through this guard and the arena, and both wait
+            // for that event first. `ptr` holds `len` elements of T on this stream's device.
+            unsafe {
+                let range = std::slice::from_raw_parts_mut(host, len);
+                cudarc::driver::result::memcpy_dtoh_async(range, ptr, stream.cu_stream())
+            }
+        })
+    }
+
     /// Queues a copy of elements `at..at + dst.len()` of the buffer (written by the host through
     /// [`Self::host`]) into `dst` on the lane's stream.
     pub(crate) fn queue_upload(&mut self, at: usize, dst: &mut CudaViewMut<'_, T>) -> Result<()> {
         let stream = self.stream.clone();
-        let kept = self.kept();
-        let capacity = kept.buffer.len();
         let len = dst.len();
-        super::invariant(at + len <= capacity, "uploading keypoints", || {
-            format!("{len} elements at {at} from {capacity}")
-        })?;
-        if len == 0 {
-            return Ok(());
-        }
-        stream
-            .context()
-            .bind_to_thread()
-            .map_err(driver_error("uploading keypoints"))?;
         let (ptr, _sync) = dst.device_ptr_mut(&stream);
-        let host = kept
-            .buffer
-            .as_ptr()
-            .map_err(driver_error("waiting for a copy"))?;
-        // SAFETY: as in `queue_download`: the range is inside the buffer, which the host does not
-        // write again before the event recorded below completes.
-        let range = unsafe { std::slice::from_raw_parts(host.add(at), len) };
-        let span = super::spans::Span::open(&stream);
-        // SAFETY: `ptr` holds `len` elements of T on this stream's device.
-        unsafe { cudarc::driver::result::memcpy_htod_async(ptr, range, stream.cu_stream()) }
-            .map_err(driver_error("uploading keypoints"))?;
-        drop(span);
-        kept.copied
-            .record(&stream)
-            .map_err(driver_error("event record"))
+        self.queue_copy((at, len), "uploading keypoints", |host, stream| {
+            // SAFETY: as in `queue_download`: the range is inside the buffer, which the host does
+            // not write again before the event recorded after this copy completes; `ptr` holds
+            // `len` elements of T on this stream's device.
+            unsafe {
+                let range = std::slice::from_raw_parts(host.cast_const(), len);
+                cudarc::driver::result::memcpy_htod_async(ptr, range, stream.cu_stream())
+            }
+        })
     }
 }
 

@@ -10,7 +10,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 data=${1:-../shared/data}
 mkdir -p .gpu && rm -rf .gpu/xbin && mkdir -p .gpu/xbin
-grep -qx '/.gpu/' .git/info/exclude 2>/dev/null || echo '/.gpu/' >> .git/info/exclude
+# (git's path: in a worktree .git is a file, the exclude list is the main checkout's)
+exclude=$(git rev-parse --git-path info/exclude)
+mkdir -p "$(dirname "$exclude")"
+grep -qx '/.gpu/' "$exclude" 2>/dev/null || echo '/.gpu/' >> "$exclude"
 cargo bench -p clatch --features cuda --bench gpu_extract_stream --no-run --message-format=json 2>/dev/null \
     | python3 -c '
 import json, sys, shutil

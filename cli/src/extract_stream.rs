@@ -7,13 +7,15 @@ use clatch::{AsGrayView, Backend, Extractor, Features};
 use crate::error::CliError;
 use crate::prefetch::{self, Prefetched};
 
-/// Decoding threads for `backend`: every core for the GPU (decoding is then the CPU's only work);
-/// a quarter for the CPU backend, whose extraction uses every core itself.
-fn decode_threads(backend: Backend) -> usize {
+/// Decoding threads for `backend`, and how many decoded images they may hold ahead of the extractor.
+/// The GPU: every core (decoding is then the CPU's only work), as many ahead as there are decoders
+/// plus the 8 images the GPU keeps in flight. The CPU backend: half the cores (its extraction uses
+/// every core itself), a whole next group of images ahead (it extracts one image per core at once).
+fn decoding(backend: Backend) -> (usize, usize) {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     match backend {
-        Backend::Cpu => (cores / 4).max(1),
-        _ => cores,
+        Backend::Cpu => ((cores / 2).max(1), 2 * rayon::current_num_threads().max(1)),
+        _ => (cores, cores + 8),
     }
 }
 
@@ -26,9 +28,7 @@ pub fn extract_decoded<T: AsGrayView + Send + Sync>(
     decode: impl Fn(usize) -> Result<T, CliError> + Sync,
     each: impl FnMut(usize, T, Features) -> Result<(), CliError>,
 ) -> Result<Prefetched, CliError> {
-    let threads = decode_threads(extractor.backend());
-    // Decoded images held: one per decoder plus the GPU's 8 in flight.
-    let ahead = threads + 8;
+    let (threads, ahead) = decoding(extractor.backend());
     let (result, stats) = prefetch::ordered(n, threads, ahead, decode, |decoded| {
         extractor.detect_and_describe_stream(decoded, each)
     });

@@ -561,7 +561,7 @@ fn print_extraction_report(
         report::per_second(photos.len(), times.extract.wall, "images")
     );
     println!(
-        "  decode      {} summed over {} threads; extraction waited {} for it",
+        "  decode      {} summed over {} decoding thread(s); extraction waited {} for it",
         report::ms(times.decoding.produce),
         times.decoding.threads,
         report::ms(times.decoding.waited)

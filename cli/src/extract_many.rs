@@ -124,7 +124,7 @@ pub fn main(args: &ExtractArgs, extractor: &Extractor) -> Result<(), CliError> {
         per_second(n, wall, "images")
     );
     println!(
-        "  {:<12}{} summed over {} threads; extraction waited {} for it",
+        "  {:<12}{} summed over {} decoding thread(s); extraction waited {} for it",
         "decode",
         ms(decoding.produce),
         decoding.threads,

@@ -6,7 +6,9 @@
 //    outside the margin and for non-corners), and applies the 3x3 suppression with the raster-order rule
 //    to its own pixels. It writes the kept map (the score of each survivor, 0 elsewhere; rows
 //    CLATCH_DETECT_ROW_ALIGN-aligned) and counts survivors per (score, row) with atomicAdd: counts are
-//    order-independent, so the atomics cannot change a result.
+//    order-independent, so the atomics cannot change a result. A launch may cover a band of tile rows
+//    (`first_tile_row`, the grid's height): the host launches one band per uploaded band of the image
+//    while the rest is still being copied; every pixel is scored and kept exactly as by one launch.
 // 2. clatch_scan_reduce / clatch_scan_partials / clatch_scan_apply: exclusive prefix sum of the counts,
 //    laid out score-major with scores descending (index (255 - s) * height + y). The sum at (s, y) is the
 //    number of survivors that sort before every survivor of score s in row y under
@@ -120,13 +122,14 @@ extern "C" __global__ void __launch_bounds__(TILE_X * TILE_Y)
 clatch_detect_nms(cudaTextureObject_t image, int width, int height, int margin, int threshold,
                   unsigned char* __restrict__ kept,  // pitch x height, pitch a multiple of 128
                   int pitch,
-                  u32* __restrict__ counts)          // 255 x height, zeroed: [(255 - s) * height + y]
+                  u32* __restrict__ counts,          // 255 x height, zeroed: [(255 - s) * height + y]
+                  int first_tile_row)                // block row 0 is this tile row (bands of rows)
 {
     __shared__ unsigned char tile[IMAGE_H][IMAGE_W];
     __shared__ unsigned char scores[SCORE_H][SCORE_W];
 
     const int tid = threadIdx.y * TILE_X + threadIdx.x;
-    const int x0 = blockIdx.x * TILE_X, y0 = blockIdx.y * TILE_Y;
+    const int x0 = blockIdx.x * TILE_X, y0 = (blockIdx.y + first_tile_row) * TILE_Y;
 
     // Clamp addressing makes reads past the border safe; those pixels only feed scores outside the
     // margin, which are 0.

@@ -35,6 +35,11 @@ impl GpuStream {
         Err(cuda_unavailable(ordinal, NOT_BUILT))
     }
 
+    /// A stream of the device's pool: always [`crate::Error::BackendUnavailable`] in this build.
+    pub(crate) fn pooled(ordinal: usize) -> Result<Self> {
+        Self::new(ordinal)
+    }
+
     /// The device ordinal.
     pub fn ordinal(&self) -> usize {
         match self.never {}
@@ -42,6 +47,10 @@ impl GpuStream {
 
     /// Blocks until everything queued so far has run.
     pub fn synchronize(&self) -> Result<()> {
+        match self.never {}
+    }
+
+    pub(crate) fn settle<T>(&self, _: Result<T>) -> Result<T> {
         match self.never {}
     }
 
@@ -159,8 +168,16 @@ pub(crate) fn detect_and_describe_async(
     _: &DetectorConfig,
     _: &DescriptorConfig,
     _: Option<&Pyramid>,
+    _: ImageLife,
 ) -> Result<PendingFeatures> {
     match stream.never {}
+}
+
+/// How long the caller's image stays valid (see the real module's `ImageLife`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum ImageLife {
+    Call,
+    Work,
 }
 
 pub(crate) fn match_async(

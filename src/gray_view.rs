@@ -102,6 +102,26 @@ impl<'a> GrayView<'a> {
     }
 }
 
+/// Something that holds a gray image: what [`crate::Extractor::detect_and_describe_stream`] takes
+/// and keeps alive while the image is being worked on (a decoded image with its metadata, a frame
+/// buffer, a view).
+pub trait AsGrayView {
+    /// The image, borrowed.
+    fn gray_view(&self) -> Result<GrayView<'_>>;
+}
+
+impl AsGrayView for GrayView<'_> {
+    fn gray_view(&self) -> Result<GrayView<'_>> {
+        Ok(*self)
+    }
+}
+
+impl<T: AsGrayView + ?Sized> AsGrayView for &T {
+    fn gray_view(&self) -> Result<GrayView<'_>> {
+        (**self).gray_view()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -55,7 +55,7 @@ pub use detect::{DetectorConfig, LevelBudget, Ranking, Subpixel, fast_score};
 pub use error::{Error, Result};
 pub use facade::{DevicePool, Extractor, ExtractorConfig, Matcher};
 pub use features::Features;
-pub use gray_view::{GrayView, MAX_IMAGE_SIDE};
+pub use gray_view::{AsGrayView, GrayView, MAX_IMAGE_SIDE};
 pub use keypoint::KeyPoint;
 pub use matching::{KnnMatches, Match, MatchConfig};
 pub use pyramid::Pyramid;

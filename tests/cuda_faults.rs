@@ -25,6 +25,7 @@ fn trials() -> Vec<Trial> {
             "every_allocation_site_fails_cleanly",
             gpu::every_allocation_site,
         ),
+        Trial::test("arena_growth_fails_cleanly", gpu::arena_growth),
     ]
 }
 
@@ -34,7 +35,7 @@ mod gpu {
     use clatch::{Backend, Error, Extractor, ExtractorConfig, GrayView, KeyPoint};
     use libtest_mimic::Failed;
 
-    use super::common::{rectangles, scale};
+    use super::common::{on_threads, rectangles, scale};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
 
@@ -181,13 +182,16 @@ mod gpu {
 
     /// Makes each device allocation of each public GPU path fail in turn: every failure is a typed
     /// `DeviceOutOfMemory` naming its operation, the next call gives the CPU's answer, and after 1000
-    /// failed calls the device's free memory is back where it was.
+    /// failed calls the device's free memory is back where it was. Every call starts cold
+    /// (`release_cached_memory`: no stream arena or staging buffer kept from an earlier call), so that
+    /// it reaches every allocation site; the growth of a warm arena is `arena_growth_fails_cleanly`.
     ///
     /// Under `CLATCH_TEST_SCALE=sanitizer`: a 400x400 image (still three pyramid levels) and 100
     /// keypoints, and 2 failed calls per allocation site instead of 1000 in all. Under any sanitizer the
     /// free-memory comparison is reported, not judged: the sanitizer's own device allocations move it.
     pub fn every_allocation_site() -> Result<(), Failed> {
-        use clatch::cuda::hooks::{device_memory, fail_allocation};
+        use clatch::cuda::hooks::{device_memory, fail_allocation, release_cached_memory};
+        let cold = || release_cached_memory(0);
         let (width, height) = scale::pick((640, 480), (400, 400));
         let image = rectangles(width, height, 9);
         let view = image.view();
@@ -211,6 +215,7 @@ mod gpu {
             let expected = call(Backend::Cpu)?;
             let mut sites = Vec::new();
             for n in 0.. {
+                cold()?;
                 fail_allocation(Some(n));
                 let result = call(GPU);
                 let injected = fail_allocation(None);
@@ -237,15 +242,18 @@ mod gpu {
             );
             sites_per_call.push(sites.len());
         }
-        // Memory: a warm round, then 1000 failed calls spread over every site.
+        // Memory: a warm round, then 1000 failed calls spread over every site, each from a cold start;
+        // free memory compared with nothing cached, before and after.
         for (_, call) in &calls {
             call(GPU)?;
         }
+        cold()?;
         let (baseline, total) = device_memory(0)?;
         let mut failed = 0;
         if scale::sanitizer() {
             for ((name, call), &sites) in calls.iter().zip(&sites_per_call) {
                 for n in 0..sites {
+                    cold()?;
                     fail_allocation(Some(n % sites));
                     let result = call(GPU);
                     match (fail_allocation(None), result) {
@@ -264,6 +272,7 @@ mod gpu {
         }
         while failed < scale::pick(1000, 0) {
             for ((_, call), &sites) in calls.iter().zip(&sites_per_call) {
+                cold()?;
                 fail_allocation(Some(failed % sites.max(1)));
                 let result = call(GPU);
                 fail_allocation(None);
@@ -275,6 +284,7 @@ mod gpu {
         for (_, call) in &calls {
             call(GPU)?;
         }
+        cold()?;
         let (after, _) = device_memory(0)?;
         println!(
             "{failed} failed calls: free device memory {baseline} bytes before, {after} after (of {total})"
@@ -286,6 +296,73 @@ mod gpu {
             );
         } else if after < baseline {
             return Err(format!("device memory leaked: {} bytes", baseline - after).into());
+        }
+        Ok(())
+    }
+
+    /// A stream whose arena holds a small image's buffers, then gets a larger image: each allocation
+    /// the growth needs (device scratch, pinned staging and read-back buffers) fails in turn with a
+    /// typed `DeviceOutOfMemory`, after which the same stream gives the CPU's answer for the large
+    /// image; the loop ends when a call reaches no injected failure and equals the CPU.
+    pub fn arena_growth() -> Result<(), Failed> {
+        use clatch::cuda::GpuStream;
+        use clatch::cuda::hooks::fail_allocation;
+        let small = rectangles(320, 240, 3);
+        // Larger than one 4 MiB upload band: the copy stream and its band events are in the growth.
+        let (w, h) = scale::pick((2400, 1800), (2100, 2100));
+        let large = rectangles(w, h, 4);
+        let single = ExtractorConfig::single_scale();
+        for (name, config) in [
+            ("pyramid", ExtractorConfig::default()),
+            ("single scale", single),
+        ] {
+            let gpu = Extractor::new(GPU, config.clone())?;
+            let expected =
+                Extractor::new(Backend::Cpu, config)?.detect_and_describe(&large.view())?;
+            let mut sites = Vec::new();
+            for n in 0.. {
+                // A fresh stream warmed on the small image: its arena must grow for the large one.
+                let stream = GpuStream::new(0)?;
+                gpu.detect_and_describe_async(&stream, &small.view())?
+                    .wait()?;
+                fail_allocation(Some(n));
+                let result = gpu
+                    .detect_and_describe_async(&stream, &large.view())
+                    .and_then(|p| p.wait());
+                let injected = fail_allocation(None);
+                match (injected, result) {
+                    (true, Err(Error::DeviceOutOfMemory { operation, .. })) => {
+                        let again = gpu
+                            .detect_and_describe_async(&stream, &large.view())?
+                            .wait()?;
+                        if again != expected {
+                            return Err(format!(
+                                "{name}: after the failure at {operation}, the stream's answer differs from the CPU's"
+                            )
+                            .into());
+                        }
+                        sites.push(operation);
+                    }
+                    (false, Ok(got)) if got == expected => break,
+                    (injected, other) => {
+                        return Err(format!(
+                            "{name}, growth allocation {n} (failure injected: {injected}): {:?}",
+                            other.map(|_| "a result that differs from the CPU's")
+                        )
+                        .into());
+                    }
+                }
+                if n > 200 {
+                    return Err(format!("{name}: more than 200 growth allocations").into());
+                }
+            }
+            if sites.is_empty() {
+                return Err(format!("{name}: the larger image grew nothing").into());
+            }
+            println!(
+                "{name}: {} growth sites fail cleanly: {sites:?}",
+                sites.len()
+            );
         }
         Ok(())
     }
@@ -319,40 +396,24 @@ mod gpu {
     pub fn many_threads() -> Result<(), Failed> {
         // Under CLATCH_TEST_SCALE=sanitizer, 4 threads of 1 round.
         let (threads, rounds) = scale::pick((16, 5), (4, 1));
-        let results: Vec<Result<usize, String>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = (0..threads)
-                .map(|t| {
-                    scope.spawn(move || -> Result<usize, String> {
-                        let image = rectangles(640 + 16 * t, 480, 100 + t as u64);
-                        let view = image.view();
-                        let mut compared = 0;
-                        for round in 0..rounds {
-                            let gpu = Extractor::new(GPU, ExtractorConfig::default())
-                                .map_err(|e| e.to_string())?;
-                            let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())
-                                .map_err(|e| e.to_string())?;
-                            let a = gpu.detect_and_describe(&view).map_err(|e| e.to_string())?;
-                            let b = cpu.detect_and_describe(&view).map_err(|e| e.to_string())?;
-                            if a != b {
-                                return Err(format!(
-                                    "thread {t}, round {round}: GPU and CPU differ"
-                                ));
-                            }
-                            compared += a.descriptors.len();
-                        }
-                        Ok(compared)
-                    })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| h.join().unwrap_or(Err("thread panicked".into())))
-                .collect()
-        });
-        let mut total = 0;
-        for r in results {
-            total += r?;
-        }
+        let total = on_threads(threads, |t| {
+            let image = rectangles(640 + 16 * t, 480, 100 + t as u64);
+            let view = image.view();
+            let mut compared = 0;
+            for round in 0..rounds {
+                let gpu =
+                    Extractor::new(GPU, ExtractorConfig::default()).map_err(|e| e.to_string())?;
+                let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())
+                    .map_err(|e| e.to_string())?;
+                let a = gpu.detect_and_describe(&view).map_err(|e| e.to_string())?;
+                let b = cpu.detect_and_describe(&view).map_err(|e| e.to_string())?;
+                if a != b {
+                    return Err(format!("thread {t}, round {round}: GPU and CPU differ"));
+                }
+                compared += a.descriptors.len();
+            }
+            Ok(compared)
+        })?;
         println!("{threads} threads x {rounds} rounds: {total} descriptors identical to the CPU");
         Ok(())
     }

@@ -14,8 +14,8 @@ use crate::cpu_time::{StageTime, Stopwatch};
 use crate::error::CliError;
 use crate::output::{Staged, TempDir, check_distinct, check_writable};
 use crate::progress::Progress;
-use crate::settings;
 use crate::text_input::read_text;
+use crate::{report, settings};
 
 /// Wall and CPU time of each stage.
 #[derive(Default)]
@@ -383,8 +383,16 @@ fn print_extraction_report(
         matches.iter().filter(|m| m.is_empty()).count()
     );
     println!("  database    {}", args.database.display());
-    println!("  extract     {}", times.extract);
-    println!("  match       {}", times.matching);
+    println!(
+        "  extract     {} ({})",
+        times.extract,
+        report::per_second(photos.len(), times.extract.wall, "images")
+    );
+    println!(
+        "  match       {} ({})",
+        times.matching,
+        report::per_second(pairs.len(), times.matching.wall, "pairs")
+    );
     println!("  write       {}", times.write);
 }
 

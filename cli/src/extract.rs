@@ -87,9 +87,13 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
         settings.extractor
     };
     let extractor = Extractor::new(settings.backend, config)?;
+    let image = match args.images.as_slice() {
+        [one] => one,
+        _ => return crate::extract_many::main(args, &extractor),
+    };
     let [csv, json, npy_path] = output_paths(&args.output)?;
     check_distinct(
-        &[("image", &args.image)],
+        &[("image", image)],
         &[
             ("keypoints CSV", &csv),
             ("keypoints JSON", &json),
@@ -102,14 +106,14 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
     let progress = Progress::new(1 + EXTRACT_STAGES + 1);
 
     progress.stage("reading image");
-    let img = load_gray(&args.image, &args.input.limits())?;
-    check_detectable(&args.image, img.width(), img.height())?;
+    let img = load_gray(image, &args.input.limits())?;
+    check_detectable(image, img.width(), img.height())?;
     progress.done();
 
     let latch = args.opencv.latch()?;
     let extracted = match &latch {
-        None => pipeline::extract(&extractor, &img, &args.image, &progress)?,
-        Some(latch) => pipeline::extract_opencv(&extractor, latch, &img, &args.image, &progress)?,
+        None => pipeline::extract(&extractor, &img, image, &progress)?,
+        Some(latch) => pipeline::extract_opencv(&extractor, latch, &img, image, &progress)?,
     };
     let features = &extracted.features;
 
@@ -128,7 +132,7 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
     let (w, h) = img.dimensions();
     let n = features.keypoints.len();
     println!("clatch extract");
-    println!("  image       {} ({w}x{h})", args.image.display());
+    println!("  image       {} ({w}x{h})", image.display());
     println!("  {:<12}{}", "backend", extractor.backend());
     if let Some(l) = &latch {
         println!(

@@ -11,12 +11,15 @@ mod draw;
 mod error;
 mod eval;
 mod extract;
+mod extract_many;
+mod extract_stream;
 mod homography;
 mod input;
 mod match_cmd;
 mod npy;
 mod output;
 mod pipeline;
+mod prefetch;
 mod progress;
 mod report;
 mod subpixel;
@@ -200,9 +203,13 @@ pub struct MatchArgs {
 /// Arguments of `clatch extract`.
 #[derive(Debug, Args)]
 pub struct ExtractArgs {
-    /// The image to describe.
-    pub image: PathBuf,
-    /// Output prefix: writes PREFIX.keypoints.csv, PREFIX.keypoints.json, PREFIX.descriptors.npy.
+    /// The image to describe; several images are decoded on worker threads while earlier ones are
+    /// extracted (on the GPU several in flight), and each writes its files into the folder `-o`
+    /// names, as STEM.keypoints.csv, STEM.keypoints.json and STEM.descriptors.npy.
+    #[arg(required = true, value_name = "IMAGE")]
+    pub images: Vec<PathBuf>,
+    /// Output prefix: writes PREFIX.keypoints.csv, PREFIX.keypoints.json, PREFIX.descriptors.npy
+    /// (with several images: the output folder).
     #[arg(short, long, value_name = "PREFIX")]
     pub output: PathBuf,
     #[command(flatten)]

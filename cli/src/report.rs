@@ -92,6 +92,16 @@ pub fn ms(d: Duration) -> String {
     format!("{:.2} ms", d.as_secs_f64() * 1e3)
 }
 
+/// `count` items over `wall` as a rate, e.g. `412.3 images/s`.
+pub fn per_second(count: usize, wall: Duration, what: &str) -> String {
+    let seconds = wall.as_secs_f64();
+    if seconds > 0.0 {
+        format!("{:.1} {what}/s", count as f64 / seconds)
+    } else {
+        format!("{count} {what}")
+    }
+}
+
 /// The matcher settings in words, e.g. `ratio 0.8, cross-check`.
 pub fn describe_matching(config: &MatchConfig) -> String {
     let mut parts = Vec::new();
@@ -192,6 +202,20 @@ pub fn picture_written(
         path.display(),
         matches.min(max_lines),
     )
+}
+
+#[cfg(test)]
+mod rate_tests {
+    use super::*;
+
+    #[test]
+    fn rates() {
+        assert_eq!(
+            per_second(30, Duration::from_millis(1500), "images"),
+            "20.0 images/s"
+        );
+        assert_eq!(per_second(3, Duration::ZERO, "pairs"), "3 pairs");
+    }
 }
 
 #[cfg(test)]

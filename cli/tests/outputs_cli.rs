@@ -142,3 +142,63 @@ fn extract_keeps_the_old_outputs_when_the_new_set_cannot_be_complete() {
         "no temporary file left"
     );
 }
+
+#[test]
+fn extract_of_several_images_writes_each_as_its_own_call_would() {
+    let dir = workdir("outputs", "extract_many");
+    let (a, b) = two_photos(&dir);
+    let c = dir.join("C.png");
+    photo(240, 180, 60).save(&c).unwrap();
+    let folder = dir.join("features");
+    let out = clatch(&[
+        "extract",
+        str(&a),
+        str(&b),
+        str(&c),
+        "-o",
+        str(&folder),
+        "--backend",
+        "cpu",
+    ]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("images/s"), "{stdout}");
+    assert!(stdout.contains("decode"), "{stdout}");
+    for (image, stem) in [(&a, "A"), (&b, "B"), (&c, "C")] {
+        let prefix = dir.join(format!("single_{stem}"));
+        let single = clatch(&[
+            "extract",
+            str(image),
+            "-o",
+            str(&prefix),
+            "--backend",
+            "cpu",
+        ]);
+        assert!(single.status.success(), "{}", common::stderr(&single));
+        for suffix in [".keypoints.csv", ".keypoints.json", ".descriptors.npy"] {
+            let many = std::fs::read(folder.join(format!("{stem}{suffix}"))).unwrap();
+            let one = std::fs::read(dir.join(format!("single_{stem}{suffix}"))).unwrap();
+            assert_eq!(many, one, "{stem}{suffix}");
+        }
+    }
+    // Two images of one stem would write the same files: refused before any work.
+    let other = dir.join("other");
+    std::fs::create_dir_all(&other).unwrap();
+    let twin = other.join("A.png");
+    photo(200, 200, 5).save(&twin).unwrap();
+    let out = clatch(&[
+        "extract",
+        str(&a),
+        str(&twin),
+        "-o",
+        str(&folder),
+        "--backend",
+        "cpu",
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        common::stderr(&out).contains("is the same file as"),
+        "{}",
+        common::stderr(&out)
+    );
+}

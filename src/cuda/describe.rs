@@ -2,12 +2,14 @@
 
 use std::sync::Arc;
 
-use cudarc::driver::{CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg};
+use cudarc::driver::{
+    CudaSlice, CudaStream, CudaView, CudaViewMut, DeviceRepr, LaunchConfig, PushKernelArg,
+};
 
+use super::arena::{Lane, Leased, PinnedScratch, Scratch, settled};
 use super::device::{GpuDevice, driver_error};
 use super::header::CLATCH_DESCRIBE_WARPS;
-use super::memory::{alloc_zeros, upload};
-use super::texture::DeviceImage;
+use super::texture::{DeviceImage, ImageLife};
 use crate::describe::{Described, DescriptorConfig, SamplingFrame, SkipReason, Skipped};
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
@@ -48,11 +50,15 @@ pub(crate) fn describe(
         });
     }
     let selected: Vec<KeyPoint> = keypoint_index.iter().map(|&i| keypoints[i]).collect();
-    let mut job = Job::prepare(dev, image, &selected, config)?;
-    job.launch(dev)?;
-    let words = job.stream.clone_dtoh(&job.out).map_err(driver_error(
-        "clatch_describe (running, or copying descriptors back)",
-    ))?;
+    let lane = Leased::take(dev)?;
+    let result = Job::prepare(dev, &lane, image, &selected, config).and_then(|mut job| {
+        job.launch(dev)?;
+        let words = selected.len() * width.words();
+        let mut host = lane.pinned::<u64>(words, "descriptor read-back buffer")?;
+        host.queue_download(0, &job.out.view())?;
+        Ok(host.wait(words)?.to_vec())
+    });
+    let words = settled(&lane, result)?;
     Ok(Described {
         descriptors: DescriptorSet::from_words(width, words)?,
         keypoint_index,
@@ -62,38 +68,42 @@ pub(crate) fn describe(
 
 /// Everything one launch of `clatch_describe` on host-supplied keypoints needs, on the device.
 struct Job {
-    stream: Arc<CudaStream>,
     image: DeviceImage,
-    keypoints: CudaSlice<KeyPoint>,
-    count: CudaSlice<u32>,
+    keypoints: Scratch<KeyPoint>,
+    count: Scratch<u32>,
     weights: DeviceWeights,
-    out: CudaSlice<u64>,
+    out: Scratch<u64>,
     bits: i32,
+    lane: Lane,
 }
 
 impl Job {
-    /// Uploads the image and keypoints (all of which must fit) on a new stream.
+    /// Uploads the image and keypoints (all of which must fit) on `lane`. The image must stay valid
+    /// until the work queued on `lane` has run ([`ImageLife::Work`]).
     fn prepare(
         dev: &GpuDevice,
+        lane: &Lane,
         image: &GrayView,
         keypoints: &[KeyPoint],
         config: &DescriptorConfig,
     ) -> Result<Self> {
-        let stream = dev.new_stream()?;
-        let mut device_image = DeviceImage::upload(dev, &stream, image)?;
-        device_image.build_quads(dev, &stream, config.smoothing)?;
+        let lane = lane.clone();
+        let mut device_image = DeviceImage::upload(dev, &lane, image, ImageLife::Work)?;
+        device_image.build_quads(dev, &lane, config.smoothing)?;
+        let n = keypoints.len();
+        let mut staged = lane.pinned::<KeyPoint>(n, "keypoint staging buffer")?;
+        staged.host()?[..n].copy_from_slice(keypoints);
+        let mut on_device = lane.scratch::<KeyPoint>(n, "keypoint upload")?;
+        staged.queue_upload(0, &mut on_device.view_mut())?;
+        let count = upload_counts(&lane, &[n])?;
         Ok(Self {
-            keypoints: upload(&stream, keypoints, "keypoint upload")?,
-            count: upload(&stream, &[keypoints.len() as u32], "keypoint count upload")?,
-            weights: upload_weights(&stream, config)?,
-            out: alloc_zeros(
-                &stream,
-                keypoints.len() * config.width.words(),
-                "descriptor allocation",
-            )?,
+            keypoints: on_device,
+            count,
+            weights: weights(dev, config)?,
+            out: lane.scratch(n * config.width.words(), "descriptor allocation")?,
             image: device_image,
             bits: config.width.bits() as i32,
-            stream,
+            lane,
         })
     }
 
@@ -101,28 +111,38 @@ impl Job {
     fn launch(&mut self, dev: &GpuDevice) -> Result<()> {
         launch_describe(
             dev,
-            &self.stream,
+            &self.lane,
             &self.image,
-            (&self.keypoints, &self.count),
+            (&self.keypoints.view(), &self.count.view()),
             &self.weights,
             self.bits,
-            &mut self.out,
+            &mut self.out.view_mut(),
         )
     }
 }
 
+/// `counts` as a device buffer of u32 on `lane`, through a pinned buffer (the copy is queued; the
+/// pinned buffer goes back to the arena with its event, so its next user waits for the copy).
+pub(crate) fn upload_counts(lane: &super::arena::Lane, counts: &[usize]) -> Result<Scratch<u32>> {
+    let mut staged: PinnedScratch<u32> = lane.pinned(counts.len(), "count staging buffer")?;
+    for (slot, &n) in staged.host()?.iter_mut().zip(counts) {
+        *slot = n as u32;
+    }
+    let mut on_device = lane.scratch::<u32>(counts.len(), "keypoint count upload")?;
+    staged.queue_upload(0, &mut on_device.view_mut())?;
+    Ok(on_device)
+}
+
 /// The patch weights on the device, and which kernel they call for.
 pub(crate) struct DeviceWeights {
-    values: CudaSlice<i32>,
+    values: Arc<CudaSlice<i32>>,
     /// Every weight 0 or 1: `clatch_describe_binary` (byte masks and dp4a) applies.
     binary: bool,
 }
 
-/// The patch weights as the kernels read them.
-pub(crate) fn upload_weights(
-    stream: &Arc<CudaStream>,
-    config: &DescriptorConfig,
-) -> Result<DeviceWeights> {
+/// The patch weights as the kernels read them: uploaded once per device and weight table
+/// ([`GpuDevice::weights`]), then shared by every stream.
+pub(crate) fn weights(dev: &GpuDevice, config: &DescriptorConfig) -> Result<DeviceWeights> {
     let weights: Vec<i32> = config
         .weights
         .as_array()
@@ -130,22 +150,35 @@ pub(crate) fn upload_weights(
         .map(|&w| w as i32)
         .collect();
     Ok(DeviceWeights {
-        values: upload(stream, &weights, "weight upload")?,
+        values: dev.weights(weights)?,
         binary: config.weights.is_binary(),
     })
 }
 
 /// Queues `clatch_describe` on `stream`: describes the first `min(*count, keypoints.len())` keypoints
-/// (all of which must fit) into `out` (`keypoints.len()` rows of the width's words).
+/// (all of which must fit) into `out` (at least `keypoints.len()` rows of the width's words).
 pub(crate) fn launch_describe(
     dev: &GpuDevice,
     stream: &Arc<CudaStream>,
     image: &DeviceImage,
-    (keypoints, count): (&CudaSlice<KeyPoint>, &CudaSlice<u32>),
+    (keypoints, count): (&CudaView<'_, KeyPoint>, &CudaView<'_, u32>),
     weights: &DeviceWeights,
     bits: i32,
-    out: &mut CudaSlice<u64>,
+    out: &mut CudaViewMut<'_, u64>,
 ) -> Result<()> {
+    let words = (bits as usize).div_ceil(64);
+    super::invariant(
+        !count.is_empty() && out.len() >= keypoints.len() * words,
+        "describe",
+        || {
+            format!(
+                "{} keypoints, {} counts, {} output words of {words} per row",
+                keypoints.len(),
+                count.len(),
+                out.len()
+            )
+        },
+    )?;
     let capacity = keypoints.len() as i32;
     let texture = image.quads().ok_or_else(|| Error::Internal {
         operation: "describe",
@@ -170,7 +203,7 @@ pub(crate) fn launch_describe(
         .arg(&capacity)
         .arg(&dev.rotation)
         .arg(&dev.triplets)
-        .arg(&weights.values)
+        .arg(&*weights.values)
         .arg(&bits)
         .arg(out);
     let config = LaunchConfig {

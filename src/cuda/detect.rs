@@ -6,19 +6,24 @@
 //! ascending) order, which gives every (score, row) its first output position, a scatter that ranks
 //! equal scores within a row left to right, and the orientation of the kept keypoints. The output stays
 //! on the device ([`DeviceKeypoints`]) until the caller reads it back, so a GPU `detect_and_describe`
-//! can hand it to the describe kernel together with the same [`DeviceImage`].
+//! can hand it to the describe kernel together with the same [`DeviceImage`]. An image large enough
+//! to be uploaded in bands on its lane's copy stream ([`DeviceImage::arrivals`]) is suppressed band by
+//! band as the bands arrive, so the copy of the rest overlaps the suppression of the first rows; the
+//! stages after suppression wait for the whole image.
 
 use std::sync::Arc;
 
-use cudarc::driver::{CudaSlice, CudaStream, LaunchConfig, PushKernelArg, ValidAsZeroBits};
+use cudarc::driver::{
+    CudaEvent, CudaStream, CudaView, CudaViewMut, LaunchConfig, PushKernelArg, ValidAsZeroBits,
+};
 
+use super::arena::{Lane, Leased, Scratch, settled};
 use super::device::{GpuDevice, driver_error};
 use super::header::{
     CLATCH_DETECT_ROW_ALIGN, CLATCH_DETECT_TILE_X, CLATCH_DETECT_TILE_Y, CLATCH_DETECT_WARPS,
     CLATCH_SCAN_CHUNK, CLATCH_SCAN_THREADS, CLATCH_SCAN_TOP_THREADS, CLATCH_SUBPIXEL_THREADS,
 };
-use super::memory::alloc_zeros;
-use super::texture::DeviceImage;
+use super::texture::{DeviceImage, ImageLife};
 use crate::detect::DetectorConfig;
 use crate::error::Result;
 use crate::gray_view::GrayView;
@@ -26,6 +31,11 @@ use crate::keypoint::KeyPoint;
 
 // SAFETY: KeyPoint is #[repr(C)] f32s and an i32; all-zero bits are a valid value.
 unsafe impl ValidAsZeroBits for KeyPoint {}
+
+/// Rows `clatch_detect_nms` reads past a tile on each side (`kernels/detect.cu`: IMAGE_H is
+/// TILE_Y + 8, from 4 rows above the tile): a tile row can be scored once its rows and this many more
+/// have arrived.
+const NMS_HALO: usize = 4;
 
 /// Distinct scores a survivor can have (1..=255): the counts have this many rows per image row.
 const SCORES: usize = 255;
@@ -37,27 +47,42 @@ const ORIENT_BLOCKS_PER_SM: usize = 8;
 pub(crate) struct DeviceKeypoints {
     /// `capacity` records (at least one); the first `min(total, capacity)` are the result, in the
     /// CPU's order.
-    pub(crate) keypoints: CudaSlice<KeyPoint>,
+    pub(crate) keypoints: Scratch<KeyPoint>,
     /// One value: how many corners survived suppression (before the top-N cut).
-    pub(crate) total: CudaSlice<u32>,
+    pub(crate) total: Scratch<u32>,
     /// `min(max_keypoints, the most survivors the image can have)`.
     pub(crate) capacity: usize,
 }
 
 impl DeviceKeypoints {
-    /// Copies the result to the host (waits for the stream).
-    pub(crate) fn download(&self, stream: &Arc<CudaStream>) -> Result<Vec<KeyPoint>> {
-        let total = stream.clone_dtoh(&self.total).map_err(driver_error(
-            "detection (running, or reading the count back)",
-        ))?[0];
-        let count = (total as usize).min(self.capacity);
-        if count == 0 {
-            return Ok(Vec::new());
-        }
-        stream
-            .clone_dtoh(&self.keypoints.slice(..count))
-            .map_err(driver_error("reading the keypoints back"))
+    /// The `capacity` output records.
+    pub(crate) fn records(&self) -> CudaView<'_, KeyPoint> {
+        self.keypoints.whole().slice(..self.capacity.max(1))
     }
+
+    /// Copies the result to the host through `lane`'s pinned buffers (waits for the stream twice:
+    /// the count, then the records).
+    pub(crate) fn download(&self, lane: &Lane) -> Result<Vec<KeyPoint>> {
+        let count = download_counts(lane, &[self])?[0];
+        let mut host = lane.pinned::<KeyPoint>(self.capacity, "keypoint read-back buffer")?;
+        host.queue_download(0, &self.records().slice(..count))?;
+        Ok(host.wait(count)?.to_vec())
+    }
+}
+
+/// How many keypoints each of `found` holds, `min(total, capacity)`, read back through one pinned
+/// buffer with one wait for the stream.
+pub(crate) fn download_counts(lane: &Lane, found: &[&DeviceKeypoints]) -> Result<Vec<usize>> {
+    let mut totals = lane.pinned::<u32>(found.len(), "count read-back buffer")?;
+    for (i, f) in found.iter().enumerate() {
+        totals.queue_download(i, &f.total.view())?;
+    }
+    let totals = totals.wait(found.len())?;
+    Ok(found
+        .iter()
+        .zip(totals)
+        .map(|(f, &t)| (t as usize).min(f.capacity))
+        .collect())
 }
 
 /// Launch geometry of one image size and configuration.
@@ -115,34 +140,25 @@ struct DetectJob {
     geometry: Geometry,
     threshold: i32,
     size: f32,
-    kept: CudaSlice<u8>,
-    counts: CudaSlice<u32>,
-    partials: CudaSlice<u32>,
+    kept: Scratch<u8>,
+    counts: Scratch<u32>,
+    partials: Scratch<u32>,
     output: DeviceKeypoints,
 }
 
 impl DetectJob {
-    /// Allocates everything for an image of `width` x `height` on `stream`.
-    fn new(
-        stream: &Arc<CudaStream>,
-        width: usize,
-        height: usize,
-        config: &DetectorConfig,
-    ) -> Result<Self> {
+    /// Takes everything for an image of `width` x `height` from `lane`'s arena.
+    fn new(lane: &Lane, width: usize, height: usize, config: &DetectorConfig) -> Result<Self> {
         let geometry = Geometry::new(width, height, config);
         Ok(Self {
             threshold: config.threshold as i32,
             size: config.keypoint_size,
-            kept: alloc_zeros(stream, geometry.pitch * height, "detection: kept map")?,
-            counts: alloc_zeros(stream, geometry.counts(), "detection: survivor counts")?,
-            partials: alloc_zeros(stream, geometry.scan_blocks(), "detection: scan partials")?,
+            kept: lane.scratch(geometry.pitch * height, "detection: kept map")?,
+            counts: lane.scratch(geometry.counts(), "detection: survivor counts")?,
+            partials: lane.scratch(geometry.scan_blocks(), "detection: scan partials")?,
             output: DeviceKeypoints {
-                keypoints: alloc_zeros(
-                    stream,
-                    geometry.capacity.max(1),
-                    "detection: keypoint output",
-                )?,
-                total: alloc_zeros(stream, 1, "detection: survivor total")?,
+                keypoints: lane.scratch(geometry.capacity.max(1), "detection: keypoint output")?,
+                total: lane.scratch(1, "detection: survivor total")?,
                 capacity: geometry.capacity,
             },
             geometry,
@@ -188,32 +204,65 @@ impl DetectJob {
         let scan_blocks = g.scan_blocks() as u32;
         let capacity = g.capacity as u32;
 
+        // Only the first `counts()` are used: clear those (the buffer may be larger, and holds the
+        // last call's offsets).
         stream
-            .memset_zeros(&mut self.counts)
+            .memset_zeros(&mut self.counts.view_mut())
             .map_err(driver_error("detection: clearing the counts"))?;
 
         let tile = (CLATCH_DETECT_TILE_X as usize, CLATCH_DETECT_TILE_Y as usize);
-        let mut nms = stream.launch_builder(dev.kernel("clatch_detect_nms"));
-        nms.arg(&texture)
-            .arg(&width)
-            .arg(&height)
-            .arg(&margin)
-            .arg(&self.threshold)
-            .arg(&mut self.kept)
-            .arg(&pitch)
-            .arg(&mut self.counts);
-        let config = LaunchConfig {
-            grid_dim: (
-                (g.pitch / tile.0) as u32,
-                g.height.div_ceil(tile.1) as u32,
-                1,
-            ),
-            block_dim: (tile.0 as u32, tile.1 as u32, 1),
-            shared_mem_bytes: 0,
+        let tile_rows = g.height.div_ceil(tile.1);
+        // One launch per band of the image as it arrives (one launch when it is all there): a tile row
+        // is scored once every row it reads, NMS_HALO past its own, has arrived.
+        let arrivals = image.arrivals();
+        let steps: Vec<(usize, Option<&CudaEvent>)> = if arrivals.is_empty() {
+            vec![(g.height, None)]
+        } else {
+            arrivals.iter().map(|(rows, e)| (*rows, Some(e))).collect()
         };
-        // SAFETY: arguments match the kernel's signature; the grid covers exactly `pitch` x `height`
-        // (rows past the image return), the size of `kept`; counts holds 255 x height.
-        unsafe { nms.launch(config) }.map_err(driver_error("launching clatch_detect_nms"))?;
+        let mut done = 0usize;
+        for (rows, arrived) in steps {
+            if let Some(event) = arrived {
+                stream
+                    .wait(event)
+                    .map_err(driver_error("detection: waiting for a band of the image"))?;
+            }
+            let ready = if rows >= g.height {
+                tile_rows
+            } else {
+                (rows.saturating_sub(NMS_HALO) / tile.1).min(tile_rows)
+            };
+            if ready <= done {
+                continue;
+            }
+            let first_tile_row = done as i32;
+            let mut nms = stream.launch_builder(dev.kernel("clatch_detect_nms"));
+            nms.arg(&texture)
+                .arg(&width)
+                .arg(&height)
+                .arg(&margin)
+                .arg(&self.threshold)
+                .arg(self.kept.whole_mut())
+                .arg(&pitch)
+                .arg(self.counts.whole_mut())
+                .arg(&first_tile_row);
+            let config = LaunchConfig {
+                grid_dim: ((g.pitch / tile.0) as u32, (ready - done) as u32, 1),
+                block_dim: (tile.0 as u32, tile.1 as u32, 1),
+                shared_mem_bytes: 0,
+            };
+            // SAFETY: arguments match the kernel's signature; the launches together cover exactly
+            // `pitch` x `height` once (tile rows `done..ready` here; rows past the image return) and
+            // write every byte of it, within `kept` (at least that size: a reused buffer's stale bytes
+            // are all overwritten); counts holds at least 255 x height. The texels these tile rows
+            // read (their rows and NMS_HALO below, clamped at the image) have arrived: the stream
+            // waited for their band above.
+            unsafe { nms.launch(config) }.map_err(driver_error("launching clatch_detect_nms"))?;
+            done = ready;
+        }
+        super::invariant(done == tile_rows, "detection", || {
+            format!("{done} of {tile_rows} tile rows suppressed")
+        })?;
         if last == Stage::Suppress {
             return Ok(());
         }
@@ -225,27 +274,28 @@ impl DetectJob {
         };
         let mut reduce = stream.launch_builder(dev.kernel("clatch_scan_reduce"));
         reduce
-            .arg(&self.counts)
+            .arg(self.counts.whole())
             .arg(&counts_len)
-            .arg(&mut self.partials);
-        // SAFETY: one partial per block of CLATCH_SCAN_CHUNK counts; reads are bounded by counts_len.
+            .arg(self.partials.whole_mut());
+        // SAFETY: one partial per block of CLATCH_SCAN_CHUNK counts (partials holds at least
+        // scan_blocks); reads are bounded by counts_len, at most the counts buffer's length.
         unsafe { reduce.launch(scan(scan_blocks, CLATCH_SCAN_THREADS)) }
             .map_err(driver_error("launching clatch_scan_reduce"))?;
 
         let mut partials = stream.launch_builder(dev.kernel("clatch_scan_partials"));
         partials
-            .arg(&mut self.partials)
+            .arg(self.partials.whole_mut())
             .arg(&scan_blocks)
-            .arg(&mut self.output.total);
+            .arg(self.output.total.whole_mut());
         // SAFETY: one block scans the scan_blocks partials in place and writes the one total.
         unsafe { partials.launch(scan(1, CLATCH_SCAN_TOP_THREADS)) }
             .map_err(driver_error("launching clatch_scan_partials"))?;
 
         let mut apply = stream.launch_builder(dev.kernel("clatch_scan_apply"));
         apply
-            .arg(&mut self.counts)
+            .arg(self.counts.whole_mut())
             .arg(&counts_len)
-            .arg(&self.partials);
+            .arg(self.partials.whole());
         // SAFETY: as clatch_scan_reduce.
         unsafe { apply.launch(scan(scan_blocks, CLATCH_SCAN_THREADS)) }
             .map_err(driver_error("launching clatch_scan_apply"))?;
@@ -256,16 +306,17 @@ impl DetectJob {
         let warps = CLATCH_DETECT_WARPS as usize;
         let mut scatter = stream.launch_builder(dev.kernel("clatch_detect_scatter"));
         scatter
-            .arg(&self.kept)
+            .arg(self.kept.whole())
             .arg(&pitch)
             .arg(&height)
             .arg(&margin)
-            .arg(&mut self.counts)
+            .arg(self.counts.whole_mut())
             .arg(&capacity)
             .arg(&self.size)
-            .arg(&mut self.output.keypoints);
+            .arg(self.output.keypoints.whole_mut());
         // SAFETY: one warp per row of the scored area (extra warps return); rows are `pitch` bytes, a
-        // multiple of 128; writes go only to positions below capacity.
+        // multiple of 128, all written by clatch_detect_nms above; writes go only to positions below
+        // capacity, within the output (at least capacity records).
         unsafe {
             scatter.launch(scan(
                 g.inner_rows.div_ceil(warps).max(1) as u32,
@@ -284,10 +335,10 @@ impl DetectJob {
         let mut orient = stream.launch_builder(dev.kernel("clatch_detect_orient"));
         orient
             .arg(&texture)
-            .arg(&self.output.total)
+            .arg(self.output.total.whole())
             .arg(&capacity)
             .arg(&dev.boundaries)
-            .arg(&mut self.output.keypoints);
+            .arg(self.output.keypoints.whole_mut());
         // SAFETY: reads and writes the first min(total, capacity) records; the boundary table holds
         // 720 (x, y) pairs.
         unsafe { orient.launch(scan(orient_blocks as u32, (warps * 32) as u32)) }
@@ -297,16 +348,17 @@ impl DetectJob {
 }
 
 /// Runs the detector on an image already on the device; the result stays there. Everything is queued
-/// on `stream` (the one `image` was uploaded on, or one ordered after it).
+/// on `lane` (the one `image` was uploaded on).
 pub(crate) fn detect_on_device(
     dev: &GpuDevice,
-    stream: &Arc<CudaStream>,
+    lane: &Lane,
     image: &DeviceImage,
     config: &DetectorConfig,
 ) -> Result<DeviceKeypoints> {
-    let mut job = DetectJob::new(stream, image.width(), image.height(), config)?;
-    job.launch(dev, stream, image)?;
-    // The scratch buffers are freed in stream order, after the launches that use them.
+    let mut job = DetectJob::new(lane, image.width(), image.height(), config)?;
+    job.launch(dev, lane, image)?;
+    // The scratch buffers go back to the arena now: their next user queues on this stream, after the
+    // launches that use them.
     Ok(job.output)
 }
 
@@ -317,9 +369,9 @@ pub(crate) fn launch_subpixel(
     dev: &GpuDevice,
     stream: &Arc<CudaStream>,
     image: &DeviceImage,
-    keypoints: &CudaSlice<KeyPoint>,
+    keypoints: &CudaView<'_, KeyPoint>,
     count: usize,
-    offsets: &mut CudaSlice<i32>,
+    offsets: &mut CudaViewMut<'_, i32>,
 ) -> Result<()> {
     super::invariant(
         count <= keypoints.len() && 2 * count <= offsets.len(),
@@ -335,6 +387,7 @@ pub(crate) fn launch_subpixel(
     if count == 0 {
         return Ok(());
     }
+    image.arrived(stream)?;
     let texture = image.texture();
     let (width, height) = (image.width() as i32, image.height() as i32);
     let n = count as u32;
@@ -365,9 +418,11 @@ pub(crate) fn detect(
     image: &GrayView,
     config: &DetectorConfig,
 ) -> Result<Vec<KeyPoint>> {
-    let stream = dev.new_stream()?;
-    let device_image = DeviceImage::upload(dev, &stream, image)?;
-    detect_on_device(dev, &stream, &device_image, config)?.download(&stream)
+    let lane = Leased::take(dev)?;
+    let result = DeviceImage::upload(dev, &lane, image, ImageLife::Work).and_then(|device_image| {
+        detect_on_device(dev, &lane, &device_image, config)?.download(&lane)
+    });
+    settled(&lane, result)
 }
 
 #[cfg(feature = "internals")]

@@ -6,6 +6,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use cudarc::driver::{CudaContext, CudaFunction, CudaSlice, CudaStream, DriverError, sys};
 use cudarc::nvrtc::Ptx;
 
+use super::arena::LanePool;
 use super::matching_tensor::{self, MatchKernel};
 use super::ptx;
 use crate::angle::{quadrant_boundaries, rotation_table};
@@ -131,6 +132,10 @@ pub struct GpuDevice {
     force_ptx: bool,
     #[cfg(feature = "internals")]
     bench_kernels: OnceLock<HashMap<&'static str, CudaFunction>>,
+    /// Idle streams with their scratch arenas, for blocking calls and batches.
+    pub(crate) lanes: LanePool,
+    /// Descriptor weight tables uploaded so far, by value.
+    weights: Mutex<HashMap<Vec<i32>, Arc<CudaSlice<i32>>>>,
 }
 
 /// Maps a driver error to ours, naming the operation and keeping the driver's error as the source.
@@ -258,7 +263,37 @@ impl GpuDevice {
             force_ptx,
             #[cfg(feature = "internals")]
             bench_kernels: OnceLock::new(),
+            lanes: LanePool::default(),
+            weights: Mutex::default(),
         })
+    }
+
+    /// Forgets the uploaded weight tables (test hooks: a cold start; only while no call is queued).
+    #[cfg(feature = "internals")]
+    pub(crate) fn clear_weights(&self) {
+        self.weights
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clear();
+    }
+
+    /// `values` (a descriptor weight table) on the device, uploaded on first use. Like the tables of
+    /// [`GpuDevice::load`], the upload runs on the default stream and is complete before the buffer is
+    /// shared with any stream, so it never needs event tracking; it is never written afterwards.
+    pub(crate) fn weights(&self, values: Vec<i32>) -> Result<Arc<CudaSlice<i32>>> {
+        let mut tables = self.weights.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(table) = tables.get(&values) {
+            return Ok(table.clone());
+        }
+        let stream = self.ctx.default_stream();
+        let table = Arc::new(super::memory::upload(&stream, &values, "weight upload")?);
+        stream
+            .synchronize()
+            .map_err(driver_error("weight upload"))?;
+        // Kept for the process (256 bytes each; a program uses one or two): a table is never freed
+        // while a stream may still read it.
+        tables.insert(values, table.clone());
+        Ok(table)
     }
 
     /// Loads the bench and diagnostic kernels (once; later calls do nothing), so that

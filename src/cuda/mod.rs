@@ -8,6 +8,7 @@
 //! tests in `tests/cuda_*.rs` compare the two bit for bit. The driver is loaded at run time, so a binary
 //! built with `cuda` still starts on a machine without one and reports `no CUDA driver` as a typed error.
 
+mod arena;
 mod describe;
 mod describe_opencv;
 mod detect;
@@ -16,6 +17,7 @@ mod matching;
 mod matching_tensor;
 mod memory;
 mod pyramid;
+mod spans;
 mod stream;
 mod texture;
 
@@ -40,6 +42,7 @@ pub(crate) use matching::{knn, match_descriptors};
 pub(crate) use pyramid::{pyramid_detect, pyramid_detect_and_describe};
 pub use stream::{GpuStream, PendingFeatures, PendingMatches};
 pub(crate) use stream::{detect_and_describe_async, match_async};
+pub(crate) use texture::ImageLife;
 
 /// The test suites' and benches' hooks into the CUDA backend (`internals` feature; not public API).
 #[cfg(feature = "internals")]
@@ -53,6 +56,7 @@ pub mod hooks {
     pub use super::matching_tensor::hooks::*;
     pub use super::memory::hooks::*;
     pub use super::pyramid::hooks::*;
+    pub use super::spans::hooks::*;
 }
 
 use crate::error::Result;

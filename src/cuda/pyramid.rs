@@ -1,22 +1,22 @@
 //! GPU pyramid: `kernels/pyramid.cu` builds the levels, the usual detect and describe kernels run on
 //! each, reproducing [`crate::pyramid::cpu`] keypoint for keypoint and bit for bit.
 //!
-//! Everything is queued on one stream. The global top-N over the levels ([`crate::pyramid::select`])
-//! runs on the host: the levels' keypoints are read back once, the selection is uploaded per level for
-//! description and, with [`crate::Subpixel::Score`], for `clatch_subpixel` (`kernels/detect.cu`),
-//! whose offsets are read back with the descriptors and mapped to level 0 on the host
-//! ([`crate::pyramid::report`]). So the asynchronous extractor queues the levels and their detection at
-//! once and does the rest in `wait`.
+//! Everything is queued on one stream, every buffer from its arena ([`super::arena`]). The global
+//! top-N over the levels ([`crate::pyramid::select`]) runs on the host: the levels' counts, then their
+//! keypoints, are read back through pinned buffers (two waits for the stream), the selection of every
+//! level is uploaded at once for description and, with [`crate::Subpixel::Score`], for
+//! `clatch_subpixel` (`kernels/detect.cu`), whose offsets are read back with the descriptors (a third
+//! wait) and mapped to level 0 on the host ([`crate::pyramid::report`]). So the asynchronous extractor
+//! queues the levels and their detection at once and does the rest in `wait`.
 
-use std::sync::Arc;
+use cudarc::driver::CudaView;
 
-use cudarc::driver::{CudaSlice, CudaStream};
-
-use super::describe::{launch_describe, upload_weights};
-use super::detect::{DeviceKeypoints, detect_on_device, launch_subpixel};
-use super::device::{GpuDevice, driver_error};
-use super::memory::{alloc_zeros, upload};
-use super::texture::DeviceImage;
+use super::arena::{Lane, Leased, Scratch, settled};
+use super::describe::{launch_describe, upload_counts, weights};
+use super::detect::{DeviceKeypoints, detect_on_device, download_counts, launch_subpixel};
+use super::device::GpuDevice;
+use super::spans::Span;
+use super::texture::{DeviceImage, ImageLife};
 use crate::describe::DescriptorConfig;
 use crate::descriptor::DescriptorSet;
 use crate::detect::{DetectorConfig, Ranking, Subpixel};
@@ -29,38 +29,42 @@ use crate::pyramid::{self, LevelKeypoint, Plan, Pyramid};
 /// A pyramid queued on a stream: levels built and every level's detection launched, nothing read back.
 #[derive(Debug)]
 pub(crate) struct QueuedPyramid {
-    stream: Arc<CudaStream>,
     plan: Plan,
     pyramid: Pyramid,
     config: DetectorConfig,
     levels: Vec<DeviceImage>,
     found: Vec<DeviceKeypoints>,
+    lane: Lane,
 }
 
-/// Queues the levels of `image` and the detection on each on `stream` (no synchronisation).
+/// Queues the levels of `image` and the detection on each on `lane` (no synchronisation); `life`
+/// says how long `image` stays valid.
 pub(crate) fn queue(
     dev: &GpuDevice,
-    stream: &Arc<CudaStream>,
+    lane: &Lane,
     image: &GrayView,
     config: &DetectorConfig,
     p: &Pyramid,
+    life: ImageLife,
 ) -> Result<QueuedPyramid> {
+    let _span = Span::open(lane);
     let plan = Plan::new(p, image.width(), image.height(), config.margin());
-    let mut levels = vec![DeviceImage::upload(dev, stream, image)?];
+    let candidates = config.candidates();
+    // Level 0 is detected first, band by band as it arrives (a large image's copy overlaps its
+    // suppression), then each level is built from the one before and detected. The order of launches
+    // on the stream changes no result.
+    let mut levels = vec![DeviceImage::upload(dev, lane, image, life)?];
+    let mut found = vec![detect_on_device(dev, lane, &levels[0], &candidates)?];
     for &size in &plan.sizes[1..] {
         let next = levels
             .last()
             .expect("level 0 is there")
-            .downscale(dev, stream, plan.step, size)?;
+            .downscale(dev, lane, plan.step, size)?;
+        found.push(detect_on_device(dev, lane, &next, &candidates)?);
         levels.push(next);
     }
-    let candidates = config.candidates();
-    let found = levels
-        .iter()
-        .map(|level| detect_on_device(dev, stream, level, &candidates))
-        .collect::<Result<Vec<_>>>()?;
     Ok(QueuedPyramid {
-        stream: stream.clone(),
+        lane: lane.clone(),
         plan,
         pyramid: *p,
         config: config.clone(),
@@ -69,14 +73,87 @@ pub(crate) fn queue(
     })
 }
 
+/// The selected keypoints of every level on the device, one level after the other in selection order
+/// ([`pyramid::of_level`]), with each level's count.
+struct Selection {
+    keypoints: Scratch<KeyPoint>,
+    counts: Scratch<u32>,
+    /// Per level: its first keypoint and how many.
+    ranges: Vec<(usize, usize)>,
+    total: usize,
+}
+
+impl Selection {
+    /// Uploads `selected` (of `levels` levels, at most `bound` keypoints) at once through a pinned
+    /// buffer.
+    fn upload(
+        lane: &Lane,
+        selected: &[LevelKeypoint],
+        levels: usize,
+        bound: usize,
+    ) -> Result<Self> {
+        let per_level: Vec<Vec<KeyPoint>> = (0..levels)
+            .map(|l| pyramid::of_level(selected, l))
+            .collect();
+        let total: usize = per_level.iter().map(Vec::len).sum();
+        super::invariant(total <= bound, "pyramid selection", || {
+            format!("{total} keypoints selected of at most {bound} found")
+        })?;
+        let mut staged = lane.pinned::<KeyPoint>(bound, "keypoint staging buffer")?;
+        let host = staged.host()?;
+        let mut ranges = Vec::with_capacity(levels);
+        let mut at = 0;
+        for keypoints in &per_level {
+            host[at..at + keypoints.len()].copy_from_slice(keypoints);
+            ranges.push((at, keypoints.len()));
+            at += keypoints.len();
+        }
+        let mut keypoints = lane.scratch::<KeyPoint>(bound, "pyramid keypoint upload")?;
+        staged.queue_upload(0, &mut keypoints.whole_mut().slice_mut(..total))?;
+        let counts: Vec<usize> = ranges.iter().map(|&(_, n)| n).collect();
+        Ok(Self {
+            keypoints,
+            counts: upload_counts(lane, &counts)?,
+            ranges,
+            total,
+        })
+    }
+
+    /// Level `l`'s keypoints on the device.
+    fn of_level(&self, l: usize) -> CudaView<'_, KeyPoint> {
+        let (at, n) = self.ranges[l];
+        self.keypoints.whole().slice(at..at + n)
+    }
+}
+
 impl QueuedPyramid {
+    /// The most keypoints the levels can hold together: what buffers whose need depends on the image's
+    /// content are sized by, so that images of one size and configuration reuse them whatever they
+    /// show.
+    fn bound(&self) -> usize {
+        self.found.iter().map(|f| f.capacity).sum()
+    }
+
     /// Reads every level's keypoints back (waits for the stream) and keeps the strongest over all.
     fn select(&self) -> Result<Vec<LevelKeypoint>> {
-        let per_level = self
-            .found
-            .iter()
-            .map(|f| f.download(&self.stream))
-            .collect::<Result<Vec<_>>>()?;
+        let found: Vec<&DeviceKeypoints> = self.found.iter().collect();
+        let counts = download_counts(&self.lane, &found)?;
+        let total = counts.iter().sum();
+        let mut host = self
+            .lane
+            .pinned::<KeyPoint>(self.bound(), "keypoint read-back buffer")?;
+        let mut at = 0;
+        for (f, &n) in self.found.iter().zip(&counts) {
+            host.queue_download(at, &f.records().slice(..n))?;
+            at += n;
+        }
+        let all = host.wait(total)?;
+        let mut per_level = Vec::with_capacity(counts.len());
+        let mut at = 0;
+        for &n in &counts {
+            per_level.push(all[at..at + n].to_vec());
+            at += n;
+        }
         // Harris ranking reads the levels' pixels: computed on the host from the levels read back,
         // by the CPU's own function, so both backends rank alike. (A kernel would save the copy.)
         let pixels = match self.config.ranking {
@@ -84,7 +161,7 @@ impl QueuedPyramid {
             Ranking::Harris => self
                 .levels
                 .iter()
-                .map(|level| level.download(&self.stream))
+                .map(|level| level.download(&self.lane))
                 .collect::<Result<Vec<_>>>()?,
         };
         let views = pixels
@@ -114,92 +191,123 @@ impl QueuedPyramid {
             .collect()
     }
 
+    /// Queues the sub-pixel offsets of every level's selected keypoints when
+    /// [`DetectorConfig::subpixel`] refines positions: `clatch_subpixel` through [`launch_subpixel`],
+    /// which reproduces [`crate::detect::cpu::subpixel_offset`], as [`crate::pyramid::cpu`] applies it
+    /// after selection. `[dx, dy]` per keypoint, in selection order.
+    fn queue_offsets(
+        &self,
+        dev: &GpuDevice,
+        selection: &Selection,
+    ) -> Result<Option<Scratch<i32>>> {
+        if self.config.subpixel == Subpixel::None || selection.total == 0 {
+            return Ok(None);
+        }
+        let mut offsets = self
+            .lane
+            .scratch::<i32>(2 * self.bound(), "sub-pixel offsets")?;
+        for (l, level) in self.levels.iter().enumerate() {
+            let (at, n) = selection.ranges[l];
+            if n == 0 {
+                continue;
+            }
+            let mut out = offsets.whole_mut().slice_mut(2 * at..2 * (at + n));
+            launch_subpixel(dev, &self.lane, level, &selection.of_level(l), n, &mut out)?;
+        }
+        Ok(Some(offsets))
+    }
+
     /// The selected keypoints in level-0 coordinates, refined by [`DetectorConfig::subpixel`] (waits
     /// for the stream).
     pub(crate) fn keypoints(self, dev: &GpuDevice) -> Result<Vec<KeyPoint>> {
         let mut selected = self.select()?;
         if self.config.subpixel != Subpixel::None {
-            let mut offsets = Vec::with_capacity(self.levels.len());
-            for (l, level) in self.levels.iter().enumerate() {
-                let keypoints = pyramid::of_level(&selected, l);
-                if keypoints.is_empty() {
-                    offsets.push(None);
-                    continue;
-                }
-                let on_device = upload(&self.stream, &keypoints, "pyramid keypoint upload")?;
-                offsets.push(queue_offsets(
-                    dev,
-                    &self.stream,
-                    level,
-                    self.config.subpixel,
-                    (&on_device, keypoints.len()),
-                )?);
+            let selection =
+                Selection::upload(&self.lane, &selected, self.levels.len(), self.bound())?;
+            if let Some(offsets) = self.queue_offsets(dev, &selection)? {
+                let mut host = self
+                    .lane
+                    .pinned::<i32>(2 * self.bound(), "offset read-back buffer")?;
+                host.queue_download(0, &offsets.whole().slice(..2 * selection.total))?;
+                apply_offsets(&mut selected, &selection, host.wait(2 * selection.total)?);
             }
-            apply_offsets(&self.stream, &mut selected, &offsets)?;
         }
         Ok(self.report(&selected))
     }
 
-    /// Describes the selected keypoints on their levels and reads everything back.
+    /// Describes the selected keypoints on their levels and reads everything back (waits for the
+    /// stream once more).
     pub(crate) fn features(
         mut self,
         dev: &GpuDevice,
         descriptor: &DescriptorConfig,
     ) -> Result<Features> {
         let mut selected = self.select()?;
-        let stream = &self.stream;
+        let lane = self.lane.clone();
         let width = descriptor.width;
-        let weights = upload_weights(stream, descriptor)?;
-        let mut outputs = Vec::with_capacity(self.levels.len());
-        let mut offsets = Vec::with_capacity(self.levels.len());
+        let words = width.words();
+        let weights = weights(dev, descriptor)?;
+        let bound = self.bound();
+        // The device works from here to the read-backs without waiting for the host.
+        let span = Span::open(&lane);
+        let selection = Selection::upload(&lane, &selected, self.levels.len(), bound)?;
+        let total = selection.total;
+        let mut out = lane.scratch::<u64>(bound * words, "pyramid descriptors")?;
         for (l, level) in self.levels.iter_mut().enumerate() {
-            let keypoints = pyramid::of_level(&selected, l);
-            if keypoints.is_empty() {
-                outputs.push(None);
-                offsets.push(None);
+            // Every level's quad texture, even one without selected keypoints: the buffers a call
+            // takes then depend on the image's size, not on what it shows, so a warm stream serves
+            // every image of that size without allocating.
+            level.build_quads(dev, &lane, descriptor.smoothing)?;
+            let (at, n) = selection.ranges[l];
+            if n == 0 {
                 continue;
             }
-            level.build_quads(dev, stream, descriptor.smoothing)?;
-            let on_device = upload(stream, &keypoints, "pyramid keypoint upload")?;
-            let count = upload(stream, &[keypoints.len() as u32], "pyramid keypoint count")?;
-            let mut out = alloc_zeros(
-                stream,
-                keypoints.len() * width.words(),
-                "pyramid descriptors",
-            )?;
             // Detection's margin makes every window fit on its level, as on the CPU.
             launch_describe(
                 dev,
-                stream,
+                &lane,
                 level,
-                (&on_device, &count),
+                (
+                    &selection.of_level(l),
+                    &selection.counts.whole().slice(l..l + 1),
+                ),
                 &weights,
                 width.bits() as i32,
-                &mut out,
+                &mut out.whole_mut().slice_mut(at * words..(at + n) * words),
             )?;
-            outputs.push(Some(out));
-            // Orientation and descriptor stay those of the whole pixel; only the position moves.
-            offsets.push(queue_offsets(
-                dev,
-                stream,
-                level,
-                self.config.subpixel,
-                (&on_device, keypoints.len()),
-            )?);
         }
-        let per_level = outputs
+        // Orientation and descriptor stay those of the whole pixel; only the position moves.
+        let offsets = self.queue_offsets(dev, &selection)?;
+        let mut host_words = lane.pinned::<u64>(bound * words, "descriptor read-back buffer")?;
+        host_words.queue_download(0, &out.whole().slice(..total * words))?;
+        let mut host_offsets = match &offsets {
+            Some(offsets) => {
+                let mut host = lane.pinned::<i32>(2 * bound, "offset read-back buffer")?;
+                host.queue_download(0, &offsets.whole().slice(..2 * total))?;
+                Some(host)
+            }
+            None => None,
+        };
+        drop(span);
+        // One wait: the offsets were queued last, so waiting for them waits for everything.
+        if let Some(host) = &mut host_offsets {
+            apply_offsets(&mut selected, &selection, host.wait(2 * total)?);
+        }
+        let all_words = host_words.wait(total * words)?;
+        let per_level = selection
+            .ranges
             .iter()
-            .map(|out| match out {
-                None => Ok(DescriptorSet::empty(width)),
-                Some(out) => {
-                    let words = stream
-                        .clone_dtoh(out)
-                        .map_err(driver_error("copying pyramid descriptors back"))?;
-                    DescriptorSet::from_words(width, words)
+            .map(|&(at, n)| {
+                if n == 0 {
+                    Ok(DescriptorSet::empty(width))
+                } else {
+                    DescriptorSet::from_words(
+                        width,
+                        all_words[at * words..(at + n) * words].to_vec(),
+                    )
                 }
             })
             .collect::<Result<Vec<_>>>()?;
-        apply_offsets(stream, &mut selected, &offsets)?;
         Ok(Features::all(
             self.report(&selected),
             pyramid::assemble(&selected, &per_level, width)?,
@@ -207,45 +315,15 @@ impl QueuedPyramid {
     }
 }
 
-/// Queues the sub-pixel offsets of one level's selected keypoints (`count` of them, already on the
-/// device) when `subpixel` refines positions: `clatch_subpixel` through
-/// [`launch_subpixel`], which reproduces [`crate::detect::cpu::subpixel_offset`], as
-/// [`crate::pyramid::cpu`] applies it after selection.
-fn queue_offsets(
-    dev: &GpuDevice,
-    stream: &Arc<CudaStream>,
-    level: &DeviceImage,
-    subpixel: Subpixel,
-    (keypoints, count): (&CudaSlice<KeyPoint>, usize),
-) -> Result<Option<CudaSlice<i32>>> {
-    if subpixel == Subpixel::None || count == 0 {
-        return Ok(None);
-    }
-    let mut offsets = alloc_zeros(stream, 2 * count, "sub-pixel offsets")?;
-    launch_subpixel(dev, stream, level, keypoints, count, &mut offsets)?;
-    Ok(Some(offsets))
-}
-
-/// Reads each level's offsets back (waits for the stream) and gives them to that level's selected
-/// keypoints, in selection order (the order they were uploaded in, [`pyramid::of_level`]).
-fn apply_offsets(
-    stream: &Arc<CudaStream>,
-    selected: &mut [LevelKeypoint],
-    per_level: &[Option<CudaSlice<i32>>],
-) -> Result<()> {
-    for (l, offsets) in per_level.iter().enumerate() {
-        let Some(offsets) = offsets else {
-            continue;
-        };
-        let flat = stream
-            .clone_dtoh(offsets)
-            .map_err(driver_error("copying sub-pixel offsets back"))?;
+/// Gives each level's offsets (`flat`: `[dx, dy]` per keypoint of `selection`, level after level) to
+/// that level's selected keypoints, in selection order (the order they were uploaded in).
+fn apply_offsets(selected: &mut [LevelKeypoint], selection: &Selection, flat: &[i32]) {
+    for (l, &(at, n)) in selection.ranges.iter().enumerate() {
         let of_level = selected.iter_mut().filter(|k| k.level == l);
-        for (k, pair) in of_level.zip(flat.chunks_exact(2)) {
+        for (k, pair) in of_level.zip(flat[2 * at..2 * (at + n)].chunks_exact(2)) {
             k.offset = [pair[0], pair[1]];
         }
     }
-    Ok(())
 }
 
 /// Multi-scale detection on the GPU: the same list as [`crate::pyramid::cpu::detect`].
@@ -255,7 +333,10 @@ pub(crate) fn pyramid_detect(
     config: &DetectorConfig,
     p: &Pyramid,
 ) -> Result<Vec<KeyPoint>> {
-    queue(dev, &dev.new_stream()?, image, config, p)?.keypoints(dev)
+    let lane = Leased::take(dev)?;
+    let result = queue(dev, &lane, image, config, p, ImageLife::Work)
+        .and_then(|queued| queued.keypoints(dev));
+    settled(&lane, result)
 }
 
 /// Multi-scale detection and description on the GPU: the same features as
@@ -267,7 +348,10 @@ pub(crate) fn pyramid_detect_and_describe(
     descriptor: &DescriptorConfig,
     p: &Pyramid,
 ) -> Result<Features> {
-    queue(dev, &dev.new_stream()?, image, detector, p)?.features(dev, descriptor)
+    let lane = Leased::take(dev)?;
+    let result = queue(dev, &lane, image, detector, p, ImageLife::Work)
+        .and_then(|queued| queued.features(dev, descriptor));
+    settled(&lane, result)
 }
 
 #[cfg(feature = "internals")]

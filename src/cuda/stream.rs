@@ -9,43 +9,90 @@
 
 use std::sync::Arc;
 
-use cudarc::driver::{CudaEvent, CudaSlice, CudaStream};
+use cudarc::driver::CudaEvent;
 
-use super::describe::{launch_describe, upload_weights};
-use super::detect::{DeviceKeypoints, detect_on_device};
+use super::arena::{Lane, Scratch};
+use super::describe::{launch_describe, weights};
+use super::detect::{DeviceKeypoints, detect_on_device, download_counts};
 use super::device::{GpuDevice, driver_error};
 use super::matching::{MatchJob, check_rows};
-use super::memory::alloc_zeros;
 use super::pyramid::QueuedPyramid;
-use super::texture::DeviceImage;
+use super::spans::Span;
+use super::texture::{DeviceImage, ImageLife};
 use crate::describe::DescriptorConfig;
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::detect::DetectorConfig;
 use crate::error::{Error, Result};
 use crate::features::Features;
 use crate::gray_view::GrayView;
+use crate::keypoint::KeyPoint;
 use crate::matching::{Match, MatchConfig};
 use crate::pyramid::Pyramid;
 
 /// A CUDA stream owned by clatch, on one device. `Send` and `Sync`: streams can be handed to worker
 /// threads; clones share the stream.
+///
+/// A stream keeps the device buffers (and pinned host buffers) of the calls queued on it after they
+/// finish, and hands them to the next calls, growing them when a call needs more: a steady state of
+/// images of similar size allocates nothing. They are freed with the stream (its last clone).
 #[derive(Debug, Clone)]
 pub struct GpuStream {
     dev: Arc<GpuDevice>,
-    stream: Arc<CudaStream>,
+    hold: Arc<Hold>,
     ordinal: usize,
+}
+
+/// A stream's lane, given back to the device's pool when the last clone drops if it came from there.
+#[derive(Debug)]
+struct Hold {
+    lane: Lane,
+    /// The device whose pool the lane goes back to, if any.
+    pool: Option<Arc<GpuDevice>>,
+}
+
+impl Drop for Hold {
+    fn drop(&mut self) {
+        if let Some(dev) = &self.pool {
+            // Work still queued on it is fine: the next user queues after it.
+            dev.lanes.give(self.lane.clone());
+        }
+    }
 }
 
 impl GpuStream {
     /// A new stream on CUDA device `ordinal`.
     pub fn new(ordinal: usize) -> Result<Self> {
         let dev = super::device(ordinal)?;
-        let stream = dev.new_stream()?;
+        let lane = Lane::new(&dev)?;
         Ok(Self {
             dev,
-            stream,
+            hold: Arc::new(Hold { lane, pool: None }),
             ordinal,
         })
+    }
+
+    /// An idle stream of the device's pool (its buffers warm from earlier calls), back in the pool
+    /// when the last clone drops: for the library's own blocking calls and batches.
+    pub(crate) fn pooled(ordinal: usize) -> Result<Self> {
+        let dev = super::device(ordinal)?;
+        let lane = dev.lanes.take(&dev)?;
+        Ok(Self {
+            hold: Arc::new(Hold {
+                lane,
+                pool: Some(dev.clone()),
+            }),
+            dev,
+            ordinal,
+        })
+    }
+
+    fn lane(&self) -> &Lane {
+        &self.hold.lane
+    }
+
+    /// `result`, after waiting for the stream when it is an error (see [`ImageLife::Work`]).
+    pub(crate) fn settle<T>(&self, result: Result<T>) -> Result<T> {
+        super::arena::settled(self.lane(), result)
     }
 
     /// The device ordinal.
@@ -60,14 +107,12 @@ impl GpuStream {
 
     /// Blocks until everything queued so far has run.
     pub fn synchronize(&self) -> Result<()> {
-        self.stream
-            .synchronize()
-            .map_err(driver_error("stream synchronisation"))
+        self.lane().synchronize_all()
     }
 
     /// An event recorded now: complete once everything queued so far has run.
     fn mark(&self) -> Result<CudaEvent> {
-        self.stream
+        self.lane()
             .record_event(None)
             .map_err(driver_error("event record"))
     }
@@ -99,10 +144,11 @@ pub struct PendingFeatures {
 #[derive(Debug)]
 enum Work {
     Single {
-        // Kept alive until the kernels that read it have run (wait synchronises first).
-        _image: DeviceImage,
+        // Its buffers go back to the stream's arena when the result is read or dropped; the next user
+        // queues on the same stream, after the kernels that read them.
+        _image: Box<DeviceImage>,
         keypoints: DeviceKeypoints,
-        descriptors: CudaSlice<u64>,
+        descriptors: Scratch<u64>,
         width: DescriptorWidth,
     },
     Pyramid {
@@ -117,9 +163,9 @@ impl PendingFeatures {
         self.done.is_complete()
     }
 
-    /// Waits for the device and copies the features back.
+    /// Waits for the device and copies the features back (through the stream's pinned buffers).
     pub fn wait(self) -> Result<Features> {
-        let stream = &self.stream.stream;
+        let lane = self.stream.lane();
         let (keypoints, descriptors, width) = match self.work {
             Work::Pyramid { queued, descriptor } => {
                 return queued.features(&self.stream.dev, &descriptor);
@@ -131,32 +177,38 @@ impl PendingFeatures {
                 ..
             } => (keypoints, descriptors, width),
         };
-        let keypoints = keypoints.download(stream)?;
-        let words = if keypoints.is_empty() {
-            Vec::new()
-        } else {
-            stream
-                .clone_dtoh(&descriptors.slice(..keypoints.len() * width.words()))
-                .map_err(driver_error("copying descriptors back"))?
-        };
+        let count = download_counts(lane, &[&keypoints])?[0];
+        let words = count * width.words();
+        // Sized by the capacity, not the count: images of one size reuse them whatever they show.
+        let capacity = keypoints.capacity;
+        let mut host_keypoints = lane.pinned::<KeyPoint>(capacity, "keypoint read-back buffer")?;
+        host_keypoints.queue_download(0, &keypoints.records().slice(..count))?;
+        let mut host_words =
+            lane.pinned::<u64>(capacity * width.words(), "descriptor read-back buffer")?;
+        host_words.queue_download(0, &descriptors.whole().slice(..words))?;
+        // The descriptors were queued last: waiting for them waits for both.
+        let words = host_words.wait(words)?.to_vec();
         Ok(Features::all(
-            keypoints,
+            host_keypoints.wait(count)?.to_vec(),
             DescriptorSet::from_words(width, words)?,
         ))
     }
 }
 
-/// Queues detection and description of `image` (validated) on `stream`.
+/// Queues detection and description of `image` (validated) on `stream`; `life` says how long `image`
+/// stays valid. With [`ImageLife::Work`] the caller waits for the stream (or the result) before the
+/// image is released, errors included ([`GpuStream::settle`]).
 pub(crate) fn detect_and_describe_async(
     stream: &GpuStream,
     image: &GrayView,
     detector: &DetectorConfig,
     descriptor: &DescriptorConfig,
     pyramid: Option<&Pyramid>,
+    life: ImageLife,
 ) -> Result<PendingFeatures> {
-    let (dev, s) = (&*stream.dev, &stream.stream);
+    let (dev, s) = (&*stream.dev, stream.lane());
     if let Some(p) = pyramid {
-        let queued = super::pyramid::queue(dev, s, image, detector, p)?;
+        let queued = super::pyramid::queue(dev, s, image, detector, p, life)?;
         return Ok(PendingFeatures {
             done: stream.mark()?,
             stream: stream.clone(),
@@ -166,14 +218,14 @@ pub(crate) fn detect_and_describe_async(
             },
         });
     }
-    let mut device_image = DeviceImage::upload(dev, s, image)?;
+    let _span = Span::open(s);
+    let mut device_image = DeviceImage::upload(dev, s, image, life)?;
     let keypoints = detect_on_device(dev, s, &device_image, detector)?;
     device_image.build_quads(dev, s, descriptor.smoothing)?;
     let width = descriptor.width;
-    let weights = upload_weights(s, descriptor)?;
-    let mut descriptors = alloc_zeros(
-        s,
-        keypoints.capacity * width.words(),
+    let weights = weights(dev, descriptor)?;
+    let mut descriptors = s.scratch::<u64>(
+        keypoints.capacity.max(1) * width.words(),
         "descriptor allocation",
     )?;
     // Detection keeps a margin for the window, so every detected keypoint fits: no host check needed.
@@ -181,16 +233,16 @@ pub(crate) fn detect_and_describe_async(
         dev,
         s,
         &device_image,
-        (&keypoints.keypoints, &keypoints.total),
+        (&keypoints.records(), &keypoints.total.view()),
         &weights,
         width.bits() as i32,
-        &mut descriptors,
+        &mut descriptors.view_mut(),
     )?;
     Ok(PendingFeatures {
         done: stream.mark()?,
         stream: stream.clone(),
         work: Work::Single {
-            _image: device_image,
+            _image: Box::new(device_image),
             keypoints,
             descriptors,
             width,
@@ -241,7 +293,7 @@ pub(crate) fn match_async(
     }
     let mut job = MatchJob::prepare(
         &stream.dev,
-        stream.stream.clone(),
+        (**stream.lane()).clone(),
         query,
         train,
         config,

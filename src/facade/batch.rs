@@ -1,12 +1,14 @@
-//! Many images in one call.
+//! Many images in one call: a slice, or a stream of images produced while earlier ones are worked on.
+
+use std::collections::VecDeque;
 
 use super::Extractor;
-use super::in_flight::{Queued, STREAMS, run_in_order, streams};
+use super::in_flight::{IN_FLIGHT_PER_STREAM, STREAMS, streams};
 use crate::backend::Backend;
-use crate::cuda;
-use crate::error::Result;
+use crate::cuda::{ImageLife, PendingFeatures};
+use crate::error::{Error, Result};
 use crate::features::Features;
-use crate::gray_view::GrayView;
+use crate::gray_view::{AsGrayView, GrayView};
 use crate::parallel::*;
 
 impl Extractor {
@@ -16,7 +18,8 @@ impl Extractor {
     ///
     /// The CPU backend spreads the images over its threads (each image's own work is parallel too);
     /// the CUDA backend keeps several streams busy, each image's upload and kernels queued while
-    /// earlier images finish.
+    /// earlier images finish (images in page-locked memory are copied by the copy engine straight
+    /// from where they are).
     ///
     /// ```
     /// use clatch::{Backend, Extractor, ExtractorConfig, GrayView};
@@ -48,17 +51,245 @@ impl Extractor {
                 })
                 .collect(),
             Backend::Cuda { device } => {
-                let streams = streams(device)?;
-                run_in_order(
-                    images.len(),
-                    |i| {
-                        self.detect_and_describe_async(&streams[i % STREAMS], &images[i])
-                            .map(Queued::Pending)
-                    },
-                    cuda::PendingFeatures::wait,
-                    done,
-                )
+                let mut all = Vec::with_capacity(images.len());
+                self.stream_on_gpu(device, images.iter().map(Ok::<_, Error>), |i, _, f| {
+                    all.push(f);
+                    done(i);
+                    Ok(())
+                })?;
+                Ok(all)
             }
         }
+    }
+
+    /// [`Extractor::detect_and_describe`] of each image `images` yields, handed to `each(i, image,
+    /// features)` in input order (`i` counts from 0) together with the image itself, which this call
+    /// keeps alive while it is worked on. Returns how many images there were.
+    ///
+    /// Images are taken from the iterator only as they are needed, so a producer that decodes files
+    /// (on other threads, ahead of the consumer) overlaps decoding with the extraction of earlier
+    /// images, and at most a few images are held at once: on the GPU, as many as the streams keep in
+    /// flight (8); on the CPU, one per thread (worked on together). The first error, of the iterator,
+    /// of an image or of `each`, stops the call and is returned (library errors converted into `E`).
+    ///
+    /// ```
+    /// use clatch::{Backend, Extractor, ExtractorConfig};
+    ///
+    /// let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+    /// // "Decoding": images made one at a time as the extractor asks for them.
+    /// let images = (0..3).map(|i| clatch::synthetic::rectangles(160 + 16 * i, 120, i as u64));
+    /// let mut counts = Vec::new();
+    /// let n = extractor.detect_and_describe_stream(
+    ///     images.map(|pixels| Ok::<_, clatch::Error>(Frame(pixels?, 0))),
+    ///     |i, frame, features| {
+    ///         counts.push((i, features.keypoints.len()));
+    ///         Ok(())
+    ///     },
+    /// )?;
+    /// assert_eq!(n, 3);
+    /// # struct Frame(Vec<u8>, usize);
+    /// # impl clatch::AsGrayView for Frame {
+    /// #     fn gray_view(&self) -> clatch::Result<clatch::GrayView<'_>> {
+    /// #         clatch::GrayView::new(&self.0, self.0.len() / 120, 120, self.0.len() / 120)
+    /// #     }
+    /// # }
+    /// # Ok::<(), clatch::Error>(())
+    /// ```
+    pub fn detect_and_describe_stream<T, E>(
+        &self,
+        images: impl IntoIterator<Item = std::result::Result<T, E>>,
+        each: impl FnMut(usize, T, Features) -> std::result::Result<(), E>,
+    ) -> std::result::Result<usize, E>
+    where
+        T: AsGrayView + Sync,
+        E: From<Error>,
+    {
+        match self.backend() {
+            Backend::Cpu => self.stream_on_cpu(images, each),
+            Backend::Cuda { device } => self.stream_on_gpu(device, images, each),
+        }
+    }
+
+    /// The CPU side of [`Extractor::detect_and_describe_stream`]: images in groups of one per
+    /// thread, each group's images worked on together.
+    fn stream_on_cpu<T, E>(
+        &self,
+        images: impl IntoIterator<Item = std::result::Result<T, E>>,
+        mut each: impl FnMut(usize, T, Features) -> std::result::Result<(), E>,
+    ) -> std::result::Result<usize, E>
+    where
+        T: AsGrayView + Sync,
+        E: From<Error>,
+    {
+        let group = crate::parallel::threads().max(1);
+        let mut images = images.into_iter();
+        let mut next = 0;
+        loop {
+            let items = images
+                .by_ref()
+                .take(group)
+                .collect::<std::result::Result<Vec<T>, E>>()?;
+            if items.is_empty() {
+                return Ok(next);
+            }
+            let features: Vec<Result<Features>> = items
+                .par_iter()
+                .map(|item| self.detect_and_describe(&item.gray_view()?))
+                .collect();
+            for (item, features) in items.into_iter().zip(features) {
+                each(next, item, features?)?;
+                next += 1;
+            }
+        }
+    }
+
+    /// The GPU side of [`Extractor::detect_and_describe_stream`] (and of the batch): images queued
+    /// on the pool's streams in turn, at most `STREAMS * IN_FLIGHT_PER_STREAM` in flight, each kept
+    /// with its pending result until that is read. Images are uploaded as [`ImageLife::Work`]: every
+    /// path out of here, errors included, waits for the streams before an image is released.
+    fn stream_on_gpu<T, E>(
+        &self,
+        device: usize,
+        images: impl IntoIterator<Item = std::result::Result<T, E>>,
+        mut each: impl FnMut(usize, T, Features) -> std::result::Result<(), E>,
+    ) -> std::result::Result<usize, E>
+    where
+        T: AsGrayView,
+        E: From<Error>,
+    {
+        let streams = streams(device)?;
+        let settle = |e: Error| -> Error {
+            for stream in &streams {
+                // The error being returned is the one that matters.
+                let _ = stream.synchronize();
+            }
+            e
+        };
+        let window = STREAMS * IN_FLIGHT_PER_STREAM;
+        let mut queued: VecDeque<(usize, T, PendingFeatures)> = VecDeque::with_capacity(window);
+        let run = || -> std::result::Result<usize, E> {
+            let mut next = 0;
+            let mut finish_oldest =
+                |queued: &mut VecDeque<(usize, T, PendingFeatures)>| -> std::result::Result<(), E> {
+                    let (i, item, pending) = queued.pop_front().expect("an image is queued");
+                    // On an error the image is released only after the streams have been waited for.
+                    let features = pending.wait().map_err(settle)?;
+                    each(i, item, features)
+                };
+            for item in images {
+                if queued.len() >= window {
+                    finish_oldest(&mut queued)?;
+                }
+                let item = item?;
+                let pending = match item.gray_view() {
+                    Ok(view) => self
+                        .queue_features(&streams[next % STREAMS], &view, ImageLife::Work)
+                        .map_err(settle)?,
+                    Err(e) => return Err(e.into()),
+                };
+                queued.push_back((next, item, pending));
+                next += 1;
+            }
+            while !queued.is_empty() {
+                finish_oldest(&mut queued)?;
+            }
+            Ok(next)
+        };
+        let result = run();
+        if result.is_err() {
+            // Images still queued may be read by their uploads: wait before they drop.
+            for stream in &streams {
+                let _ = stream.synchronize();
+            }
+        }
+        drop(queued);
+        result
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ExtractorConfig;
+
+    struct Owned(Vec<u8>, usize, usize);
+
+    impl AsGrayView for Owned {
+        fn gray_view(&self) -> Result<GrayView<'_>> {
+            GrayView::new(&self.0, self.1, self.2, self.1)
+        }
+    }
+
+    fn image(i: usize) -> Owned {
+        let (w, h) = (96 + 8 * (i % 5), 80 + 4 * (i % 3));
+        Owned(
+            crate::synthetic::rectangles(w, h, i as u64).expect("synthetic image"),
+            w,
+            h,
+        )
+    }
+
+    #[test]
+    fn a_stream_on_the_cpu_gives_each_image_its_own_result_in_order() {
+        let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
+        // More images than one group of threads.
+        let n = 2 * crate::parallel::threads() + 3;
+        let mut seen = Vec::new();
+        let count = extractor
+            .detect_and_describe_stream((0..n).map(|i| Ok::<_, Error>(image(i))), |i, item, f| {
+                assert_eq!(f, extractor.detect_and_describe(&item.gray_view()?)?);
+                assert_eq!(
+                    item.0,
+                    image(i).0,
+                    "image {i} handed back with its features"
+                );
+                seen.push(i);
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!(count, n);
+        assert_eq!(seen, (0..n).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn a_stream_stops_at_the_first_error() {
+        let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
+        let producer = (0..10).map(|i| {
+            if i == 6 {
+                Err(Error::EmptyGallery)
+            } else {
+                Ok(image(i))
+            }
+        });
+        let mut handed = 0;
+        let result = extractor.detect_and_describe_stream(producer, |_, _, _| {
+            handed += 1;
+            Ok(())
+        });
+        assert!(matches!(result, Err(Error::EmptyGallery)));
+        assert!(handed <= 6);
+        let tiny = (0..3).map(|i| {
+            Ok::<_, Error>(if i == 1 {
+                Owned(vec![0; 16 * 16], 16, 16)
+            } else {
+                image(i)
+            })
+        });
+        let result = extractor.detect_and_describe_stream(tiny, |_, _, _| Ok(()));
+        assert!(
+            matches!(result, Err(Error::ImageTooSmall { .. })),
+            "{result:?}"
+        );
+        let result = extractor.detect_and_describe_stream(
+            (0..5).map(|i| Ok::<_, Error>(image(i))),
+            |i, _, _| {
+                if i == 2 {
+                    Err(Error::EmptyGallery)
+                } else {
+                    Ok(())
+                }
+            },
+        );
+        assert!(matches!(result, Err(Error::EmptyGallery)));
     }
 }

@@ -1,7 +1,7 @@
 //! Detection and description behind one backend-independent interface.
 
 use crate::backend::Backend;
-use crate::cuda::{self, GpuStream, PendingFeatures};
+use crate::cuda::{self, GpuStream, ImageLife, PendingFeatures};
 use crate::describe::opencv::{self, OpencvLatch};
 use crate::describe::{self, DescriptorConfig, WINDOW};
 use crate::detect::{self, DetectorConfig};
@@ -253,9 +253,14 @@ impl Extractor {
                 let keypoints = self.detect(image)?;
                 self.describe(image, &keypoints)
             }
-            Backend::Cuda { device } => self
-                .detect_and_describe_async(&GpuStream::new(device)?, image)?
-                .wait(),
+            Backend::Cuda { device } => {
+                // The image outlives this call, which waits for the stream on every path.
+                let stream = GpuStream::pooled(device)?;
+                let result = self
+                    .queue_features(&stream, image, ImageLife::Work)
+                    .and_then(PendingFeatures::wait);
+                stream.settle(result)
+            }
         }
     }
 
@@ -286,6 +291,16 @@ impl Extractor {
         stream: &GpuStream,
         image: &GrayView,
     ) -> Result<PendingFeatures> {
+        self.queue_features(stream, image, ImageLife::Call)
+    }
+
+    /// [`Extractor::detect_and_describe_async`] of an image valid for as long as `life` says.
+    pub(super) fn queue_features(
+        &self,
+        stream: &GpuStream,
+        image: &GrayView,
+        life: ImageLife,
+    ) -> Result<PendingFeatures> {
         Self::check_image(image)?;
         match self.backend {
             Backend::Cuda { device } => {
@@ -296,6 +311,7 @@ impl Extractor {
                     &self.config.detector,
                     &self.config.descriptor,
                     self.levels().as_ref(),
+                    life,
                 )
             }
             Backend::Cpu => Err(Error::InvalidConfig {

@@ -10,9 +10,9 @@ use crate::error::Result;
 pub(super) const STREAMS: usize = 4;
 pub(super) const IN_FLIGHT_PER_STREAM: usize = 2;
 
-/// `STREAMS` new streams on CUDA device `device`.
+/// `STREAMS` streams of CUDA device `device`'s pool (warm from earlier calls; back in the pool after).
 pub(super) fn streams(device: usize) -> Result<Vec<GpuStream>> {
-    (0..STREAMS).map(|_| GpuStream::new(device)).collect()
+    (0..STREAMS).map(|_| GpuStream::pooled(device)).collect()
 }
 
 /// One item after `queue`: work in flight, or a result without any.

@@ -186,3 +186,23 @@ pub fn match_configs() -> Vec<clatch::MatchConfig> {
     }
     out
 }
+
+/// Runs `work(t)` for `t` in `0..threads`, each on its own thread at once, and sums what they return;
+/// the first error (a panic is one) comes back instead.
+pub fn on_threads(
+    threads: usize,
+    work: impl Fn(usize) -> Result<usize, String> + Sync,
+) -> Result<usize, String> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                let work = &work;
+                scope.spawn(move || work(t))
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or(Err("thread panicked".into())))
+            .sum()
+    })
+}

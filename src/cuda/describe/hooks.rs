@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::cuda::device::time_launches;
+use crate::cuda::texture::ImageLife;
 
 /// Kernel times in milliseconds of `repeats` launches after `warmup` launches, measured with CUDA
 /// events on the job's stream (upload and download excluded). Keypoints must all fit.
@@ -13,9 +14,10 @@ pub fn time_describe_kernel(
     warmup: usize,
     repeats: usize,
 ) -> Result<Vec<f32>> {
-    let mut job = Job::prepare(dev, image, keypoints, config)?;
-    let stream = job.stream.clone();
-    time_launches(dev, &stream, warmup, repeats, || job.launch(dev))
+    let lane = Leased::take(dev)?;
+    let result = Job::prepare(dev, &lane, image, keypoints, config)
+        .and_then(|mut job| time_launches(dev, &lane, warmup, repeats, || job.launch(dev)));
+    settled(&lane, result)
 }
 
 /// `image` smoothed by `smoothing` as the GPU smooths it before description
@@ -26,10 +28,10 @@ pub fn debug_smoothed(
     image: &GrayView,
     smoothing: crate::describe::Smoothing,
 ) -> Result<Vec<u8>> {
-    let stream = dev.new_stream()?;
-    let device_image = DeviceImage::upload(dev, &stream, image)?;
-    match device_image.smoothed(dev, &stream, smoothing)? {
-        Some(smoothed) => device_image.download_like(&stream, &smoothed),
-        None => device_image.download(&stream),
+    let lane = Leased::take(dev)?;
+    let device_image = DeviceImage::upload(dev, &lane, image, ImageLife::Call)?;
+    match device_image.smoothed(dev, &lane, smoothing)? {
+        Some(smoothed) => device_image.download_like(&lane, &smoothed),
+        None => device_image.download(&lane),
     }
 }

@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::cuda::device::time_launches;
+use crate::cuda::texture::ImageLife;
 
 /// Times the detector: `repeats` runs of all its launches after `warmup` runs, each measured with CUDA
 /// events on its stream (image upload, allocation and read-back excluded). Returns the times in
@@ -13,8 +14,8 @@ pub fn time_detect(
     warmup: usize,
     repeats: usize,
 ) -> Result<(Vec<f32>, Vec<KeyPoint>)> {
-    let stream = dev.new_stream()?;
-    let device_image = DeviceImage::upload(dev, &stream, image)?;
+    let stream = Leased::take(dev)?;
+    let device_image = DeviceImage::upload(dev, &stream, image, ImageLife::Call)?;
     let mut job = DetectJob::new(&stream, image.width(), image.height(), config)?;
     let times = time_launches(dev, &stream, warmup, repeats, || {
         job.launch(dev, &stream, &device_image)
@@ -50,10 +51,12 @@ pub fn debug_detect_stages(
     config: &DetectorConfig,
 ) -> Result<DetectStages> {
     dev.load_bench_kernels()?;
-    let stream = dev.new_stream()?;
-    let device_image = DeviceImage::upload(dev, &stream, image)?;
+    let stream = Leased::take(dev)?;
+    let device_image = DeviceImage::upload(dev, &stream, image, ImageLife::Call)?;
     let (width, height) = (image.width(), image.height());
-    let mut texels = alloc_zeros::<u8>(&stream, width * height, "debug texels")?;
+    let mut texels =
+        crate::cuda::memory::alloc_zeros::<u8>(&stream, width * height, "debug texels")?;
+    device_image.arrived(&stream)?;
     let mut read = stream.launch_builder(dev.kernel("clatch_debug_read_texture"));
     let texture = device_image.texture();
     let (w, h) = (width as i32, height as i32);
@@ -73,15 +76,15 @@ pub fn debug_detect_stages(
     let mut job = DetectJob::new(&stream, width, height, config)?;
     job.launch_stages(dev, &stream, &device_image, Stage::Suppress)?;
     let kept = stream
-        .clone_dtoh(&job.kept)
+        .clone_dtoh(&job.kept.view())
         .map_err(driver_error("debug kept map"))?;
     let mut job = DetectJob::new(&stream, width, height, config)?;
     job.launch_stages(dev, &stream, &device_image, Stage::Scan)?;
     let offsets = stream
-        .clone_dtoh(&job.counts)
+        .clone_dtoh(&job.counts.view())
         .map_err(driver_error("debug offsets"))?;
     let total = stream
-        .clone_dtoh(&job.output.total)
+        .clone_dtoh(&job.output.total.view())
         .map_err(driver_error("debug total"))?[0];
     let mut job = DetectJob::new(&stream, width, height, config)?;
     job.launch_stages(dev, &stream, &device_image, Stage::Scatter)?;
@@ -110,17 +113,21 @@ pub fn debug_subpixel_offsets(
     if keypoints.is_empty() {
         return Ok(Vec::new());
     }
-    let stream = dev.new_stream()?;
-    let device_image = DeviceImage::upload(dev, &stream, image)?;
+    let stream = Leased::take(dev)?;
+    let device_image = DeviceImage::upload(dev, &stream, image, ImageLife::Call)?;
     let on_device = super::super::memory::upload(&stream, keypoints, "debug keypoint upload")?;
-    let mut offsets = alloc_zeros(&stream, 2 * keypoints.len(), "debug sub-pixel offsets")?;
+    let mut offsets = crate::cuda::memory::alloc_zeros::<i32>(
+        &stream,
+        2 * keypoints.len(),
+        "debug sub-pixel offsets",
+    )?;
     launch_subpixel(
         dev,
         &stream,
         &device_image,
-        &on_device,
+        &on_device.as_view(),
         keypoints.len(),
-        &mut offsets,
+        &mut offsets.as_view_mut(),
     )?;
     let flat = stream
         .clone_dtoh(&offsets)

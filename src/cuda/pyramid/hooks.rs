@@ -1,6 +1,7 @@
 //! Test and bench hooks of `cuda/pyramid.rs` (the `internals` feature only): not part of the API.
 
 use super::*;
+use crate::cuda::texture::ImageLife;
 
 /// The pyramid levels of `image` for a detector margin of `margin` as the GPU builds them, level 0
 /// first, each row-major with stride = width: for comparing with [`crate::pyramid::cpu::build_levels`].
@@ -10,9 +11,9 @@ pub fn debug_pyramid_levels(
     p: &Pyramid,
     margin: usize,
 ) -> Result<Vec<Vec<u8>>> {
-    let stream = dev.new_stream()?;
+    let stream = Leased::take(dev)?;
     let plan = Plan::new(p, image.width(), image.height(), margin);
-    let mut level = DeviceImage::upload(dev, &stream, image)?;
+    let mut level = DeviceImage::upload(dev, &stream, image, ImageLife::Call)?;
     let mut out = vec![level.download(&stream)?];
     for &size in &plan.sizes[1..] {
         level = level.downscale(dev, &stream, plan.step, size)?;

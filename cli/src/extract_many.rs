@@ -1,0 +1,135 @@
+//! `clatch extract IMG... -o DIR`: several images, their files in one folder. Images are decoded on
+//! worker threads ahead of the extractor, which takes them as a stream (on the GPU several in flight
+//! on several streams); the progress bar counts images with their rate.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clatch::{Extractor, GrayView};
+
+use crate::ExtractArgs;
+use crate::error::CliError;
+use crate::extract::{write_descriptors_npy, write_keypoints_csv, write_keypoints_json};
+use crate::extract_stream::extract_decoded;
+use crate::input::{check_detectable, load_gray};
+use crate::output::{Staged, check_distinct, check_writable};
+use crate::progress::Progress;
+use crate::report::{ms, per_second};
+
+/// A decoded image waiting for extraction.
+struct Decoded {
+    img: image::GrayImage,
+    index: usize,
+}
+
+impl clatch::AsGrayView for Decoded {
+    fn gray_view(&self) -> clatch::Result<GrayView<'_>> {
+        GrayView::try_from(&self.img)
+    }
+}
+
+/// The three output files of `image` in `dir`: `STEM.keypoints.csv`, `STEM.keypoints.json`,
+/// `STEM.descriptors.npy`.
+fn outputs_in(dir: &Path, image: &Path) -> Result<[PathBuf; 3], CliError> {
+    let stem = image.file_stem().ok_or_else(|| CliError::OutputPath {
+        path: image.to_path_buf(),
+        reason: "the image path has no file name to name its outputs by".into(),
+    })?;
+    let prefix = dir.join(stem);
+    Ok([".keypoints.csv", ".keypoints.json", ".descriptors.npy"]
+        .map(|suffix| crate::extract::with_suffix(&prefix, suffix)))
+}
+
+/// Runs `clatch extract` on several images with `extractor`; `-o` names the output folder.
+pub fn main(args: &ExtractArgs, extractor: &Extractor) -> Result<(), CliError> {
+    if args.opencv.opencv_latch {
+        return Err(CliError::OptionConflict {
+            options: "--opencv-latch with several images".into(),
+            reason: "OpenCV-compatible LATCH describes one image per call; run one call per image"
+                .into(),
+        });
+    }
+    let dir = &args.output;
+    if dir.exists() && !dir.is_dir() {
+        return Err(CliError::OutputPath {
+            path: dir.clone(),
+            reason: "with several images, -o names a folder for their files".into(),
+        });
+    }
+    // Every output checked before any work: distinct from each other and from the inputs.
+    let outputs = args
+        .images
+        .iter()
+        .map(|image| outputs_in(dir, image))
+        .collect::<Result<Vec<_>, _>>()?;
+    let inputs: Vec<(&'static str, &Path)> =
+        args.images.iter().map(|p| ("image", p.as_path())).collect();
+    let roles = ["keypoints CSV", "keypoints JSON", "descriptors"];
+    let all_outputs: Vec<(&'static str, &Path)> = outputs
+        .iter()
+        .flat_map(|files| {
+            roles
+                .iter()
+                .copied()
+                .zip(files.iter().map(PathBuf::as_path))
+        })
+        .collect();
+    check_distinct(&inputs, &all_outputs)?;
+    std::fs::create_dir_all(dir).map_err(CliError::write(dir))?;
+    for (_, path) in &all_outputs {
+        check_writable(path)?;
+    }
+
+    let limits = args.input.limits();
+    let progress = Progress::counter(args.images.len() as u64, "extracting images");
+    let start = Instant::now();
+    let mut keypoints = 0usize;
+    let decoding = extract_decoded(
+        extractor,
+        args.images.len(),
+        |i| {
+            let path = &args.images[i];
+            let img = load_gray(path, &limits)?;
+            check_detectable(path, img.width(), img.height())?;
+            Ok(Decoded { img, index: i })
+        },
+        |_, decoded, features| {
+            let [csv, json, npy] = &outputs[decoded.index];
+            let mut staged = Staged::new();
+            staged.write(csv, |w| write_keypoints_csv(w, &features.keypoints))?;
+            staged.write(json, |w| write_keypoints_json(w, &features.keypoints))?;
+            staged.write(npy, |w| write_descriptors_npy(w, &features.descriptors))?;
+            staged.commit()?;
+            keypoints += features.keypoints.len();
+            progress.done();
+            Ok(())
+        },
+    )?;
+    let wall = start.elapsed();
+    progress.finish();
+
+    let n = args.images.len();
+    println!("clatch extract");
+    println!("  images      {n}");
+    println!("  {:<12}{}", "backend", extractor.backend());
+    println!(
+        "  {:<12}{keypoints} ({:.0} per image)",
+        "keypoints",
+        keypoints as f64 / n as f64
+    );
+    println!(
+        "  {:<12}{} ({}, files written included)",
+        "extract",
+        ms(wall),
+        per_second(n, wall, "images")
+    );
+    println!(
+        "  {:<12}{} summed over {} decoding thread(s); extraction waited {} for it",
+        "decode",
+        ms(decoding.produce),
+        decoding.threads,
+        ms(decoding.waited)
+    );
+    println!("  wrote       {} x 3 files in {}", n, dir.display());
+    Ok(())
+}

@@ -75,6 +75,13 @@ const KERNELS: &[KernelFile] = &[
         needs_tensor_cores: false,
     },
     KernelFile {
+        path: "kernels/match_pairs.cu",
+        ptx: ptx::MATCH_PAIRS_PTX,
+        fatbin: ptx::MATCH_PAIRS_FATBIN,
+        names: super::collection::KERNELS,
+        needs_tensor_cores: false,
+    },
+    KernelFile {
         path: "kernels/matching_tensor.cu",
         ptx: ptx::MATCHING_TENSOR_PTX,
         fatbin: ptx::MATCHING_TENSOR_FATBIN,

@@ -8,6 +8,7 @@
 //! tests in `tests/cuda_*.rs` compare the two bit for bit. The driver is loaded at run time, so a binary
 //! built with `cuda` still starts on a machine without one and reports `no CUDA driver` as a typed error.
 
+mod collection;
 mod describe;
 mod describe_opencv;
 mod detect;
@@ -31,6 +32,7 @@ pub(crate) mod ptx {
     include!(concat!(env!("OUT_DIR"), "/kernels.rs"));
 }
 
+pub(crate) use collection::DeviceCollection;
 pub(crate) use describe::describe;
 pub(crate) use describe_opencv::describe_opencv;
 pub(crate) use detect::detect;
@@ -45,6 +47,7 @@ pub(crate) use stream::{detect_and_describe_async, match_async};
 #[cfg(feature = "internals")]
 #[doc(hidden)]
 pub mod hooks {
+    pub use super::collection::hooks::*;
     pub use super::describe::hooks::*;
     pub use super::detect::hooks::*;
     pub use super::device::{GpuDevice, device};

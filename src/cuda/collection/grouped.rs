@@ -1,0 +1,339 @@
+//! One grouped run: blocks of pairs through `kernels/match_pairs.cu`, two blocks in flight, each
+//! block's results handed on in pair order as soon as it is back.
+//!
+//! Everything runs on the collection's one stream, so no buffer crosses streams (the device disables
+//! cudarc's event tracking on that promise). Two slots of scratch alternate: block `b + 1` is queued
+//! before the host waits for block `b`, so the device moves on to the next launch while the host splits
+//! the last one's matches; the copies back go into page-locked buffers (true asynchronous DMA), whose
+//! own events say when they have landed.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+use cudarc::driver::{
+    CudaContext, CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PinnedHostSlice, PushKernelArg,
+    ValidAsZeroBits,
+};
+
+use super::kernel_name;
+use super::plan::{Block, Budget, PairRows, blocks};
+use crate::cuda::device::{GpuDevice, driver_error};
+use crate::cuda::header::{
+    CLATCH_MATCH_SELECT_THREADS, CLATCH_MATCH_THREADS, clatch_pair, clatch_pair_task,
+};
+use crate::cuda::memory::alloc_zeros;
+use crate::error::Result;
+use crate::matching::{Match, MatchConfig};
+
+// SAFETY: clatch_pair is bindgen's #[repr(C)] copy of the C struct: four u64 and two u32, no padding
+// the kernel reads, no pointers; all-zero bits are a valid value.
+unsafe impl DeviceRepr for clatch_pair {}
+// SAFETY: as above.
+unsafe impl ValidAsZeroBits for clatch_pair {}
+// SAFETY: clatch_pair_task is #[repr(C)] with two u32; all-zero bits are valid.
+unsafe impl DeviceRepr for clatch_pair_task {}
+// SAFETY: as above.
+unsafe impl ValidAsZeroBits for clatch_pair_task {}
+
+/// Most blocks of a grouped kNN launch (grid x); more tasks are taken grid-stride.
+const MAX_GRID: usize = 1 << 20;
+/// Most blocks of the compaction (grid x); more pairs are taken grid-stride.
+const MAX_COMPACT_GRID: usize = 65_535;
+
+/// The sizes one slot is allocated for: the largest block of the run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Capacity {
+    pairs: usize,
+    tasks: usize,
+    query_rows: usize,
+    train_rows: usize,
+}
+
+impl Capacity {
+    fn of(blocks: &[Block]) -> Self {
+        blocks.iter().fold(Self::default(), |c, b| Self {
+            pairs: c.pairs.max(b.device.len()),
+            tasks: c.tasks.max(b.tasks),
+            query_rows: c.query_rows.max(b.query_rows),
+            train_rows: c.train_rows.max(b.train_rows),
+        })
+    }
+}
+
+/// Page-locked host memory of `len` (at least one) zeroed elements, read back without write-combining.
+fn pinned<T: DeviceRepr + ValidAsZeroBits + Copy>(
+    ctx: &Arc<CudaContext>,
+    len: usize,
+    zero: T,
+) -> Result<PinnedHostSlice<T>> {
+    // SAFETY: the memory is zeroed below before anything reads it.
+    let mut buffer = unsafe { ctx.alloc_pinned_with_flags::<T>(len.max(1), 0) }
+        .map_err(driver_error("pinned buffers of grouped matching"))?;
+    buffer
+        .as_mut_slice()
+        .map_err(driver_error("pinned buffers of grouped matching"))?
+        .fill(zero);
+    Ok(buffer)
+}
+
+/// The scratch of one block in flight, on the device and in pinned host memory.
+struct Slot {
+    capacity: Capacity,
+    pairs: CudaSlice<clatch_pair>,
+    tasks: CudaSlice<clatch_pair_task>,
+    best: CudaSlice<Match>,
+    kept: CudaSlice<Match>,
+    reverse: CudaSlice<u64>,
+    counts: CudaSlice<u32>,
+    pairs_host: PinnedHostSlice<clatch_pair>,
+    tasks_host: PinnedHostSlice<clatch_pair_task>,
+    kept_host: PinnedHostSlice<Match>,
+    counts_host: PinnedHostSlice<u32>,
+}
+
+const NO_MATCH: Match = Match {
+    query: 0,
+    train: 0,
+    distance: 0,
+};
+
+impl Slot {
+    fn new(stream: &Arc<CudaStream>, capacity: Capacity) -> Result<Self> {
+        let ctx = stream.context();
+        // The pinned record buffers and their device twins have the same length: the uploads copy
+        // whole buffers.
+        let (pairs_len, tasks_len) = (capacity.pairs.max(1), capacity.tasks.max(1));
+        Ok(Self {
+            pairs: alloc_zeros(stream, pairs_len, "grouped matching pair records")?,
+            tasks: alloc_zeros(stream, tasks_len, "grouped matching task list")?,
+            best: alloc_zeros(stream, capacity.query_rows, "grouped matching best matches")?,
+            kept: alloc_zeros(stream, capacity.query_rows, "grouped matching kept matches")?,
+            reverse: alloc_zeros(stream, capacity.train_rows, "grouped matching reverse keys")?,
+            counts: alloc_zeros(stream, capacity.pairs, "grouped matching counts")?,
+            pairs_host: pinned(ctx, pairs_len, clatch_pair::default())?,
+            tasks_host: pinned(ctx, tasks_len, clatch_pair_task::default())?,
+            kept_host: pinned(ctx, capacity.query_rows, NO_MATCH)?,
+            counts_host: pinned(ctx, capacity.pairs, 0u32)?,
+            capacity,
+        })
+    }
+
+    /// Queues `block`'s launches and the copies of its results into the pinned buffers.
+    fn queue(&mut self, run: &Run<'_>, block: &Block) -> Result<()> {
+        let (pairs, tasks) = block.layout();
+        crate::cuda::invariant(
+            pairs.len() <= self.capacity.pairs
+                && tasks.len() <= self.capacity.tasks
+                && block.query_rows <= self.capacity.query_rows
+                && block.train_rows <= self.capacity.train_rows,
+            "grouped matching",
+            || format!("block {block:?} over the slot's capacity {:?}", self.capacity),
+        )?;
+        let stream = run.stream;
+        let copy = driver_error("uploading the pair records of grouped matching");
+        // as_mut_slice waits for the last upload from these buffers (two blocks ago).
+        self.pairs_host.as_mut_slice().map_err(&copy)?[..pairs.len()].copy_from_slice(&pairs);
+        self.tasks_host.as_mut_slice().map_err(&copy)?[..tasks.len()].copy_from_slice(&tasks);
+        stream
+            .memcpy_htod(&self.pairs_host, &mut self.pairs)
+            .map_err(&copy)?;
+        stream
+            .memcpy_htod(&self.tasks_host, &mut self.tasks)
+            .map_err(&copy)?;
+        if run.config.cross_check {
+            // The reverse keys are folded in with atomics: start from zero (no candidate).
+            stream
+                .memset_zeros(&mut self.reverse.slice_mut(..block.train_rows))
+                .map_err(driver_error("clearing the reverse keys of grouped matching"))?;
+        }
+
+        let k = if run.config.ratio.is_some() { 2 } else { 1 };
+        let kernel = kernel_name(run.words, k, run.config.cross_check);
+        let n_tasks = tasks.len() as u32;
+        let use_ratio = run.config.ratio.is_some() as i32;
+        let ratio = run.config.ratio.unwrap_or(0.0);
+        let use_max = run.config.max_distance.is_some() as i32;
+        let max_distance = run.config.max_distance.unwrap_or(u32::MAX);
+        let mut launch = stream.launch_builder(run.dev.kernel(kernel));
+        launch
+            .arg(run.query)
+            .arg(run.train)
+            .arg(&self.pairs)
+            .arg(&self.tasks)
+            .arg(&n_tasks)
+            .arg(&use_ratio)
+            .arg(&ratio)
+            .arg(&use_max)
+            .arg(&max_distance)
+            .arg(&mut self.best)
+            .arg(&mut self.reverse);
+        let config = LaunchConfig {
+            grid_dim: (tasks.len().clamp(1, MAX_GRID) as u32, 1, 1),
+            block_dim: (CLATCH_MATCH_THREADS, 1, 1),
+            shared_mem_bytes: 0,
+        };
+        // SAFETY: the arguments match clatch_pairs_knn_*'s signature, for rows of `run.words` words.
+        // Every pair record was checked against the buffers by `Run::check` (its rows, and a whole
+        // query block and tile past them, lie inside `query` and `train`); `pairs` holds the block's
+        // records and `tasks` its n_tasks tasks, each naming a pair of the block and one of its query
+        // blocks; `best` holds the block's query_rows records and `reverse` its train_rows keys (best_row
+        // and reverse_row pack them, see `Block::layout`), both within this slot's capacity (checked
+        // above). With k = 2 every pair has two gallery rows or more (`Run::check`).
+        unsafe { launch.launch(config) }.map_err(driver_error(kernel))?;
+
+        let n_pairs = pairs.len() as u32;
+        let cross_check = run.config.cross_check as i32;
+        let mut launch = stream.launch_builder(run.dev.kernel("clatch_pairs_compact"));
+        launch
+            .arg(&self.pairs)
+            .arg(&n_pairs)
+            .arg(&self.best)
+            .arg(&cross_check)
+            .arg(&self.reverse)
+            .arg(&mut self.kept)
+            .arg(&mut self.counts);
+        let config = LaunchConfig {
+            grid_dim: (pairs.len().clamp(1, MAX_COMPACT_GRID) as u32, 1, 1),
+            block_dim: (CLATCH_MATCH_SELECT_THREADS, 1, 1),
+            shared_mem_bytes: 0,
+        };
+        // SAFETY: as above; `best` was written for every query of every pair by the kNN launch queued
+        // before on this stream, `reverse` (read with the cross-check only) for every gallery row, at
+        // train indices below each pair's train_rows; `kept` has room for every pair's queries at its
+        // best_row and `counts` one word per pair.
+        unsafe { launch.launch(config) }.map_err(driver_error("clatch_pairs_compact"))?;
+
+        let back = driver_error("copying the matches of grouped matching back");
+        stream
+            .memcpy_dtoh(&self.counts.slice(..pairs.len()), &mut self.counts_host)
+            .map_err(&back)?;
+        stream
+            .memcpy_dtoh(&self.kept.slice(..block.query_rows), &mut self.kept_host)
+            .map_err(&back)?;
+        Ok(())
+    }
+
+    /// Waits for `block`'s copies and hands each of its pairs' matches to `each`, in pair order.
+    fn finish(&self, block: &Block, each: &mut dyn FnMut(usize, Vec<Match>)) -> Result<()> {
+        let wait = driver_error("grouped matching (running, or copying matches back)");
+        let counts = self.counts_host.as_slice().map_err(&wait)?;
+        let kept = self.kept_host.as_slice().map_err(&wait)?;
+        let mut device = block.device.iter().enumerate().peekable();
+        let mut best_row = 0;
+        for index in block.range.clone() {
+            let Some((p, &(_, rows))) = device.next_if(|(_, (i, _))| *i == index) else {
+                each(index, Vec::new());
+                continue;
+            };
+            let count = counts[p] as usize;
+            crate::cuda::invariant(count <= rows.query_rows, "grouped matching", || {
+                format!("{count} kept matches of {} queries", rows.query_rows)
+            })?;
+            each(index, kept[best_row..best_row + count].to_vec());
+            best_row += rows.query_rows;
+        }
+        Ok(())
+    }
+}
+
+/// What every block of one run shares.
+pub(super) struct Run<'a> {
+    pub(super) dev: &'a GpuDevice,
+    pub(super) stream: &'a Arc<CudaStream>,
+    /// Query and gallery buffers (the same one for pairs among a collection's sets), `words` 64-bit
+    /// words per row.
+    pub(super) query: &'a CudaSlice<u64>,
+    pub(super) train: &'a CudaSlice<u64>,
+    pub(super) words: usize,
+    pub(super) config: &'a MatchConfig,
+}
+
+impl Run<'_> {
+    /// Checks that a pair's rows, plus the whole query block and tile the kernel may read past them,
+    /// lie in the buffers, and that it has the rows its kernel needs.
+    fn check(&self, rows: &PairRows) -> Result<()> {
+        use crate::cuda::header::{CLATCH_MATCH_ROW_PAD, CLATCH_PAIRS_ROW_ALIGN};
+        let pad = CLATCH_MATCH_ROW_PAD as usize;
+        let align = CLATCH_PAIRS_ROW_ALIGN as usize;
+        let needed = if self.config.ratio.is_some() { 2 } else { 1 };
+        let inside = |row: usize, n: usize, buffer: &CudaSlice<u64>| {
+            row.is_multiple_of(align) && (row + n + pad) * self.words <= buffer.len()
+        };
+        crate::cuda::invariant(
+            rows.query_rows >= 1
+                && rows.train_rows >= needed
+                && rows.query_rows <= u32::MAX as usize
+                && rows.train_rows <= u32::MAX as usize
+                && inside(rows.query_row, rows.query_rows, self.query)
+                && inside(rows.train_row, rows.train_rows, self.train),
+            "grouped matching",
+            || {
+                format!(
+                    "pair {rows:?} against buffers of {} and {} words ({} per row)",
+                    self.query.len(),
+                    self.train.len(),
+                    self.words
+                )
+            },
+        )
+    }
+
+    /// Matches every pair of `places` (`None`: no device work, no matches), `budget` bounding each
+    /// block; `each(i, matches)` for every input pair `i`, in order.
+    pub(super) fn all(
+        &self,
+        places: &[Option<PairRows>],
+        budget: Budget,
+        each: &mut dyn FnMut(usize, Vec<Match>),
+    ) -> Result<()> {
+        for rows in places.iter().flatten() {
+            self.check(rows)?;
+        }
+        let blocks = blocks(places, budget);
+        let capacity = Capacity::of(&blocks);
+        let mut slots: [Option<Slot>; 2] = [None, None];
+        // (block, slot) of the blocks queued and not yet handed on, oldest first; slot None: no
+        // device work.
+        let mut queued: VecDeque<(usize, Option<usize>)> = VecDeque::new();
+        for (b, block) in blocks.iter().enumerate() {
+            if queued.len() == 2 {
+                let (oldest, slot) = queued.pop_front().expect("two queued");
+                hand_on(&blocks[oldest], slot, &slots, each)?;
+            }
+            if block.device.is_empty() {
+                queued.push_back((b, None));
+                continue;
+            }
+            // The block two before this one, which used this slot, has been handed on just above.
+            let s = b % 2;
+            let slot = match &mut slots[s] {
+                Some(slot) => slot,
+                empty => empty.insert(Slot::new(self.stream, capacity)?),
+            };
+            slot.queue(self, block)?;
+            queued.push_back((b, Some(s)));
+        }
+        while let Some((oldest, slot)) = queued.pop_front() {
+            hand_on(&blocks[oldest], slot, &slots, each)?;
+        }
+        Ok(())
+    }
+}
+
+/// Hands on `block`'s results: from `slots[slot]` where it ran on the device, else none for each pair.
+fn hand_on(
+    block: &Block,
+    slot: Option<usize>,
+    slots: &[Option<Slot>; 2],
+    each: &mut dyn FnMut(usize, Vec<Match>),
+) -> Result<()> {
+    let Some(s) = slot else {
+        block.range.clone().for_each(|i| each(i, Vec::new()));
+        return Ok(());
+    };
+    let slot = slots[s].as_ref().ok_or_else(|| crate::Error::Internal {
+        operation: "grouped matching",
+        message: format!("block {:?} has no slot", block.range),
+    })?;
+    slot.finish(block, each)
+}

@@ -272,13 +272,10 @@ impl DeviceCollection {
     }
 
     fn place(&self, id: usize) -> Result<Place> {
-        self.places
-            .get(id)
-            .copied()
-            .ok_or_else(|| Error::Internal {
-                operation: "descriptor collection",
-                message: format!("set {id} of {} (ids are checked before)", self.places.len()),
-            })
+        self.places.get(id).copied().ok_or_else(|| Error::Internal {
+            operation: "descriptor collection",
+            message: format!("set {id} of {} (ids are checked before)", self.places.len()),
+        })
     }
 }
 

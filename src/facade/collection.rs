@@ -75,10 +75,9 @@ impl DescriptorCollection {
     pub fn new(matcher: &Matcher, width: DescriptorWidth) -> Result<Self> {
         let store = match matcher.backend() {
             Backend::Cpu => Store::Host(Vec::new()),
-            Backend::Cuda { device } => Store::Device(cuda::DeviceCollection::new(
-                cuda::device(device)?,
-                width,
-            )?),
+            Backend::Cuda { device } => {
+                Store::Device(cuda::DeviceCollection::new(cuda::device(device)?, width)?)
+            }
         };
         Ok(Self {
             matcher: matcher.clone(),
@@ -144,7 +143,9 @@ impl DescriptorCollection {
         let config = self.matcher.config();
         match &self.store {
             Store::Host(held) => {
-                in_host_blocks(pairs, each, |&(a, b)| match_on_host(&held[a], &held[b], config));
+                in_host_blocks(pairs, each, |&(a, b)| {
+                    match_on_host(&held[a], &held[b], config)
+                });
                 Ok(())
             }
             Store::Device(device) => device.match_pairs(pairs, config, &mut each),

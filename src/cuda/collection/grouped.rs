@@ -127,7 +127,12 @@ impl Slot {
                 && block.query_rows <= self.capacity.query_rows
                 && block.train_rows <= self.capacity.train_rows,
             "grouped matching",
-            || format!("block {block:?} over the slot's capacity {:?}", self.capacity),
+            || {
+                format!(
+                    "block {block:?} over the slot's capacity {:?}",
+                    self.capacity
+                )
+            },
         )?;
         let stream = run.stream;
         let copy = driver_error("uploading the pair records of grouped matching");
@@ -144,7 +149,9 @@ impl Slot {
             // The reverse keys are folded in with atomics: start from zero (no candidate).
             stream
                 .memset_zeros(&mut self.reverse.slice_mut(..block.train_rows))
-                .map_err(driver_error("clearing the reverse keys of grouped matching"))?;
+                .map_err(driver_error(
+                    "clearing the reverse keys of grouped matching",
+                ))?;
         }
 
         let k = if run.config.ratio.is_some() { 2 } else { 1 };

@@ -182,12 +182,18 @@ mod tests {
 
     #[test]
     fn layout_packs_records_and_lists_every_query_block() {
-        let blocks = blocks(&[rows(257, 3), None, rows(256, 2), rows(1, 9)], Budget::DEFAULT);
+        let blocks = blocks(
+            &[rows(257, 3), None, rows(256, 2), rows(1, 9)],
+            Budget::DEFAULT,
+        );
         assert_eq!(blocks.len(), 1);
         let (pairs, tasks) = blocks[0].layout();
         assert_eq!(pairs.len(), 3);
         assert_eq!(
-            pairs.iter().map(|p| (p.best_row, p.reverse_row)).collect::<Vec<_>>(),
+            pairs
+                .iter()
+                .map(|p| (p.best_row, p.reverse_row))
+                .collect::<Vec<_>>(),
             vec![(0, 0), (257, 3), (513, 5)]
         );
         assert_eq!(tasks.len(), blocks[0].tasks);
@@ -198,7 +204,11 @@ mod tests {
                 .collect::<Vec<_>>(),
             vec![(0, 0), (0, 1), (1, 0), (2, 0)]
         );
-        assert!(super::blocks(&[None, None], Budget::DEFAULT)[0].device.is_empty());
+        assert!(
+            super::blocks(&[None, None], Budget::DEFAULT)[0]
+                .device
+                .is_empty()
+        );
         assert!(super::blocks(&[], Budget::DEFAULT).is_empty());
     }
 }

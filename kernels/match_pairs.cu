@@ -10,12 +10,15 @@
 //   match, with query = CLATCH_PAIRS_REJECTED when either test refuses it. MUTUAL (the cross-check) folds
 //   the reverse 1-NN into the pair's slice of the reverse arena exactly as the single-pair kernels do
 //   (warp minimum of (distance, query) keys, atomic maximum of complemented keys: order-independent).
+// - The tensor-core twins of the kNN kernels are in kernels/match_pairs_tensor.cu; they leave the same
+//   records, so this compaction serves both.
 // - clatch_pairs_compact: one block per pair (grid-stride over pairs) keeps the queries whose record
 //   survived and, with the cross-check, whose best gallery row names them as its nearest query; writes
 //   the kept matches in query order to the pair's own slice of `kept` (starting at best_row, room for
 //   every query) and their number to counts[pair]. The host copies both back.
 #include "clatch.h"
 #include "knn.cuh"
+#include "pair_record.cuh"
 
 using clatch_knn::u64;
 
@@ -64,21 +67,8 @@ __device__ __forceinline__ void pairs_knn(const u64* __restrict__ query_rows, co
         for (int p = 0; p < QPT; ++p) {
             const u64 qi = first + p * THREADS + threadIdx.x;
             if (qi >= pair.query_rows) continue;
-            bool keep = true;
-            if constexpr (K >= 2) {
-                // (d1 as f32) < ratio * (d2 as f32): exact conversions, one correctly rounded product.
-                if (use_ratio) {
-                    const float d1 = __uint2float_rn(block.dist[p][0]);
-                    const float d2 = __uint2float_rn(block.dist[p][1]);
-                    keep = d1 < __fmul_rn(ratio, d2);
-                }
-            }
-            if (use_max_distance) keep = keep && block.dist[p][0] <= max_distance;
-            clatch_match m;
-            m.query = keep ? (unsigned)qi : CLATCH_PAIRS_REJECTED;
-            m.train = block.index[p][0];
-            m.distance = block.dist[p][0];
-            best[pair.best_row + qi] = m;
+            best[pair.best_row + qi] = best_record<K>(qi, block.dist[p], block.index[p], use_ratio, ratio,
+                                                      use_max_distance, max_distance);
         }
     }
 }

@@ -41,6 +41,7 @@ fn trials() -> Vec<Trial> {
 
 #[cfg(feature = "cuda")]
 mod gpu {
+    use clatch::cuda::hooks::MatchKernel;
     use clatch::synthetic::SplitMix64;
     use clatch::{
         Backend, DescriptorCollection, DescriptorSet, DescriptorWidth, Match, MatchConfig, Matcher,
@@ -59,6 +60,45 @@ mod gpu {
     /// Every filter combination; under `CLATCH_TEST_SCALE=sanitizer` every fifth.
     fn configs() -> Vec<MatchConfig> {
         scale::thin(match_configs(), 5)
+    }
+
+    /// The kernel families the device runs: popcount always, the tensor cores where it has them.
+    fn families() -> Result<Vec<MatchKernel>, Failed> {
+        let dev = clatch::cuda::hooks::device(0)?;
+        let mut all = vec![MatchKernel::Popcount];
+        if dev.has_tensor_matcher() {
+            all.push(MatchKernel::Tensor);
+        }
+        Ok(all)
+    }
+
+    /// Every pair of `sets` both ways through `match_pairs_in_blocks` on each family (the default
+    /// budget), against `want`.
+    fn every_family(
+        what: &str,
+        sets: &[&DescriptorSet],
+        pairs: &[(usize, usize)],
+        config: &MatchConfig,
+        want: &[Vec<Match>],
+    ) -> Result<(), Failed> {
+        let dev = clatch::cuda::hooks::device(0)?;
+        for family in families()? {
+            let got = clatch::cuda::hooks::match_pairs_in_blocks(
+                dev.clone(),
+                sets,
+                pairs,
+                config,
+                (1 << 16, 1 << 21),
+                Some(family),
+            )?;
+            compare(
+                &format!("{what}, {config:?}, {family:?}"),
+                want,
+                &got,
+                &|i| format!("pair {:?}", pairs[i]),
+            )?;
+        }
+        Ok(())
     }
 
     /// What pair (query, train) must give.
@@ -147,6 +187,7 @@ mod gpu {
                 )
             };
             compared += compare(&format!("{what}, {config:?}"), &want, &got, &label)?;
+            every_family(what, &refs, &pairs, config, &want)?;
         }
         Ok(compared)
     }
@@ -215,21 +256,24 @@ mod gpu {
                 .iter()
                 .map(|&(a, b)| expected(&cpu, &sets[a], &sets[b]))
                 .collect();
-            for budget in [(1, 1 << 20), (3, 1 << 20), (1 << 16, 400), (7, 100)] {
-                let got = clatch::cuda::hooks::match_pairs_in_blocks(
-                    dev.clone(),
-                    &refs,
-                    &pairs,
-                    &config,
-                    budget,
-                )?;
-                let label = |i: usize| format!("pair {:?}", pairs[i]);
-                compared += compare(
-                    &format!("{config:?}, blocks of {budget:?}"),
-                    &want,
-                    &got,
-                    &label,
-                )?;
+            for family in families()? {
+                for budget in [(1, 1 << 20), (3, 1 << 20), (1 << 16, 400), (7, 100)] {
+                    let got = clatch::cuda::hooks::match_pairs_in_blocks(
+                        dev.clone(),
+                        &refs,
+                        &pairs,
+                        &config,
+                        budget,
+                        Some(family),
+                    )?;
+                    let label = |i: usize| format!("pair {:?}", pairs[i]);
+                    compared += compare(
+                        &format!("{config:?}, {family:?}, blocks of {budget:?}"),
+                        &want,
+                        &got,
+                        &label,
+                    )?;
+                }
             }
         }
         println!(
@@ -277,19 +321,22 @@ mod gpu {
                         &listed,
                         &|i| format!("id {}", ids[i]),
                     )?;
-                    let small = clatch::cuda::hooks::search_in_blocks(
-                        dev.clone(),
-                        &refs,
-                        query,
-                        &config,
-                        (2, 300),
-                    )?;
-                    compare(
-                        &format!("search in small blocks, {bits} bits"),
-                        &want,
-                        &small,
-                        &label,
-                    )?;
+                    for family in families()? {
+                        let small = clatch::cuda::hooks::search_in_blocks(
+                            dev.clone(),
+                            &refs,
+                            query,
+                            &config,
+                            (2, 300),
+                            Some(family),
+                        )?;
+                        compare(
+                            &format!("search in small blocks, {bits} bits, {family:?}"),
+                            &want,
+                            &small,
+                            &label,
+                        )?;
+                    }
                 }
             }
         }

@@ -18,12 +18,13 @@
 mod grouped;
 mod plan;
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, MutexGuard};
 
 use cudarc::driver::{CudaSlice, CudaStream};
 
 use super::device::{GpuDevice, driver_error};
 use super::header::{CLATCH_MATCH_ROW_PAD, CLATCH_PAIRS_ROW_ALIGN};
+use super::matching_tensor::{self, MatchKernel};
 use super::memory::alloc_zeros;
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::error::{Error, Result};
@@ -51,6 +52,29 @@ macro_rules! pair_kernels {
 /// (see [`kernel_name`]), then the compaction.
 pub(crate) const KERNELS: &[&str] = pair_kernels!(1 2 3 4 5 6 7 8);
 
+macro_rules! tensor_pair_kernels {
+    ($($b:literal)*) => {
+        &[
+            $(
+                concat!("clatch_knn_tensor_pairs_b", $b, "_k1"),
+                concat!("clatch_knn_tensor_pairs_b", $b, "_k2"),
+                concat!("clatch_knn_tensor_pairs_mutual_b", $b, "_k1"),
+                concat!("clatch_knn_tensor_pairs_mutual_b", $b, "_k2"),
+            )*
+        ]
+    };
+}
+
+/// Every entry point of `kernels/match_pairs_tensor.cu`: four grouped tensor-core kNN kernels per
+/// padded row width of 64, 128, 256 and 512 bits (see [`tensor_kernel_name`]).
+pub(crate) const TENSOR_KERNELS: &[&str] = tensor_pair_kernels!(64 128 256 512);
+
+/// The grouped tensor-core kNN kernel for sign rows of `bits` (64, 128, 256, 512) bytes.
+fn tensor_kernel_name(bits: usize, k: usize, mutual: bool) -> &'static str {
+    let slot = bits.trailing_zeros() as usize - 6;
+    TENSOR_KERNELS[slot * 4 + 2 * mutual as usize + (k - 1)]
+}
+
 /// The grouped kNN kernel for rows of `words` words, `k` (1, or 2 with the ratio test), with the
 /// reverse 1-NN when `mutual`.
 fn kernel_name(words: usize, k: usize, mutual: bool) -> &'static str {
@@ -75,6 +99,9 @@ pub(crate) struct DeviceCollection {
     places: Vec<Place>,
     /// The first row after the last set, rounded up to `ROW_ALIGN`: where the next set goes.
     end_row: usize,
+    /// The rows expanded to +-1 bytes for the tensor-core kernels (`capacity_rows` rows of the padded
+    /// width): made on first use, dropped when sets are added.
+    signs: Mutex<Option<CudaSlice<u8>>>,
 }
 
 impl std::fmt::Debug for DeviceCollection {
@@ -101,6 +128,7 @@ impl DeviceCollection {
             capacity_rows: ROW_PAD,
             places: Vec::new(),
             end_row: 0,
+            signs: Mutex::new(None),
         })
     }
 
@@ -137,6 +165,7 @@ impl DeviceCollection {
         }
         self.places.extend(places);
         self.end_row = end;
+        *self.signs.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
         Ok(())
     }
 
@@ -182,15 +211,16 @@ impl DeviceCollection {
         config: &MatchConfig,
         each: &mut dyn FnMut(usize, Vec<Match>),
     ) -> Result<()> {
-        self.match_pairs_within(pairs, config, Budget::DEFAULT, each)
+        self.match_pairs_within(pairs, config, (Budget::DEFAULT, None), each)
     }
 
-    /// [`DeviceCollection::match_pairs`] with blocks of at most `budget`.
+    /// [`DeviceCollection::match_pairs`] with blocks of at most `budget`, on the kernel family asked
+    /// for (the device's choice when `None`).
     pub(crate) fn match_pairs_within(
         &self,
         pairs: &[(usize, usize)],
         config: &MatchConfig,
-        budget: Budget,
+        (budget, family): (Budget, Option<MatchKernel>),
         each: &mut dyn FnMut(usize, Vec<Match>),
     ) -> Result<()> {
         let places = pairs
@@ -201,7 +231,7 @@ impl DeviceCollection {
                     .then(|| self.rows_of(query, train)))
             })
             .collect::<Result<Vec<_>>>()?;
-        self.run(&self.rows, &places, config, budget, each)
+        self.run(None, &places, config, (budget, family), each)
     }
 
     /// Matches `query` (this collection's width, checked by the caller) against each held set of
@@ -213,16 +243,16 @@ impl DeviceCollection {
         config: &MatchConfig,
         each: &mut dyn FnMut(usize, Vec<Match>),
     ) -> Result<()> {
-        self.search_within(query, ids, config, Budget::DEFAULT, each)
+        self.search_within(query, ids, config, (Budget::DEFAULT, None), each)
     }
 
-    /// [`DeviceCollection::search`] with blocks of at most `budget`.
+    /// [`DeviceCollection::search`] with blocks of at most `budget`, on the kernel family asked for.
     pub(crate) fn search_within(
         &self,
         query: &DescriptorSet,
         ids: &[usize],
         config: &MatchConfig,
-        budget: Budget,
+        (budget, family): (Budget, Option<MatchKernel>),
         each: &mut dyn FnMut(usize, Vec<Match>),
     ) -> Result<()> {
         super::matching::check_rows(query, "query descriptors")?;
@@ -249,26 +279,81 @@ impl DeviceCollection {
                     .then(|| self.rows_of(query_place, train)))
             })
             .collect::<Result<Vec<_>>>()?;
-        self.run(&buffer, &places, config, budget, each)
+        self.run(Some(&buffer), &places, config, (budget, family), each)
     }
 
+    /// Runs `places` with queries from `query` (a padded buffer of its own) or, when `None`, from the
+    /// collection itself.
     fn run(
         &self,
-        query: &CudaSlice<u64>,
+        query: Option<&CudaSlice<u64>>,
         places: &[Option<PairRows>],
         config: &MatchConfig,
-        budget: Budget,
+        (budget, family): (Budget, Option<MatchKernel>),
         each: &mut dyn FnMut(usize, Vec<Match>),
     ) -> Result<()> {
-        let run = grouped::Run {
+        let k = if config.ratio.is_some() { 2 } else { 1 };
+        let family = match family {
+            Some(f) => self.dev.check_match_kernel(f, k)?,
+            None => self.dev.match_kernel(k),
+        };
+        let words = self.width.words();
+        let mut run = grouped::Run {
             dev: &self.dev,
             stream: &self.stream,
-            query,
+            query: query.unwrap_or(&self.rows),
             train: &self.rows,
-            words: self.width.words(),
+            words,
             config,
+            tensor: None,
         };
+        if family == MatchKernel::Popcount {
+            return run.all(places, budget, each);
+        }
+        let bits = matching_tensor::padded_bits(words);
+        let train_signs = self.signs()?;
+        let train = train_signs.as_ref().ok_or_else(|| Error::Internal {
+            operation: "descriptor collection",
+            message: "no expanded rows after expanding them".into(),
+        })?;
+        let query_signs = match query {
+            Some(q) => Some(self.expand(q, q.len() / words)?),
+            None => None,
+        };
+        run.tensor = Some(grouped::SignRows {
+            query: query_signs.as_ref().unwrap_or(train),
+            train,
+            bits,
+            kernel: tensor_kernel_name(bits, k, config.cross_check),
+        });
         run.all(places, budget, each)
+    }
+
+    /// The rows expanded to +-1 bytes (made now if they are not yet).
+    fn signs(&self) -> Result<MutexGuard<'_, Option<CudaSlice<u8>>>> {
+        let mut signs = self.signs.lock().unwrap_or_else(|p| p.into_inner());
+        if signs.is_none() {
+            *signs = Some(self.expand(&self.rows, self.capacity_rows)?);
+        }
+        Ok(signs)
+    }
+
+    /// `rows` rows of `buffer` expanded to +-1 bytes of the padded width, on the collection's stream.
+    fn expand(&self, buffer: &CudaSlice<u64>, rows: usize) -> Result<CudaSlice<u8>> {
+        let (words, bits) = (
+            self.width.words(),
+            matching_tensor::padded_bits(self.width.words()),
+        );
+        let mut signs = alloc_zeros::<u8>(&self.stream, rows * bits, "expanded collection rows")?;
+        matching_tensor::expand(
+            &self.dev,
+            &self.stream,
+            buffer,
+            words as u32,
+            bits,
+            &mut signs,
+        )?;
+        Ok(signs)
     }
 
     fn place(&self, id: usize) -> Result<Place> {
@@ -301,6 +386,18 @@ mod tests {
             }
         }
         assert_eq!(KERNELS.len(), 8 * 4 + 1);
+        for bits in [64, 128, 256, 512] {
+            for k in 1..=2 {
+                assert_eq!(
+                    tensor_kernel_name(bits, k, false),
+                    format!("clatch_knn_tensor_pairs_b{bits}_k{k}")
+                );
+                assert_eq!(
+                    tensor_kernel_name(bits, k, true),
+                    format!("clatch_knn_tensor_pairs_mutual_b{bits}_k{k}")
+                );
+            }
+        }
     }
 
     #[test]

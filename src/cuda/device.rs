@@ -82,6 +82,13 @@ const KERNELS: &[KernelFile] = &[
         needs_tensor_cores: false,
     },
     KernelFile {
+        path: "kernels/match_pairs_tensor.cu",
+        ptx: ptx::MATCH_PAIRS_TENSOR_PTX,
+        fatbin: ptx::MATCH_PAIRS_TENSOR_FATBIN,
+        names: super::collection::TENSOR_KERNELS,
+        needs_tensor_cores: true,
+    },
+    KernelFile {
         path: "kernels/matching_tensor.cu",
         ptx: ptx::MATCHING_TENSOR_PTX,
         fatbin: ptx::MATCHING_TENSOR_FATBIN,

@@ -19,8 +19,10 @@ use super::kernel_name;
 use super::plan::{Block, Budget, PairRows, blocks};
 use crate::cuda::device::{GpuDevice, driver_error};
 use crate::cuda::header::{
-    CLATCH_MATCH_SELECT_THREADS, CLATCH_MATCH_THREADS, clatch_pair, clatch_pair_task,
+    CLATCH_MATCH_SELECT_THREADS, CLATCH_MATCH_THREADS, CLATCH_TENSOR_WARPS, clatch_pair,
+    clatch_pair_task,
 };
+use crate::cuda::matching_tensor;
 use crate::cuda::memory::alloc_zeros;
 use crate::error::Result;
 use crate::matching::{Match, MatchConfig};
@@ -155,16 +157,29 @@ impl Slot {
         }
 
         let k = if run.config.ratio.is_some() { 2 } else { 1 };
-        let kernel = kernel_name(run.words, k, run.config.cross_check);
         let n_tasks = tasks.len() as u32;
         let use_ratio = run.config.ratio.is_some() as i32;
         let ratio = run.config.ratio.unwrap_or(0.0);
         let use_max = run.config.max_distance.is_some() as i32;
         let max_distance = run.config.max_distance.unwrap_or(u32::MAX);
+        let (kernel, threads, shared) = match &run.tensor {
+            Some(signs) => (
+                signs.kernel,
+                CLATCH_TENSOR_WARPS * 32,
+                matching_tensor::shared_bytes(signs.bits) as u32,
+            ),
+            None => (
+                kernel_name(run.words, k, run.config.cross_check),
+                CLATCH_MATCH_THREADS,
+                0,
+            ),
+        };
         let mut launch = stream.launch_builder(run.dev.kernel(kernel));
+        match &run.tensor {
+            Some(signs) => launch.arg(signs.query).arg(signs.train),
+            None => launch.arg(run.query).arg(run.train),
+        };
         launch
-            .arg(run.query)
-            .arg(run.train)
             .arg(&self.pairs)
             .arg(&self.tasks)
             .arg(&n_tasks)
@@ -176,16 +191,18 @@ impl Slot {
             .arg(&mut self.reverse);
         let config = LaunchConfig {
             grid_dim: (tasks.len().clamp(1, MAX_GRID) as u32, 1, 1),
-            block_dim: (CLATCH_MATCH_THREADS, 1, 1),
-            shared_mem_bytes: 0,
+            block_dim: (threads, 1, 1),
+            shared_mem_bytes: shared,
         };
-        // SAFETY: the arguments match clatch_pairs_knn_*'s signature, for rows of `run.words` words.
-        // Every pair record was checked against the buffers by `Run::check` (its rows, and a whole
-        // query block and tile past them, lie inside `query` and `train`); `pairs` holds the block's
-        // records and `tasks` its n_tasks tasks, each naming a pair of the block and one of its query
-        // blocks; `best` holds the block's query_rows records and `reverse` its train_rows keys (best_row
-        // and reverse_row pack them, see `Block::layout`), both within this slot's capacity (checked
-        // above). With k = 2 every pair has two gallery rows or more (`Run::check`).
+        // SAFETY: the arguments match the signature of clatch_pairs_knn_* (rows of `run.words` words)
+        // or, with `run.tensor`, of clatch_knn_tensor_pairs_* (sign rows of `bits` bytes, the dynamic
+        // shared memory its stages need, allowed at load by `matching_tensor::configure`). Every pair
+        // record was checked against the buffers it is read from by `Run::check` (its rows, and a
+        // whole query block and tile past them, lie inside them); `pairs` holds the block's records and
+        // `tasks` its n_tasks tasks, each naming a pair of the block and one of its query blocks;
+        // `best` holds the block's query_rows records and `reverse` its train_rows keys (best_row and
+        // reverse_row pack them, see `Block::layout`), both within this slot's capacity (checked above).
+        // With k = 2 every pair has two gallery rows or more (`Run::check`).
         unsafe { launch.launch(config) }.map_err(driver_error(kernel))?;
 
         let n_pairs = pairs.len() as u32;
@@ -243,6 +260,16 @@ impl Slot {
     }
 }
 
+/// The rows as +-1 bytes for the tensor-core kernels: rows of `bits` bytes, in the same row order as
+/// the bit buffers.
+pub(super) struct SignRows<'a> {
+    pub(super) query: &'a CudaSlice<u8>,
+    pub(super) train: &'a CudaSlice<u8>,
+    pub(super) bits: usize,
+    /// The `clatch_knn_tensor_pairs_*` kernel for this width, k and cross-check.
+    pub(super) kernel: &'static str,
+}
+
 /// What every block of one run shares.
 pub(super) struct Run<'a> {
     pub(super) dev: &'a GpuDevice,
@@ -253,6 +280,8 @@ pub(super) struct Run<'a> {
     pub(super) train: &'a CudaSlice<u64>,
     pub(super) words: usize,
     pub(super) config: &'a MatchConfig,
+    /// The tensor-core kernels run instead of the popcount ones when set.
+    pub(super) tensor: Option<SignRows<'a>>,
 }
 
 impl Run<'_> {
@@ -263,16 +292,31 @@ impl Run<'_> {
         let pad = CLATCH_MATCH_ROW_PAD as usize;
         let align = CLATCH_PAIRS_ROW_ALIGN as usize;
         let needed = if self.config.ratio.is_some() { 2 } else { 1 };
-        let inside = |row: usize, n: usize, buffer: &CudaSlice<u64>| {
-            row.is_multiple_of(align) && (row + n + pad) * self.words <= buffer.len()
+        let inside = |row: usize, n: usize, len: usize, per_row: usize| {
+            row.is_multiple_of(align) && (row + n + pad) * per_row <= len
         };
+        let in_signs = self.tensor.as_ref().is_none_or(|s| {
+            inside(rows.query_row, rows.query_rows, s.query.len(), s.bits)
+                && inside(rows.train_row, rows.train_rows, s.train.len(), s.bits)
+        });
         crate::cuda::invariant(
             rows.query_rows >= 1
                 && rows.train_rows >= needed
                 && rows.query_rows <= u32::MAX as usize
                 && rows.train_rows <= u32::MAX as usize
-                && inside(rows.query_row, rows.query_rows, self.query)
-                && inside(rows.train_row, rows.train_rows, self.train),
+                && inside(
+                    rows.query_row,
+                    rows.query_rows,
+                    self.query.len(),
+                    self.words,
+                )
+                && inside(
+                    rows.train_row,
+                    rows.train_rows,
+                    self.train.len(),
+                    self.words,
+                )
+                && in_signs,
             "grouped matching",
             || {
                 format!(

@@ -4,20 +4,22 @@ use super::*;
 
 /// A device collection of `sets` (one width) matched over `pairs` in blocks of at most `pairs_per_block`
 /// pairs and `rows_per_block` query and gallery rows: lets the tests reach many blocks, both slots and
-/// blocks without device work with small sets. Results in pair order.
+/// blocks without device work with small sets; on kernel family `kernel` (the device's choice when
+/// `None`). Results in pair order.
 pub fn match_pairs_in_blocks(
     dev: Arc<GpuDevice>,
     sets: &[&DescriptorSet],
     pairs: &[(usize, usize)],
     config: &MatchConfig,
     (pairs_per_block, rows_per_block): (usize, usize),
+    kernel: Option<MatchKernel>,
 ) -> Result<Vec<Vec<Match>>> {
     let collection = filled(dev, sets)?;
     let mut out = Vec::with_capacity(pairs.len());
     collection.match_pairs_within(
         pairs,
         config,
-        budget(pairs_per_block, rows_per_block),
+        (budget(pairs_per_block, rows_per_block), kernel),
         &mut |_, m| out.push(m),
     )?;
     Ok(out)
@@ -30,6 +32,7 @@ pub fn search_in_blocks(
     query: &DescriptorSet,
     config: &MatchConfig,
     (pairs_per_block, rows_per_block): (usize, usize),
+    kernel: Option<MatchKernel>,
 ) -> Result<Vec<Vec<Match>>> {
     let collection = filled(dev, sets)?;
     let ids: Vec<usize> = (0..sets.len()).collect();
@@ -38,7 +41,7 @@ pub fn search_in_blocks(
         query,
         &ids,
         config,
-        budget(pairs_per_block, rows_per_block),
+        (budget(pairs_per_block, rows_per_block), kernel),
         &mut |_, m| out.push(m),
     )?;
     Ok(out)

@@ -56,17 +56,25 @@ def median_ms(torch, fn, warmup, repeats):
     return statistics.median(times)
 
 
-def torch_matching(sizes, repeats):
+def torch_cuda(seed):
+    """PyTorch, its CUDA device, a generator seeded with `seed` and the results header; or (None, the
+    reason it is skipped)."""
     try:
         import torch
     except ImportError:
-        return {"skipped": "PyTorch not installed"}
+        return None, None, None, {"skipped": "PyTorch not installed"}
     if not torch.cuda.is_available():
-        return {"skipped": "no CUDA device for PyTorch"}
+        return None, None, None, {"skipped": "no CUDA device for PyTorch"}
     dev = torch.device("cuda")
     gen = torch.Generator(device=dev)
-    gen.manual_seed(2024)
-    results = {"device": torch.cuda.get_device_name(0), "torch": torch.__version__, "runs": []}
+    gen.manual_seed(seed)
+    return torch, dev, gen, {"device": torch.cuda.get_device_name(0), "torch": torch.__version__, "runs": []}
+
+
+def torch_matching(sizes, repeats):
+    torch, dev, gen, results = torch_cuda(2024)
+    if torch is None:
+        return results
     budget = 1 << 30  # bytes of one chunk's score matrix
     for n in sizes:
         bits_q = torch.randint(0, 2, (n, 512), generator=gen, device=dev, dtype=torch.int8)
@@ -134,16 +142,9 @@ def torch_matching(sizes, repeats):
 
 
 def torch_collection(set_count, sizes, repeats, limit_pairs):
-    try:
-        import torch
-    except ImportError:
-        return {"skipped": "PyTorch not installed"}
-    if not torch.cuda.is_available():
-        return {"skipped": "no CUDA device for PyTorch"}
-    dev = torch.device("cuda")
-    gen = torch.Generator(device=dev)
-    gen.manual_seed(2025)
-    results = {"device": torch.cuda.get_device_name(0), "torch": torch.__version__, "runs": []}
+    torch, dev, gen, results = torch_cuda(2025)
+    if torch is None:
+        return results
     budget = 1 << 30  # bytes of one batch's score tensor
     for n in sizes:
         bits = torch.randint(0, 2, (set_count, n, 512), generator=gen, device=dev, dtype=torch.int8)
@@ -178,17 +179,9 @@ def torch_collection(set_count, sizes, repeats, limit_pairs):
         if not torch.equal(d_baseline.sort(dim=1).values, d_direct.sort(dim=1).values):
             raise SystemExit(f"collection baseline n={n}: distances disagree with a direct count")
         run(min(pairs, 4 * batch))  # warm-up
-        times = []
-        kept = 0
-        for _ in range(repeats):
-            start = torch.cuda.Event(enable_timing=True)
-            end = torch.cuda.Event(enable_timing=True)
-            start.record()
-            kept = run(pairs)
-            end.record()
-            torch.cuda.synchronize()
-            times.append(start.elapsed_time(end) / 1e3)
-        seconds = statistics.median(times) * total / pairs
+        kept = []
+        ms = median_ms(torch, lambda: kept.append(run(pairs)), 0, repeats)
+        seconds = ms / 1e3 * total / pairs
         results["runs"].append(
             {
                 "sets": set_count,
@@ -200,7 +193,7 @@ def torch_collection(set_count, sizes, repeats, limit_pairs):
                 "seconds": seconds,
                 "pairs_per_s": total / seconds,
                 "descriptor_pairs_per_s": total * n * n / seconds,
-                "kept_in_timed_pairs": int(kept),
+                "kept_in_timed_pairs": int(kept[-1]),
                 "runs": repeats,
             }
         )

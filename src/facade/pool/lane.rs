@@ -75,10 +75,15 @@ impl<S> Resident<S> {
     }
 
     fn get(&self, s: usize) -> Result<&S> {
-        self.held.get(&s).ok_or_else(|| Error::Internal {
-            operation: "device pool",
-            message: format!("set {s} is not resident for its block"),
-        })
+        self.held.get(&s).ok_or_else(|| not_resident(s))
+    }
+}
+
+/// The scheduler's promise broken: a block's pair reads set `s`, which the block does not list.
+fn not_resident(s: usize) -> Error {
+    Error::Internal {
+        operation: "device pool",
+        message: format!("set {s} is not resident for its block"),
     }
 }
 
@@ -142,10 +147,9 @@ pub(super) fn match_on(
     }
 }
 
-/// Claims blocks from `queue` until none is left or a worker has failed, and matches each whole on
-/// `matcher`'s device: the block's sets in a `DescriptorCollection` of their own, its matchable pairs
-/// in one grouped run (the others get no matches); `done(p)` as pair `p` finishes. The `(pair,
-/// matches)` of every pair this worker finished.
+/// [`match_blocks`] for a CUDA worker: each claimed block matched whole on `matcher`'s device, its
+/// sets in a `DescriptorCollection` of their own and its matchable pairs in one grouped run (the
+/// others get no matches).
 fn match_blocks_grouped(
     matcher: &Matcher,
     collection: &Collection,
@@ -161,12 +165,7 @@ fn match_blocks_grouped(
     let mut finished = Vec::new();
     while let Some(b) = queue.claim() {
         let block = &blocks[b];
-        let resident = |s: usize| {
-            block.sets.binary_search(&s).map_err(|_| Error::Internal {
-                operation: "device pool",
-                message: format!("set {s} is not resident for its block"),
-            })
-        };
+        let resident = |s: usize| block.sets.binary_search(&s).map_err(|_| not_resident(s));
         let mut listed = Vec::new();
         for &p in &block.pairs {
             let (a, t) = pairs[p];

@@ -9,7 +9,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 mkdir -p .gpu && rm -rf .gpu/bin && mkdir -p .gpu/bin
-grep -qx '/.gpu/' .git/info/exclude 2>/dev/null || echo '/.gpu/' >> .git/info/exclude
+exclude=$(git rev-parse --git-path info/exclude)  # a worktree's .git is a file
+mkdir -p "$(dirname "$exclude")"
+grep -qx '/.gpu/' "$exclude" 2>/dev/null || echo '/.gpu/' >> "$exclude"
 
 # Test binaries: their paths from cargo's JSON messages.
 cargo test -p clatch --features cuda --no-run --message-format=json 2>/dev/null \

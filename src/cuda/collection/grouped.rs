@@ -37,8 +37,9 @@ unsafe impl DeviceRepr for clatch_pair_task {}
 // SAFETY: as above.
 unsafe impl ValidAsZeroBits for clatch_pair_task {}
 
-/// Most blocks of a grouped kNN launch (grid x); more tasks are taken grid-stride.
-const MAX_GRID: usize = 1 << 20;
+/// Most tasks of one grouped kNN launch: one block each (grid x), as the tensor-core kernels need
+/// (the popcount ones would take more grid-stride). A block within the budget has far fewer.
+const MAX_TASKS: usize = i32::MAX as usize;
 /// Most blocks of the compaction (grid x); more pairs are taken grid-stride.
 const MAX_COMPACT_GRID: usize = 65_535;
 
@@ -125,6 +126,7 @@ impl Slot {
         let (pairs, tasks) = block.layout();
         crate::cuda::invariant(
             pairs.len() <= self.capacity.pairs
+                && tasks.len() <= MAX_TASKS
                 && tasks.len() <= self.capacity.tasks
                 && block.query_rows <= self.capacity.query_rows
                 && block.train_rows <= self.capacity.train_rows,
@@ -190,7 +192,7 @@ impl Slot {
             .arg(&mut self.best)
             .arg(&mut self.reverse);
         let config = LaunchConfig {
-            grid_dim: (tasks.len().clamp(1, MAX_GRID) as u32, 1, 1),
+            grid_dim: (tasks.len().max(1) as u32, 1, 1),
             block_dim: (threads, 1, 1),
             shared_mem_bytes: shared,
         };
@@ -199,7 +201,8 @@ impl Slot {
         // shared memory its stages need, allowed at load by `matching_tensor::configure`). Every pair
         // record was checked against the buffers it is read from by `Run::check` (its rows, and a
         // whole query block and tile past them, lie inside them); `pairs` holds the block's records and
-        // `tasks` its n_tasks tasks, each naming a pair of the block and one of its query blocks;
+        // `tasks` its n_tasks tasks (one block each: the grid is n_tasks blocks, at most MAX_TASKS),
+        // each naming a pair of the block and one of its query blocks;
         // `best` holds the block's query_rows records and `reverse` its train_rows keys (best_row and
         // reverse_row pack them, see `Block::layout`), both within this slot's capacity (checked above).
         // With k = 2 every pair has two gallery rows or more (`Run::check`).

@@ -100,8 +100,10 @@ fn pool() -> &'static Pool {
 }
 
 /// Uploads `len` bytes written by `fill` into a pinned staging buffer, then copied to a new device
-/// buffer on `stream`. The staging buffer returns to the pool; a later user takes it once this copy has
-/// finished reading it (and cudarc's own event makes any user wait for that in any case).
+/// buffer on `stream`. The staging buffer returns to the pool with an event recorded after the copy; a
+/// later user takes it only once that event is complete. Nothing else waits for the copy: with event
+/// tracking off (`device.rs`) cudarc never records the buffer's own event, so its `as_mut_slice` and
+/// drop return at once; a buffer the pool has no room for is dropped only after the copy's event.
 pub(crate) fn upload_staged(
     stream: &Arc<CudaStream>,
     len: usize,
@@ -132,13 +134,30 @@ pub(crate) fn upload_staged(
     let device = stream
         .clone_htod(&staging)
         .map_err(|e| with_bytes(driver_error(operation)(e), len))?;
-    let copied = stream
-        .record_event(None)
-        .map_err(driver_error("event record"))?;
+    let copied = match stream.record_event(None) {
+        Ok(copied) => copied,
+        Err(e) => {
+            // No event to wait on before the buffer is freed: wait for the stream instead, and leak
+            // the buffer if that fails too (the copy may still be pending).
+            if stream.synchronize().is_err() {
+                std::mem::forget(staging);
+            }
+            return Err(driver_error("event record")(e));
+        }
+    };
     let mut pool = pool().lock().unwrap_or_else(|p| p.into_inner());
     let kept = pool.entry(key).or_default();
     if kept.len() < kept_for(len) {
         kept.push((staging, copied));
+        return Ok(device);
+    }
+    drop(pool);
+    // No room: the buffer is freed, but only once the copy has read it.
+    if let Err(e) = copied.synchronize() {
+        // The copy may still be pending on a broken context: leak the page-locked memory rather than
+        // free it under the DMA.
+        std::mem::forget(staging);
+        return Err(driver_error(operation)(e));
     }
     Ok(device)
 }

@@ -4,15 +4,19 @@
 //! Everything runs on the collection's one stream, so no buffer crosses streams (the device disables
 //! cudarc's event tracking on that promise). Two slots of scratch alternate: block `b + 1` is queued
 //! before the host waits for block `b`, so the device moves on to the next launch while the host splits
-//! the last one's matches; the copies back go into page-locked buffers (true asynchronous DMA), whose
-//! own events say when they have landed.
+//! the last one's matches; the uploads and the copies back go through page-locked buffers (true
+//! asynchronous DMA). With event tracking off, cudarc never records the events of those buffers, so
+//! their `as_slice`/`as_mut_slice` and drop do not wait for anything: each slot records events of its
+//! own (`uploaded` after its uploads, `landed` after its copies back) and waits on them before the host
+//! writes or reads the buffers, and its drop waits for the stream before they are freed.
 
 use std::collections::VecDeque;
+use std::mem::ManuallyDrop;
 use std::sync::Arc;
 
 use cudarc::driver::{
-    CudaContext, CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PinnedHostSlice, PushKernelArg,
-    ValidAsZeroBits,
+    CudaContext, CudaEvent, CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PinnedHostSlice,
+    PushKernelArg, ValidAsZeroBits,
 };
 
 use super::kernel_name;
@@ -79,19 +83,49 @@ fn pinned<T: DeviceRepr + ValidAsZeroBits + Copy>(
     Ok(buffer)
 }
 
+/// The page-locked buffers of one slot: the records uploaded and the results copied back.
+struct Pinned {
+    pairs: PinnedHostSlice<clatch_pair>,
+    tasks: PinnedHostSlice<clatch_pair_task>,
+    kept: PinnedHostSlice<Match>,
+    counts: PinnedHostSlice<u32>,
+}
+
 /// The scratch of one block in flight, on the device and in pinned host memory.
 struct Slot {
     capacity: Capacity,
+    stream: Arc<CudaStream>,
     pairs: CudaSlice<clatch_pair>,
     tasks: CudaSlice<clatch_pair_task>,
     best: CudaSlice<Match>,
     kept: CudaSlice<Match>,
     reverse: CudaSlice<u64>,
     counts: CudaSlice<u32>,
-    pairs_host: PinnedHostSlice<clatch_pair>,
-    tasks_host: PinnedHostSlice<clatch_pair_task>,
-    kept_host: PinnedHostSlice<Match>,
-    counts_host: PinnedHostSlice<u32>,
+    /// Freed by `Slot`'s drop only once no copy from or into them can be pending (never otherwise).
+    host: ManuallyDrop<Pinned>,
+    /// Recorded after the uploads from `host.pairs` and `host.tasks`.
+    uploaded: CudaEvent,
+    /// Recorded after the copies back into `host.counts` and `host.kept`.
+    landed: CudaEvent,
+    /// Copies on the pinned buffers may be queued that no wait has covered: set before a block's
+    /// first copy is queued, cleared once `finish` has waited for its copies back.
+    in_flight: bool,
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        // A slot dropped between `queue` and `finish` (an error, or a panic in a callback) may have
+        // copies queued on its pinned buffers, and their own drop would free them at once (cudarc
+        // records no events for them with tracking off). `queue` may have failed part way, after a
+        // copy and before its event, so wait for the whole stream, not the slot's events.
+        let idle = !self.in_flight || self.stream.synchronize().is_ok();
+        if idle {
+            // SAFETY: dropped once, here, with no copy queued on the buffers any more.
+            unsafe { ManuallyDrop::drop(&mut self.host) };
+        }
+        // Otherwise the wait failed (the context is broken, and a DMA may still be pending): the
+        // page-locked memory is leaked rather than freed under it.
+    }
 }
 
 const NO_MATCH: Match = Match {
@@ -101,22 +135,32 @@ const NO_MATCH: Match = Match {
 };
 
 impl Slot {
-    fn new(stream: &Arc<CudaStream>, capacity: Capacity) -> Result<Self> {
+    fn new(dev: &GpuDevice, stream: &Arc<CudaStream>, capacity: Capacity) -> Result<Self> {
         let ctx = stream.context();
         // The pinned record buffers and their device twins have the same length: the uploads copy
         // whole buffers.
         let (pairs_len, tasks_len) = (capacity.pairs.max(1), capacity.tasks.max(1));
+        let (uploaded, landed) = (dev.new_event()?, dev.new_event()?);
+        // Made before the slot: a failure below drops them with no copy queued on them (once in the
+        // slot, only the slot's drop frees them).
+        let host = Pinned {
+            pairs: pinned(ctx, pairs_len, clatch_pair::default())?,
+            tasks: pinned(ctx, tasks_len, clatch_pair_task::default())?,
+            kept: pinned(ctx, capacity.query_rows, NO_MATCH)?,
+            counts: pinned(ctx, capacity.pairs, 0u32)?,
+        };
         Ok(Self {
+            stream: stream.clone(),
             pairs: alloc_zeros(stream, pairs_len, "grouped matching pair records")?,
             tasks: alloc_zeros(stream, tasks_len, "grouped matching task list")?,
             best: alloc_zeros(stream, capacity.query_rows, "grouped matching best matches")?,
             kept: alloc_zeros(stream, capacity.query_rows, "grouped matching kept matches")?,
             reverse: alloc_zeros(stream, capacity.train_rows, "grouped matching reverse keys")?,
             counts: alloc_zeros(stream, capacity.pairs, "grouped matching counts")?,
-            pairs_host: pinned(ctx, pairs_len, clatch_pair::default())?,
-            tasks_host: pinned(ctx, tasks_len, clatch_pair_task::default())?,
-            kept_host: pinned(ctx, capacity.query_rows, NO_MATCH)?,
-            counts_host: pinned(ctx, capacity.pairs, 0u32)?,
+            host: ManuallyDrop::new(host),
+            uploaded,
+            landed,
+            in_flight: false,
             capacity,
         })
     }
@@ -140,15 +184,20 @@ impl Slot {
         )?;
         let stream = run.stream;
         let copy = driver_error("uploading the pair records of grouped matching");
-        // as_mut_slice waits for the last upload from these buffers (two blocks ago).
-        self.pairs_host.as_mut_slice().map_err(&copy)?[..pairs.len()].copy_from_slice(&pairs);
-        self.tasks_host.as_mut_slice().map_err(&copy)?[..tasks.len()].copy_from_slice(&tasks);
+        // The last uploads from these buffers (two blocks ago) must have read them; as_mut_slice does
+        // not wait (see the module notes).
+        self.uploaded.synchronize().map_err(&copy)?;
+        self.in_flight = true;
+        let host = &mut *self.host;
+        host.pairs.as_mut_slice().map_err(&copy)?[..pairs.len()].copy_from_slice(&pairs);
+        host.tasks.as_mut_slice().map_err(&copy)?[..tasks.len()].copy_from_slice(&tasks);
         stream
-            .memcpy_htod(&self.pairs_host, &mut self.pairs)
+            .memcpy_htod(&host.pairs, &mut self.pairs)
             .map_err(&copy)?;
         stream
-            .memcpy_htod(&self.tasks_host, &mut self.tasks)
+            .memcpy_htod(&host.tasks, &mut self.tasks)
             .map_err(&copy)?;
+        self.uploaded.record(stream).map_err(&copy)?;
         if run.config.cross_check {
             // The reverse keys are folded in with atomics: start from zero (no candidate).
             stream
@@ -231,20 +280,26 @@ impl Slot {
         unsafe { launch.launch(config) }.map_err(driver_error("clatch_pairs_compact"))?;
 
         let back = driver_error("copying the matches of grouped matching back");
+        let host = &mut *self.host;
         stream
-            .memcpy_dtoh(&self.counts.slice(..pairs.len()), &mut self.counts_host)
+            .memcpy_dtoh(&self.counts.slice(..pairs.len()), &mut host.counts)
             .map_err(&back)?;
         stream
-            .memcpy_dtoh(&self.kept.slice(..block.query_rows), &mut self.kept_host)
+            .memcpy_dtoh(&self.kept.slice(..block.query_rows), &mut host.kept)
             .map_err(&back)?;
+        self.landed.record(stream).map_err(&back)?;
         Ok(())
     }
 
     /// Waits for `block`'s copies and hands each of its pairs' matches to `each`, in pair order.
-    fn finish(&self, block: &Block, each: &mut dyn FnMut(usize, Vec<Match>)) -> Result<()> {
+    fn finish(&mut self, block: &Block, each: &mut dyn FnMut(usize, Vec<Match>)) -> Result<()> {
         let wait = driver_error("grouped matching (running, or copying matches back)");
-        let counts = self.counts_host.as_slice().map_err(&wait)?;
-        let kept = self.kept_host.as_slice().map_err(&wait)?;
+        // as_slice does not wait (see the module notes): `landed` follows the copies back, and the
+        // uploads before them, in stream order.
+        self.landed.synchronize().map_err(&wait)?;
+        self.in_flight = false;
+        let counts = self.host.counts.as_slice().map_err(&wait)?;
+        let kept = self.host.kept.as_slice().map_err(&wait)?;
         let mut device = block.device.iter().enumerate().peekable();
         let mut best_row = 0;
         for index in block.range.clone() {
@@ -352,7 +407,7 @@ impl Run<'_> {
         for (b, block) in blocks.iter().enumerate() {
             if queued.len() == 2 {
                 let (oldest, slot) = queued.pop_front().expect("two queued");
-                hand_on(&blocks[oldest], slot, &slots, each)?;
+                hand_on(&blocks[oldest], slot, &mut slots, each)?;
             }
             if block.device.is_empty() {
                 queued.push_back((b, None));
@@ -362,13 +417,13 @@ impl Run<'_> {
             let s = b % 2;
             let slot = match &mut slots[s] {
                 Some(slot) => slot,
-                empty => empty.insert(Slot::new(self.stream, capacity)?),
+                empty => empty.insert(Slot::new(self.dev, self.stream, capacity)?),
             };
             slot.queue(self, block)?;
             queued.push_back((b, Some(s)));
         }
         while let Some((oldest, slot)) = queued.pop_front() {
-            hand_on(&blocks[oldest], slot, &slots, each)?;
+            hand_on(&blocks[oldest], slot, &mut slots, each)?;
         }
         Ok(())
     }
@@ -378,14 +433,14 @@ impl Run<'_> {
 fn hand_on(
     block: &Block,
     slot: Option<usize>,
-    slots: &[Option<Slot>; 2],
+    slots: &mut [Option<Slot>; 2],
     each: &mut dyn FnMut(usize, Vec<Match>),
 ) -> Result<()> {
     let Some(s) = slot else {
         block.range.clone().for_each(|i| each(i, Vec::new()));
         return Ok(());
     };
-    let slot = slots[s].as_ref().ok_or_else(|| crate::Error::Internal {
+    let slot = slots[s].as_mut().ok_or_else(|| crate::Error::Internal {
         operation: "grouped matching",
         message: format!("block {:?} has no slot", block.range),
     })?;

@@ -18,7 +18,7 @@
 mod grouped;
 mod plan;
 
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 
 use cudarc::driver::{CudaSlice, CudaStream};
 
@@ -100,8 +100,11 @@ pub(crate) struct DeviceCollection {
     /// The first row after the last set, rounded up to `ROW_ALIGN`: where the next set goes.
     end_row: usize,
     /// The rows expanded to +-1 bytes for the tensor-core kernels (`capacity_rows` rows of the padded
-    /// width): made on first use, dropped when sets are added.
-    signs: Mutex<Option<CudaSlice<u8>>>,
+    /// width): made on first use, dropped when sets are added. A run clones the `Arc` out and lets
+    /// the lock go before it starts, so callbacks may match on this collection again and threads run
+    /// side by side; a buffer dropped while a run holds it is freed with the run's last clone, queued
+    /// on the collection's one stream after every launch that read it.
+    signs: Mutex<Option<Arc<CudaSlice<u8>>>>,
 }
 
 impl std::fmt::Debug for DeviceCollection {
@@ -312,10 +315,7 @@ impl DeviceCollection {
         }
         let bits = matching_tensor::padded_bits(words);
         let train_signs = self.signs()?;
-        let train = train_signs.as_ref().ok_or_else(|| Error::Internal {
-            operation: "descriptor collection",
-            message: "no expanded rows after expanding them".into(),
-        })?;
+        let train = &*train_signs;
         let query_signs = match query {
             Some(q) => Some(self.expand(q, q.len() / words)?),
             None => None,
@@ -329,13 +329,16 @@ impl DeviceCollection {
         run.all(places, budget, each)
     }
 
-    /// The rows expanded to +-1 bytes (made now if they are not yet).
-    fn signs(&self) -> Result<MutexGuard<'_, Option<CudaSlice<u8>>>> {
+    /// The rows expanded to +-1 bytes (made now if they are not yet), shared: the lock is held only
+    /// while they are looked up or queued for expansion, never while they are used.
+    fn signs(&self) -> Result<Arc<CudaSlice<u8>>> {
         let mut signs = self.signs.lock().unwrap_or_else(|p| p.into_inner());
-        if signs.is_none() {
-            *signs = Some(self.expand(&self.rows, self.capacity_rows)?);
+        if let Some(signs) = &*signs {
+            return Ok(signs.clone());
         }
-        Ok(signs)
+        let made = Arc::new(self.expand(&self.rows, self.capacity_rows)?);
+        *signs = Some(made.clone());
+        Ok(made)
     }
 
     /// `rows` rows of `buffer` expanded to +-1 bytes of the padded width, on the collection's stream.

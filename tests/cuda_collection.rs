@@ -36,12 +36,16 @@ fn trials() -> Vec<Trial> {
             gpu::matcher_match_pairs,
         ),
         Trial::test("collection_exhaustive_512_bits", gpu::exhaustive),
+        Trial::test(
+            "collection_two_threads_and_reentrant_callbacks",
+            gpu::concurrent_and_reentrant,
+        ),
     ]
 }
 
 #[cfg(feature = "cuda")]
 mod gpu {
-    use clatch::cuda::hooks::MatchKernel;
+    use clatch::cuda::hooks::{HeldCollection, MatchKernel};
     use clatch::synthetic::SplitMix64;
     use clatch::{
         Backend, DescriptorCollection, DescriptorSet, DescriptorWidth, Match, MatchConfig, Matcher,
@@ -431,6 +435,204 @@ mod gpu {
         println!(
             "{n} sets of about {rows}, {} pairs: {compared} matches, 0 differences",
             pairs.len()
+        );
+        Ok(())
+    }
+
+    /// What one run of `pairs` on `held` gave, checked to come once per pair in order; `inner` is
+    /// called inside the callback before each pair's result is kept (a re-entrant run, or nothing).
+    fn held_run(
+        held: &HeldCollection,
+        pairs: &[(usize, usize)],
+        config: &MatchConfig,
+        family: MatchKernel,
+        inner: &mut dyn FnMut(usize),
+    ) -> Result<Vec<Vec<Match>>, Failed> {
+        let mut out = Vec::new();
+        let mut order = true;
+        // Small blocks: both slots in flight while a callback runs.
+        held.match_pairs(pairs, config, (3, 1 << 21), Some(family), &mut |i, m| {
+            inner(i);
+            order &= i == out.len();
+            out.push(m);
+        })?;
+        if !order {
+            return Err("results not handed out once per pair in order".into());
+        }
+        Ok(out)
+    }
+
+    pub fn concurrent_and_reentrant() -> Result<(), Failed> {
+        // One collection matched from two threads at once, and again from inside its own callbacks
+        // (pairs and a search), on each kernel family: no lock is held while callbacks run, and every
+        // run's pinned results are its own.
+        let mut rng = SplitMix64::new(48);
+        let dev = clatch::cuda::hooks::device(0)?;
+        let sizes = scale::pick(vec![300, 0, 65, 700, 2, 257, 1], vec![70, 0, 65, 2, 1]);
+        let repeats = scale::pick(4, 2);
+        let mut compared = 0;
+        for bits in scale::thin([72, 512], 2) {
+            let sets = tied_collection(bits, &sizes, &mut rng);
+            let refs: Vec<&DescriptorSet> = sets.iter().collect();
+            let query = &tied_collection(bits, &[scale::pick(400, 50)], &mut rng)[0];
+            let n = sets.len();
+            let pairs: Vec<(usize, usize)> =
+                (0..n).flat_map(|a| (0..n).map(move |b| (a, b))).collect();
+            let reversed: Vec<(usize, usize)> = pairs.iter().rev().copied().collect();
+            for config in scale::thin(configs(), 3) {
+                let cpu = matcher(Backend::Cpu, &config)?;
+                let want = |list: &[(usize, usize)]| -> Vec<Vec<Match>> {
+                    list.iter()
+                        .map(|&(a, b)| expected(&cpu, &sets[a], &sets[b]))
+                        .collect()
+                };
+                let (want_pairs, want_reversed) = (want(&pairs), want(&reversed));
+                let want_search: Vec<Vec<Match>> =
+                    sets.iter().map(|set| expected(&cpu, query, set)).collect();
+                let label = |list: &[(usize, usize)], i: usize| format!("pair {:?}", list[i]);
+                for family in families()? {
+                    let what = format!("{bits} bits, {config:?}, {family:?}");
+                    let held = HeldCollection::new(dev.clone(), &refs)?;
+                    // Two threads, each running its list several times, at once.
+                    let run = |list: &[(usize, usize)]| {
+                        (0..repeats)
+                            .map(|_| {
+                                held_run(&held, list, &config, family, &mut |_| {})
+                                    .map_err(|e| format!("{e:?}"))
+                            })
+                            .collect::<Result<Vec<_>, String>>()
+                    };
+                    let (first, second) = std::thread::scope(|scope| {
+                        let first = scope.spawn(|| run(&pairs));
+                        let second = scope.spawn(|| run(&reversed));
+                        (first.join(), second.join())
+                    });
+                    let first =
+                        first.map_err(|_| format!("{what}: the first thread panicked"))??;
+                    let second =
+                        second.map_err(|_| format!("{what}: the second thread panicked"))??;
+                    for got in &first {
+                        compared +=
+                            compare(&format!("{what}, thread 1"), &want_pairs, got, &|i| {
+                                label(&pairs, i)
+                            })?;
+                    }
+                    for got in &second {
+                        compared +=
+                            compare(&format!("{what}, thread 2"), &want_reversed, got, &|i| {
+                                label(&reversed, i)
+                            })?;
+                    }
+                    // Re-entrant: inside the callback of each pair, a run of two pairs; inside the
+                    // first, a whole run and a search.
+                    let mut inner_failures: Vec<String> = Vec::new();
+                    let mut inner_compared = 0;
+                    let outer = held_run(&held, &pairs, &config, family, &mut |i| {
+                        let check = || -> Result<usize, Failed> {
+                            let j = (i * 7 + 3) % pairs.len();
+                            let two = [pairs[i], pairs[j]];
+                            let got = held_run(&held, &two, &config, family, &mut |_| {})?;
+                            let mut done = compare(
+                                &format!("{what}, inside pair {i}"),
+                                &want(&two),
+                                &got,
+                                &|k| label(&two, k),
+                            )?;
+                            if i == 0 {
+                                let got = held_run(&held, &reversed, &config, family, &mut |_| {})?;
+                                done += compare(
+                                    &format!("{what}, inside pair 0"),
+                                    &want_reversed,
+                                    &got,
+                                    &|k| label(&reversed, k),
+                                )?;
+                                let mut found = Vec::new();
+                                held.search(
+                                    query,
+                                    &config,
+                                    (2, 1 << 21),
+                                    Some(family),
+                                    &mut |_, m| found.push(m),
+                                )?;
+                                done += compare(
+                                    &format!("{what}, search inside pair 0"),
+                                    &want_search,
+                                    &found,
+                                    &|k| format!("set {k}"),
+                                )?;
+                            }
+                            Ok(done)
+                        };
+                        match check() {
+                            Ok(done) => inner_compared += done,
+                            Err(e) => inner_failures.push(format!("{e:?}")),
+                        }
+                    })?;
+                    if let Some(first) = inner_failures.first() {
+                        return Err(format!(
+                            "{} of {} re-entrant runs failed; first: {first}",
+                            inner_failures.len(),
+                            pairs.len()
+                        )
+                        .into());
+                    }
+                    compared += inner_compared;
+                    compared +=
+                        compare(&format!("{what}, outer run"), &want_pairs, &outer, &|i| {
+                            label(&pairs, i)
+                        })?;
+                }
+            }
+        }
+        // The public collection (the device's family) the same ways.
+        let config = MatchConfig {
+            cross_check: true,
+            ..MatchConfig::default()
+        };
+        let cpu = matcher(Backend::Cpu, &config)?;
+        let sets = tied_collection(256, &sizes, &mut rng);
+        let refs: Vec<&DescriptorSet> = sets.iter().collect();
+        let mut c = DescriptorCollection::new(&matcher(GPU, &config)?, sets[0].width())?;
+        c.add(&refs)?;
+        let pairs = Matcher::all_pairs(sets.len());
+        let want: Vec<Vec<Match>> = pairs
+            .iter()
+            .map(|&(a, b)| expected(&cpu, &sets[a], &sets[b]))
+            .collect();
+        let (first, second) = std::thread::scope(|scope| {
+            let run = || gpu_pairs(&c, &pairs).map_err(|e| format!("{e:?}"));
+            let first = scope.spawn(run);
+            let second = scope.spawn(run);
+            (first.join(), second.join())
+        });
+        for got in [first, second] {
+            let got = got.map_err(|_| "a thread panicked")??;
+            compared += compare("public collection, two threads", &want, &got, &|i| {
+                format!("pair {:?}", pairs[i])
+            })?;
+        }
+        let mut inner = Vec::new();
+        let outer = {
+            let mut out = Vec::new();
+            c.match_pairs(&pairs, |i, m| {
+                inner.push(gpu_pairs(&c, &pairs[i..=i]).map_err(|e| format!("{e:?}")));
+                out.push(m);
+            })?;
+            out
+        };
+        compared += compare("public collection, outer run", &want, &outer, &|i| {
+            format!("pair {:?}", pairs[i])
+        })?;
+        for (i, got) in inner.into_iter().enumerate() {
+            compared += compare(
+                &format!("public collection, inside pair {i}"),
+                &want[i..=i],
+                &got?,
+                &|_| format!("pair {:?}", pairs[i]),
+            )?;
+        }
+        println!(
+            "one collection from two threads and from its own callbacks: {compared} matches, 0 differences"
         );
         Ok(())
     }

@@ -148,3 +148,43 @@ fn bad_requests_are_refused_before_any_work() {
     assert_eq!(called, 0);
     assert_eq!((c.width(), c.matcher().backend()), (w, Backend::Cpu));
 }
+
+#[test]
+fn callbacks_may_match_again_and_threads_share_a_collection() {
+    // A callback matching on its own collection (pairs and a search) and two threads matching one
+    // collection at once get what a lone call gets.
+    let mut rng = SplitMix64::new(32);
+    let sets = tied_collection(64, &[70, 0, 1, 2, 65, 130, 9, 300], &mut rng);
+    let query = &tied_collection(64, &[90], &mut rng)[0];
+    let config = MatchConfig {
+        cross_check: true,
+        ..MatchConfig::default()
+    };
+    let matcher = Matcher::new(Backend::Cpu, config).unwrap();
+    let c = collection(&matcher, &sets);
+    let all = Matcher::all_pairs(sets.len());
+    let want: Vec<Vec<Match>> = all
+        .iter()
+        .map(|&(a, b)| expected(&matcher, &sets[a], &sets[b]))
+        .collect();
+    let want_search: Vec<Vec<Match>> = sets.iter().map(|s| expected(&matcher, query, s)).collect();
+    let outer = collect(all.len(), |each| {
+        c.match_pairs(&all, |i, m| {
+            let inner = collect(2, |e| c.match_pairs(&[all[i], all[0]], e).unwrap());
+            assert_eq!(inner, [want[i].clone(), want[0].clone()], "inside pair {i}");
+            let found = collect(sets.len(), |e| c.search(query, e).unwrap());
+            assert_eq!(found, want_search, "search inside pair {i}");
+            each(i, m);
+        })
+        .unwrap()
+    });
+    assert_eq!(outer, want, "outer run");
+    std::thread::scope(|scope| {
+        let runs: Vec<_> = (0..2)
+            .map(|_| scope.spawn(|| collect(all.len(), |each| c.match_all_pairs(each).unwrap())))
+            .collect();
+        for run in runs {
+            assert_eq!(run.join().unwrap(), want, "one of two threads");
+        }
+    });
+}

@@ -64,3 +64,47 @@ fn filled(dev: Arc<GpuDevice>, sets: &[&DescriptorSet]) -> Result<DeviceCollecti
     }
     Ok(collection)
 }
+
+/// A device collection holding `sets` (added one at a time), kept so that tests can match it many
+/// times, from several threads at once and from inside its own callbacks, on a chosen kernel family.
+#[derive(Debug)]
+pub struct HeldCollection(DeviceCollection);
+
+impl HeldCollection {
+    /// A collection of `sets` (one width) on `dev`.
+    pub fn new(dev: Arc<GpuDevice>, sets: &[&DescriptorSet]) -> Result<Self> {
+        filled(dev, sets).map(Self)
+    }
+
+    /// [`DeviceCollection::match_pairs`] in blocks of at most `pairs_per_block` pairs and
+    /// `rows_per_block` rows (as [`match_pairs_in_blocks`]), on kernel family `kernel` (the device's
+    /// choice when `None`); `each(p, matches)` as blocks complete.
+    pub fn match_pairs(
+        &self,
+        pairs: &[(usize, usize)],
+        config: &MatchConfig,
+        (pairs_per_block, rows_per_block): (usize, usize),
+        kernel: Option<MatchKernel>,
+        each: &mut dyn FnMut(usize, Vec<Match>),
+    ) -> Result<()> {
+        let budget = budget(pairs_per_block, rows_per_block);
+        self.0
+            .match_pairs_within(pairs, config, (budget, kernel), each)
+    }
+
+    /// [`DeviceCollection::search`] of `query` against every held set, blocks and family as
+    /// [`HeldCollection::match_pairs`].
+    pub fn search(
+        &self,
+        query: &DescriptorSet,
+        config: &MatchConfig,
+        (pairs_per_block, rows_per_block): (usize, usize),
+        kernel: Option<MatchKernel>,
+        each: &mut dyn FnMut(usize, Vec<Match>),
+    ) -> Result<()> {
+        let ids: Vec<usize> = (0..self.0.places.len()).collect();
+        let budget = budget(pairs_per_block, rows_per_block);
+        self.0
+            .search_within(query, &ids, config, (budget, kernel), each)
+    }
+}

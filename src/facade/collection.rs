@@ -29,7 +29,8 @@ const HOST_BLOCK: usize = 256;
 /// Results are handed to a callback, `each(i, matches)`, once per pair `i` of the request, in
 /// increasing `i`, as soon as the block of pairs holding it is back: memory stays bounded for any
 /// number of pairs (blocks of pairs are matched one after another), and the caller may write each
-/// result out and drop it.
+/// result out and drop it. The callback may match on the same collection again, and several threads
+/// may match one collection at once (it is `Sync`; on CUDA their work shares the collection's stream).
 ///
 /// ```
 /// use clatch::{Backend, DescriptorCollection, DescriptorSet, DescriptorWidth, MatchConfig, Matcher};

@@ -29,6 +29,10 @@
 #define CLATCH_MATCH_ROW_PAD 256 /* device descriptor buffers hold a multiple of this many rows */
 #define CLATCH_MATCH_SELECT_THREADS 256 /* clatch_match_filter / clatch_match_compact (8 warps) */
 #define CLATCH_MATCH_SCAN_THREADS 1024 /* clatch_match_scan: one block */
+/* Grouped matching of many pairs per launch (kernels/match_pairs.cu, src/cuda/collection.rs). */
+#define CLATCH_PAIRS_ROW_ALIGN 16 /* each set of a device collection starts at a multiple of this many rows */
+#define CLATCH_PAIRS_BLOCK_QUERIES 256 /* queries per task (CLATCH_MATCH_THREADS * CLATCH_MATCH_QUERIES_PER_THREAD) */
+#define CLATCH_PAIRS_REJECTED 0xffffffffu /* query field of a best-match record the ratio test or distance limit refused */
 /* Tensor-core matching (kernels/matching_tensor.cu): descriptors as +-1 bytes, int8 MMA. */
 #define CLATCH_TENSOR_WARPS 8 /* warps per block; each holds 32 queries in registers */
 #define CLATCH_TENSOR_QUERIES 256 /* queries per block (CLATCH_TENSOR_WARPS * 32) */
@@ -86,5 +90,25 @@ typedef struct clatch_match {
     unsigned int train;
     unsigned int distance;
 } clatch_match;
+
+/* One pair of a grouped launch (kernels/match_pairs.cu): the queries are rows [query_row, query_row +
+ * query_rows) of the query buffer, the gallery rows [train_row, train_row + train_rows) of the gallery
+ * buffer; the pair's per-query records start at best_row of the launch's best and kept arenas, its
+ * per-gallery-row reverse keys at reverse_row of the reverse arena. */
+typedef struct clatch_pair {
+    unsigned long long query_row;
+    unsigned long long train_row;
+    unsigned long long best_row;
+    unsigned long long reverse_row;
+    unsigned int query_rows;
+    unsigned int train_rows;
+} clatch_pair;
+
+/* One block's work in a grouped kNN launch: queries [CLATCH_PAIRS_BLOCK_QUERIES * query_block, + that)
+ * of pair `pair` (an index into the launch's pair list) against the pair's whole gallery. */
+typedef struct clatch_pair_task {
+    unsigned int pair;
+    unsigned int query_block;
+} clatch_pair_task;
 
 #endif /* CLATCH_H */

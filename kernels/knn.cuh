@@ -227,39 +227,24 @@ struct Stage {
     }
 };
 
-// The kNN kernel body. Grid: x over blocks of THREADS * QPT queries (grid-stride), y over gallery
-// segments of `segment` rows (a multiple of TILE; the host makes every segment non-empty). Both descriptor
-// buffers hold a whole number of CLATCH_MATCH_ROW_PAD rows (zero padding), so whole tiles and whole query
-// blocks are always in bounds; padded gallery rows are never compared and padded queries never written.
-// With one segment the k neighbours go straight to `out` (query-major, as KnnMatches); otherwise each
-// segment writes its k best as (distance << 32 | index) keys to `partial[(segment * nq + query) * k + j]`.
-//
-// MUTUAL: also fold every (distance, query) pair into reverse[train index] (nt slots, zeroed by the host,
-// complemented keys; see the cross-check note at the top).
-template <int WORDS, int K, int QPT, int G, int UNROLL, bool MUTUAL>
-__device__ __forceinline__ void knn(const u64* __restrict__ query, unsigned nq, const u64* __restrict__ train,
-                                    unsigned nt, unsigned segment, unsigned k, clatch_match* __restrict__ out,
-                                    u64* __restrict__ partial, u64* __restrict__ reverse) {
-    static_assert(TILE % 2 == 0 && CLATCH_MATCH_ROW_PAD % TILE == 0, "whole 16-byte chunks, whole tiles");
-    static_assert(CLATCH_MATCH_ROW_PAD % (THREADS * QPT) == 0, "whole query blocks");
-    constexpr int L = 2 * WORDS;
-    __shared__ uint4 tiles[2][Stage<WORDS>::CHUNKS];
+// One block's QPT * THREADS queries in registers, with their k-lists and reverse-key tags: what the
+// kNN body (below) and the grouped pair kernel (kernels/match_pairs.cu) keep per query block.
+template <int WORDS, int K, int QPT>
+struct QueryBlock {
+    static constexpr int L = 2 * WORDS;
+    unsigned q[QPT][L];
+    unsigned dist[QPT][K], index[QPT][K];
+    // Reverse-key tags: p << 5 | lane, or NONE for the padded query rows past nq (they never win).
+    unsigned tag[QPT];
+    unsigned warp_query;
 
-    const u64 seg_begin = (u64)blockIdx.y * segment;
-    const unsigned first_row = (unsigned)seg_begin;
-    const unsigned end_row = (unsigned)min((u64)nt, seg_begin + segment);
-    const unsigned tiles_in_segment = (end_row - first_row + TILE - 1) / TILE;
-    const unsigned query_blocks = (nq + THREADS * QPT - 1) / (THREADS * QPT);
-
-    for (unsigned qb = blockIdx.x; qb < query_blocks; qb += gridDim.x) {
-        unsigned q[QPT][L];
-        unsigned dist[QPT][K], index[QPT][K];
-        // Reverse-key tags: p << 5 | lane, or NONE for the padded query rows past nq (they never win).
-        unsigned tag[QPT];
-        const unsigned warp_query = (unsigned)((u64)qb * (THREADS * QPT) + (threadIdx.x & ~31u));
+    // Loads queries first + p * THREADS + threadIdx.x (p < QPT) of `query` (nq real rows; the rows past
+    // them up to the whole block must be readable) and clears their lists.
+    __device__ __forceinline__ void load(const u64* __restrict__ query, unsigned nq, u64 first) {
+        warp_query = (unsigned)(first + (threadIdx.x & ~31u));
 #pragma unroll
         for (int p = 0; p < QPT; ++p) {
-            const u64 row = (u64)qb * (THREADS * QPT) + p * THREADS + threadIdx.x;
+            const u64 row = first + p * THREADS + threadIdx.x;
             tag[p] = row < nq ? (unsigned)(p << 5) | (threadIdx.x & 31) : NONE;
             const uint2* src = reinterpret_cast<const uint2*>(query + row * WORDS);
 #pragma unroll
@@ -274,7 +259,15 @@ __device__ __forceinline__ void knn(const u64* __restrict__ query, unsigned nq, 
                 index[p][s] = NONE;
             }
         }
+    }
 
+    // Compares the block's queries with gallery rows [first_row, end_row) of `train` (at least one row;
+    // whole tiles from first_row on must be readable, first_row * WORDS even for 16-byte loads), tile by
+    // tile through the double buffer `tiles`. Ends with a barrier, so `tiles` is free again on return.
+    template <int G, int UNROLL, bool MUTUAL>
+    __device__ __forceinline__ void scan(const u64* __restrict__ train, unsigned first_row, unsigned end_row,
+                                         uint4 (&tiles)[2][Stage<WORDS>::CHUNKS], u64* __restrict__ reverse) {
+        const unsigned tiles_in_segment = (end_row - first_row + TILE - 1) / TILE;
         Stage<WORDS> stage;
         stage.load(train, first_row);
         stage.store(tiles[0]);
@@ -294,12 +287,41 @@ __device__ __forceinline__ void knn(const u64* __restrict__ query, unsigned nq, 
             if (more) stage.store(tiles[(t + 1) & 1]);
             __syncthreads();
         }
+    }
+};
+
+// The kNN kernel body. Grid: x over blocks of THREADS * QPT queries (grid-stride), y over gallery
+// segments of `segment` rows (a multiple of TILE; the host makes every segment non-empty). Both descriptor
+// buffers hold a whole number of CLATCH_MATCH_ROW_PAD rows (zero padding), so whole tiles and whole query
+// blocks are always in bounds; padded gallery rows are never compared and padded queries never written.
+// With one segment the k neighbours go straight to `out` (query-major, as KnnMatches); otherwise each
+// segment writes its k best as (distance << 32 | index) keys to `partial[(segment * nq + query) * k + j]`.
+//
+// MUTUAL: also fold every (distance, query) pair into reverse[train index] (nt slots, zeroed by the host,
+// complemented keys; see the cross-check note at the top).
+template <int WORDS, int K, int QPT, int G, int UNROLL, bool MUTUAL>
+__device__ __forceinline__ void knn(const u64* __restrict__ query, unsigned nq, const u64* __restrict__ train,
+                                    unsigned nt, unsigned segment, unsigned k, clatch_match* __restrict__ out,
+                                    u64* __restrict__ partial, u64* __restrict__ reverse) {
+    static_assert(TILE % 2 == 0 && CLATCH_MATCH_ROW_PAD % TILE == 0, "whole 16-byte chunks, whole tiles");
+    static_assert(CLATCH_MATCH_ROW_PAD % (THREADS * QPT) == 0, "whole query blocks");
+    __shared__ uint4 tiles[2][Stage<WORDS>::CHUNKS];
+
+    const u64 seg_begin = (u64)blockIdx.y * segment;
+    const unsigned first_row = (unsigned)seg_begin;
+    const unsigned end_row = (unsigned)min((u64)nt, seg_begin + segment);
+    const unsigned query_blocks = (nq + THREADS * QPT - 1) / (THREADS * QPT);
+
+    for (unsigned qb = blockIdx.x; qb < query_blocks; qb += gridDim.x) {
+        QueryBlock<WORDS, K, QPT> block;
+        block.load(query, nq, (u64)qb * (THREADS * QPT));
+        block.template scan<G, UNROLL, MUTUAL>(train, first_row, end_row, tiles, reverse);
 
 #pragma unroll
         for (int p = 0; p < QPT; ++p) {
             const u64 qi = (u64)qb * (THREADS * QPT) + p * THREADS + threadIdx.x;
             if (qi >= nq) continue;
-            write_knn_list<K>(qi, nq, k, dist[p], index[p], out, partial);
+            write_knn_list<K>(qi, nq, k, block.dist[p], block.index[p], out, partial);
         }
     }
 }

@@ -11,7 +11,7 @@ use std::sync::Arc;
 use crate::backend::{CUDA_NOT_BUILT as NOT_BUILT, cuda_unavailable};
 use crate::describe::opencv::{OpencvLatch, Placed};
 use crate::describe::{Described, DescriptorConfig};
-use crate::descriptor::DescriptorSet;
+use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::detect::DetectorConfig;
 use crate::error::Result;
 use crate::features::Features;
@@ -187,4 +187,39 @@ pub(crate) fn match_async(
     _: &MatchConfig,
 ) -> Result<PendingMatches> {
     match stream.never {}
+}
+
+/// Descriptor sets held on a device (none in this build).
+#[derive(Debug)]
+pub(crate) struct DeviceCollection {
+    never: Infallible,
+}
+
+impl DeviceCollection {
+    pub(crate) fn new(dev: Arc<GpuDevice>, _: DescriptorWidth) -> Result<Self> {
+        match *dev {}
+    }
+
+    pub(crate) fn add(&mut self, _: &[&DescriptorSet]) -> Result<()> {
+        match self.never {}
+    }
+
+    pub(crate) fn match_pairs(
+        &self,
+        _: &[(usize, usize)],
+        _: &MatchConfig,
+        _: &mut dyn FnMut(usize, Vec<Match>),
+    ) -> Result<()> {
+        match self.never {}
+    }
+
+    pub(crate) fn search(
+        &self,
+        _: &DescriptorSet,
+        _: &[usize],
+        _: &MatchConfig,
+        _: &mut dyn FnMut(usize, Vec<Match>),
+    ) -> Result<()> {
+        match self.never {}
+    }
 }

@@ -69,6 +69,7 @@ fn public_types_are_send_and_sync() {
     send_sync::<ExtractorConfig>();
     send_sync::<Matcher>();
     send_sync::<clatch::DevicePool>();
+    send_sync::<clatch::DescriptorCollection>();
     send_sync::<MatchConfig>();
     send_sync::<clatch::Features>();
     send_sync::<clatch::DescriptorSet>();

@@ -160,6 +160,19 @@ mod gpu {
                 }),
             ),
             (
+                "descriptor collection: pairs and search",
+                Box::new(move |b| {
+                    let m = Matcher::new(b, MatchConfig::default())?;
+                    let mut c = clatch::DescriptorCollection::new(&m, descriptors.width())?;
+                    c.add(&[descriptors])?;
+                    c.add(&[descriptors, descriptors])?; // grows the device buffer
+                    let mut found = Vec::new();
+                    c.match_all_pairs(|_, matches| found.push(matches))?;
+                    c.search(descriptors, |_, matches| found.push(matches))?;
+                    Ok(format!("{found:?}"))
+                }),
+            ),
+            (
                 "async extraction and matching",
                 Box::new(move |b| {
                     let e = Extractor::new(b, d4.clone())?;

@@ -29,7 +29,7 @@ part=${1:-all}
 summary=()
 if [ "$part" = tests ] || [ "$part" = all ]; then
 nvidia-smi --query-gpu=name,driver_version,clocks.max.sm,memory.total --format=csv > "$O/suite.txt" 2>&1
-SUITES="cuda_describe cuda_describe_opencv cuda_detect cuda_match cuda_pyramid cuda_faults cuda_async cuda_extract_stream cuda_pool cuda_soak"
+SUITES="cuda_describe cuda_describe_opencv cuda_detect cuda_match cuda_collection cuda_pyramid cuda_faults cuda_async cuda_extract_stream cuda_pool cuda_soak"
 for t in clatch_unit backend $SUITES; do
     echo "== $t" >> "$O/suite.txt"
     start=$(date +%s)
@@ -41,6 +41,9 @@ done
 echo "== cuda_match popcount" >> "$O/suite.txt"
 CLATCH_MATCH_KERNEL=popcount timeout 300 "$B/cuda_match" small_ >> "$O/suite.txt" 2>&1
 summary+=("cuda_match small_ (popcount) rc=$?: $(grep -E '^test result' "$O/suite.txt" | tail -1)")
+echo "== cuda_collection PTX" >> "$O/suite.txt"
+CLATCH_FORCE_PTX=1 CLATCH_TEST_SCALE=sanitizer timeout 300 "$B/cuda_collection" >> "$O/suite.txt" 2>&1
+summary+=("cuda_collection scaled (PTX JIT) rc=$?: $(grep -E '^test result' "$O/suite.txt" | tail -1)")
 echo "== cuda_describe PTX" >> "$O/suite.txt"
 CLATCH_FORCE_PTX=1 timeout 300 "$B/cuda_describe" describe_every_width >> "$O/suite.txt" 2>&1
 summary+=("cuda_describe every_width (PTX JIT) rc=$?: $(grep -E '^test result' "$O/suite.txt" | tail -1)")
@@ -56,6 +59,7 @@ if [ "$part" = sanitize ] || [ "$part" = all ]; then
 for tool in memcheck racecheck initcheck synccheck; do san $tool cuda_match sanitizer_subset; done
 for tool in memcheck initcheck; do san $tool cuda_async eight_images_in_flight; done
 for tool in memcheck initcheck synccheck; do san $tool cuda_extract_stream one_stream_shrinking; done
+for tool in memcheck racecheck initcheck synccheck; do san $tool cuda_collection collection_many_blocks; done
 for tool in memcheck initcheck racecheck; do
     san $tool cuda_describe describe_sizes_subpixel_and_borders
     san $tool cuda_describe_opencv opencv_borders_and_patch_sizes
@@ -69,6 +73,7 @@ san memcheck cuda_detect detect_stage_by_stage
     echo "== bench gpu_match"; timeout 200 "$B/bench_gpu_match"; echo "rc $?"
     echo "== bench gpu_pool"; timeout 200 "$B/bench_gpu_pool"; echo "rc $?"
     echo "== bench gpu_extract_stream"; timeout 200 "$B/bench_gpu_extract_stream"; echo "rc $?"
+    echo "== bench gpu_collection (200 sets)"; CLATCH_COLLECTION_SETS=200 CLATCH_COLLECTION_REPEATS=1 timeout 200 "$B/bench_gpu_collection"; echo "rc $?"
 } > "$O/tools.txt" 2>&1
 summary+=("tools: $(grep -c '^rc 0' "$O/tools.txt") of 6 exited 0")
 fi
@@ -85,7 +90,7 @@ if [ "$part" = sanitize-all ]; then
         scale=full
         [ "$tool" = racecheck ] && scale=sanitizer
         # Cheapest first, so a short call still covers the most binaries; SAN_TIMEOUT bounds each run.
-        for t in cuda_async cuda_extract_stream cuda_faults cuda_match cuda_pyramid cuda_detect cuda_describe cuda_describe_opencv; do
+        for t in cuda_async cuda_extract_stream cuda_faults cuda_collection cuda_match cuda_pyramid cuda_detect cuda_describe cuda_describe_opencv; do
             start=$(date +%s)
             echo "== $tool $t (whole, CLATCH_TEST_SCALE=$scale)" >> "$O/sanitize.txt"
             log=/tmp/san_$tool.txt
@@ -98,7 +103,7 @@ if [ "$part" = sanitize-all ]; then
 fi
 if [ "$part" = racecheck-parallel ]; then
     shift
-    bins=${*:-cuda_async cuda_extract_stream cuda_faults cuda_match cuda_pyramid cuda_detect cuda_describe cuda_describe_opencv}
+    bins=${*:-cuda_async cuda_extract_stream cuda_faults cuda_collection cuda_match cuda_pyramid cuda_detect cuda_describe cuda_describe_opencv}
     mkdir -p /tmp/racecheck
     for t in $bins; do
         (

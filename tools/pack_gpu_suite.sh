@@ -3,8 +3,8 @@
 # .gpu/suite.tar.xz (git-ignored): the GPU test binaries (tests/cuda_*.rs), the library's unit tests and
 # tests/backend.rs with the `cuda` feature, the command-line tool, the gpu_streams example, the
 # gpu_detect and gpu_match benches (they load the bench-only kernels), the gpu_pool bench (the
-# multi-device scheduler on the one GPU) and the gpu_extract_stream bench (whole extraction calls against
-# the device's busy time). Then, with the device tool:
+# multi-device scheduler on the one GPU), the gpu_extract_stream bench (whole extraction calls against
+# the device's busy time) and the gpu_collection bench (exhaustive collection matching). Then, with the device tool:
 #     run: bash tools/gpu_suite.sh      carry: [".gpu"]
 # Needs NVCC (see the README's CUDA section) and libclang.
 set -euo pipefail
@@ -37,7 +37,7 @@ cargo bench -p clatch --features cuda --no-run --message-format=json 2>/dev/null
 import json, sys, shutil
 for line in sys.stdin:
     m = json.loads(line)
-    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] in ("gpu_detect", "gpu_match", "gpu_pool", "gpu_extract_stream"):
+    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] in ("gpu_detect", "gpu_match", "gpu_pool", "gpu_extract_stream", "gpu_collection"):
         shutil.copy(m["executable"], ".gpu/bin/bench_" + m["target"]["name"])
         print("packed bench", m["target"]["name"])
 '

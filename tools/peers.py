@@ -7,6 +7,15 @@ user would write it today: descriptors unpacked once to +-1 vectors, then per ch
 top-k of all chunks (the unpacking is outside the timing, the baseline's best case), median of the runs
 after warm-up. Pairs per second.
 
+Collections (`--collection`, needs PyTorch with CUDA): exhaustive matching of S sets of n random 512-bit
+descriptors (every pair a < b, ratio 0.8 and cross-check), as benches/gpu_collection.rs does with clatch,
+written the way a PyTorch user would: all sets unpacked once to +-1 fp16 on the device, then per batch
+of pairs one `torch.bmm` of the gathered query and gallery sets, `torch.topk(k=2)` along the gallery for
+the ratio test and a max along the queries for the cross-check, the kept matches counted on the device.
+CUDA events around all batches (the unpacking outside, the baseline's best case), after a warm-up on the
+first batches; one timed run by default (`--collection-repeats`). `--collection-pairs P` times only the
+first P pairs and extrapolates to all of them (said so in the output).
+
 Extraction (needs opencv-contrib-python): OpenCV's LATCH (`cv2.xfeatures2d.LATCH_create(64, True, 3)`)
 on the image and keypoints the clatch GPU bench dumped (`CLATCH_BENCH_DUMP=DIR cargo bench --features
 cuda --bench gpu`): one process (OpenCV's LATCH is single-threaded), and the keypoints split over one
@@ -47,17 +56,25 @@ def median_ms(torch, fn, warmup, repeats):
     return statistics.median(times)
 
 
-def torch_matching(sizes, repeats):
+def torch_cuda(seed):
+    """PyTorch, its CUDA device, a generator seeded with `seed` and the results header; or (None, the
+    reason it is skipped)."""
     try:
         import torch
     except ImportError:
-        return {"skipped": "PyTorch not installed"}
+        return None, None, None, {"skipped": "PyTorch not installed"}
     if not torch.cuda.is_available():
-        return {"skipped": "no CUDA device for PyTorch"}
+        return None, None, None, {"skipped": "no CUDA device for PyTorch"}
     dev = torch.device("cuda")
     gen = torch.Generator(device=dev)
-    gen.manual_seed(2024)
-    results = {"device": torch.cuda.get_device_name(0), "torch": torch.__version__, "runs": []}
+    gen.manual_seed(seed)
+    return torch, dev, gen, {"device": torch.cuda.get_device_name(0), "torch": torch.__version__, "runs": []}
+
+
+def torch_matching(sizes, repeats):
+    torch, dev, gen, results = torch_cuda(2024)
+    if torch is None:
+        return results
     budget = 1 << 30  # bytes of one chunk's score matrix
     for n in sizes:
         bits_q = torch.randint(0, 2, (n, 512), generator=gen, device=dev, dtype=torch.int8)
@@ -121,6 +138,67 @@ def torch_matching(sizes, repeats):
             )
             del q, g, gt
             torch.cuda.empty_cache()
+    return results
+
+
+def torch_collection(set_count, sizes, repeats, limit_pairs):
+    torch, dev, gen, results = torch_cuda(2025)
+    if torch is None:
+        return results
+    budget = 1 << 30  # bytes of one batch's score tensor
+    for n in sizes:
+        bits = torch.randint(0, 2, (set_count, n, 512), generator=gen, device=dev, dtype=torch.int8)
+        signs = (1 - 2 * bits).to(torch.float16)
+        first_bits = bits[:2].clone()
+        del bits
+        a_all, b_all = torch.triu_indices(set_count, set_count, offset=1, device=dev)
+        total = a_all.numel()
+        pairs = total if limit_pairs is None else min(total, limit_pairs)
+        batch = max(1, budget // (2 * n * n))
+        arange = torch.arange(n, device=dev)
+
+        def run(count):
+            kept = torch.zeros((), dtype=torch.int64, device=dev)
+            for s in range(0, count, batch):
+                a = a_all[s : min(s + batch, count)]
+                b = b_all[s : min(s + batch, count)]
+                scores = torch.bmm(signs[a], signs[b].transpose(1, 2))  # (B, n, n): 512 - 2 distance
+                top = torch.topk(scores, 2, dim=2)
+                d1 = (512 - top.values[..., 0].float()) / 2
+                d2 = (512 - top.values[..., 1].float()) / 2
+                nearest_query = scores.max(dim=1).indices  # (B, n): per gallery row
+                mutual = nearest_query.gather(1, top.indices[..., 0]) == arange
+                kept += ((d1 < 0.8 * d2) & mutual).sum()
+            return kept
+
+        # The baseline's own check: its top-2 distances of pair (0, 1) equal a direct count.
+        scores = torch.mm(signs[0, :4], signs[1].t())
+        d_baseline = ((512 - torch.topk(scores, 2, dim=1).values.float()) / 2).round().long()
+        direct = (first_bits[0, :4, None, :] != first_bits[1][None, :, :]).sum(-1)
+        d_direct = torch.topk(direct, 2, dim=1, largest=False).values
+        if not torch.equal(d_baseline.sort(dim=1).values, d_direct.sort(dim=1).values):
+            raise SystemExit(f"collection baseline n={n}: distances disagree with a direct count")
+        run(min(pairs, 4 * batch))  # warm-up
+        kept = []
+        ms = median_ms(torch, lambda: kept.append(run(pairs)), 0, repeats)
+        seconds = ms / 1e3 * total / pairs
+        results["runs"].append(
+            {
+                "sets": set_count,
+                "n": n,
+                "pairs": total,
+                "timed_pairs": pairs,
+                "extrapolated": pairs < total,
+                "batch": batch,
+                "seconds": seconds,
+                "pairs_per_s": total / seconds,
+                "descriptor_pairs_per_s": total * n * n / seconds,
+                "kept_in_timed_pairs": int(kept[-1]),
+                "runs": repeats,
+            }
+        )
+        del signs
+        torch.cuda.empty_cache()
     return results
 
 
@@ -201,12 +279,26 @@ def main():
     ap.add_argument("--sizes", default="1024,16384,65536,131072")
     ap.add_argument("--repeats", type=int, default=10)
     ap.add_argument("--out", default=None, help="write the results as JSON here")
+    ap.add_argument("--collection", action="store_true", help="the exhaustive collection baseline too")
+    ap.add_argument("--collection-sets", type=int, default=1000)
+    ap.add_argument("--collection-sizes", default="5000,2000")
+    ap.add_argument("--collection-repeats", type=int, default=1)
+    ap.add_argument("--collection-pairs", type=int, default=None, help="time only this many pairs")
+    ap.add_argument("--skip-matching", action="store_true", help="leave out the N x N kNN baseline")
     args = ap.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
     report = {
         "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
         "paper": PAPER,
-        "matching": torch_matching(sizes, args.repeats),
+        "matching": {"skipped": "--skip-matching"} if args.skip_matching else torch_matching(sizes, args.repeats),
+        "collection": torch_collection(
+            args.collection_sets,
+            [int(s) for s in args.collection_sizes.split(",")],
+            args.collection_repeats,
+            args.collection_pairs,
+        )
+        if args.collection
+        else {"skipped": "no --collection"},
         "extraction": opencv_latch(args.dump, 5) if args.dump else {"skipped": "no --dump"},
     }
     m = report["matching"]
@@ -222,6 +314,18 @@ def main():
                 f"  {r['kind']:<5} {r['n']:>6} x {r['n']:<6}: median {r['ms']:9.3} ms "
                 f"{r['pairs_per_s'] / 1e9:8.1f} G pairs/s (GEMM alone {r['gemm_pairs_per_s'] / 1e9:8.1f}; "
                 f"chunks of {r['chunk']}, {r['runs']} runs)"
+            )
+    c = report["collection"]
+    if "skipped" in c:
+        print(f"collection peers: skipped: {c['skipped']}")
+    else:
+        print(f"PyTorch {c['torch']} on {c['device']}, exhaustive collection, ratio 0.8 + cross-check, +-1 fp16 bmm:")
+        for r in c["runs"]:
+            how = f"extrapolated from {r['timed_pairs']} pairs" if r["extrapolated"] else "all pairs timed"
+            print(
+                f"  {r['sets']} sets x {r['n']}, {r['pairs']} pairs: {r['seconds']:9.3f} s "
+                f"{r['pairs_per_s']:9.0f} pairs/s {r['descriptor_pairs_per_s'] / 1e9:7.1f} G descriptor pairs/s "
+                f"({how}; batches of {r['batch']} pairs, {r['runs']} runs)"
             )
     e = report["extraction"]
     if "skipped" in e:

@@ -209,7 +209,7 @@ impl Matcher {
     /// order. ``pairs`` is a sequence of ``(a, b)`` or an integer array of shape (P, 2)
     /// (``all_pairs(n)``). A pair with no query, or too small a gallery, gets no matches rather than
     /// an error; every index and width is checked before any work. The CPU spreads the pairs over its
-    /// threads, CUDA keeps several streams busy.
+    /// threads, CUDA uploads each set once and matches many pairs per kernel launch.
     fn match_pairs<'py>(
         &self,
         py: Python<'py>,

@@ -3,7 +3,9 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
-use cudarc::driver::{CudaContext, CudaFunction, CudaSlice, CudaStream, DriverError, sys};
+use cudarc::driver::{
+    CudaContext, CudaEvent, CudaFunction, CudaSlice, CudaStream, DriverError, sys,
+};
 use cudarc::nvrtc::Ptx;
 
 use super::arena::LanePool;
@@ -74,6 +76,20 @@ const KERNELS: &[KernelFile] = &[
         fatbin: ptx::MATCHING_FATBIN,
         names: super::matching::KERNELS,
         needs_tensor_cores: false,
+    },
+    KernelFile {
+        path: "kernels/match_pairs.cu",
+        ptx: ptx::MATCH_PAIRS_PTX,
+        fatbin: ptx::MATCH_PAIRS_FATBIN,
+        names: super::collection::KERNELS,
+        needs_tensor_cores: false,
+    },
+    KernelFile {
+        path: "kernels/match_pairs_tensor.cu",
+        ptx: ptx::MATCH_PAIRS_TENSOR_PTX,
+        fatbin: ptx::MATCH_PAIRS_TENSOR_FATBIN,
+        names: super::collection::TENSOR_KERNELS,
+        needs_tensor_cores: true,
     },
     KernelFile {
         path: "kernels/matching_tensor.cu",
@@ -195,8 +211,10 @@ impl GpuDevice {
         // use, so that a buffer can hop between streams safely. clatch never lets one hop: each call
         // allocates, uses and frees its buffers on its own stream (frees are stream-ordered), and the
         // tables below are uploaded on the default stream and synchronised before any other stream
-        // exists; pinned staging buffers keep their own events. The tracking cost ~2 driver calls per
-        // kernel argument and most of the host time of a queued image.
+        // exists. The tracking cost ~2 driver calls per kernel argument and most of the host time of
+        // a queued image. With it off, cudarc never records a `PinnedHostSlice`'s own event either, so
+        // its `as_slice`, `as_mut_slice` and drop return at once even with copies queued: every user of
+        // pinned memory records and waits on events of its own (`memory.rs`, `collection/grouped.rs`).
         // SAFETY: the invariant above: no buffer is used on a stream other than the one it was
         // allocated on, except the tables, which are complete before they are shared.
         unsafe { ctx.disable_event_tracking() };
@@ -372,6 +390,13 @@ impl GpuDevice {
         self.ctx
             .new_stream()
             .map_err(driver_error("stream creation"))
+    }
+
+    /// A new event without timing, not yet recorded (waiting on it returns at once until it is).
+    pub(crate) fn new_event(&self) -> Result<CudaEvent> {
+        self.ctx
+            .new_event(None)
+            .map_err(driver_error("event creation"))
     }
 }
 

@@ -78,12 +78,12 @@ const MAX_SEGMENTS: usize = 65_535;
 
 /// Bits per row the kernels see: `words` rounded up to a power of two (zero bits are +1 on both sides:
 /// the same constant in every dot product, so distances are unchanged).
-fn padded_bits(words: usize) -> usize {
+pub(crate) fn padded_bits(words: usize) -> usize {
     words.next_power_of_two() * 64
 }
 
 /// Shared memory of one block of the kernels for `bits`-wide rows: the gallery stages.
-fn shared_bytes(bits: usize) -> usize {
+pub(crate) fn shared_bytes(bits: usize) -> usize {
     CLATCH_TENSOR_STAGES as usize * TILE * bits
 }
 
@@ -272,7 +272,7 @@ fn config(g: Geometry, bits: usize) -> LaunchConfig {
 
 /// Queues the expansion of a padded bit buffer (rows of `words` words) into `signs` (rows of `bits`
 /// signed bytes).
-fn expand(
+pub(crate) fn expand(
     dev: &GpuDevice,
     stream: &Arc<CudaStream>,
     bits_buffer: &CudaSlice<u64>,

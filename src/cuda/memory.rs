@@ -142,7 +142,8 @@ struct Staging {
 
 impl Drop for Staging {
     fn drop(&mut self) {
-        // The buffer is freed after this: its copy must have read it.
+        // The buffer is freed after this: its copy must have read it. (A copy queued without its
+        // event is waited for by `upload_rows` before the buffer gets here.)
         let _ = self.copied.synchronize();
     }
 }
@@ -266,7 +267,13 @@ pub(crate) fn upload_rows(
                 .record(stream)
                 .map_err(driver_error("event record"))
         })();
-        give_back(ordinal, staged);
+        if result.is_err() && stream.synchronize().is_err() {
+            // The copy may have been queued without its event: with the stream broken too, leak the
+            // page-locked band rather than hand it out (or free it) while the copy may still read it.
+            std::mem::forget(staged);
+        } else {
+            give_back(ordinal, staged);
+        }
         result?;
         y0 = y1;
     }

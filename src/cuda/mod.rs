@@ -9,6 +9,7 @@
 //! built with `cuda` still starts on a machine without one and reports `no CUDA driver` as a typed error.
 
 mod arena;
+mod collection;
 mod describe;
 mod describe_opencv;
 mod detect;
@@ -33,6 +34,7 @@ pub(crate) mod ptx {
     include!(concat!(env!("OUT_DIR"), "/kernels.rs"));
 }
 
+pub(crate) use collection::DeviceCollection;
 pub(crate) use describe::describe;
 pub(crate) use describe_opencv::describe_opencv;
 pub(crate) use detect::detect;
@@ -48,6 +50,7 @@ pub(crate) use texture::ImageLife;
 #[cfg(feature = "internals")]
 #[doc(hidden)]
 pub mod hooks {
+    pub use super::collection::hooks::*;
     pub use super::describe::hooks::*;
     pub use super::detect::hooks::*;
     pub use super::device::{GpuDevice, device};

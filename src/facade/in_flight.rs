@@ -21,28 +21,6 @@ pub(super) enum Queued<P, T> {
     Ready(T),
 }
 
-/// Runs `queue(i)` for `i` in `0..n`, keeping at most `STREAMS * IN_FLIGHT_PER_STREAM` items queued,
-/// and `wait`s for them oldest first; `done(i)` follows each result. Results in input order.
-pub(super) fn run_in_order<P, T>(
-    n: usize,
-    queue: impl FnMut(usize) -> Result<Queued<P, T>>,
-    wait: impl FnMut(P) -> Result<T>,
-    done: &(dyn Fn(usize) + Sync),
-) -> Result<Vec<T>> {
-    let mut results = Vec::with_capacity(n);
-    run_window(
-        0..n,
-        STREAMS * IN_FLIGHT_PER_STREAM,
-        queue,
-        wait,
-        |i, result| {
-            results.push(result);
-            done(i);
-        },
-    )?;
-    Ok(results)
-}
-
 /// Runs `queue(item)` for each item as `items` yields it (items may be claimed from a shared queue as
 /// they are needed), keeping at most `window` (at least one) queued, and `wait`s for them oldest
 /// first; `finish(item, result)` takes each result, in the order the items came.
@@ -79,6 +57,28 @@ pub(super) fn run_window<I: Copy, P, T>(
 mod tests {
     use super::*;
     use std::sync::Mutex;
+
+    /// The window over `0..n`, results collected in input order (what the tests check): runs `queue(i)` for `i` in `0..n`, keeping at most `STREAMS * IN_FLIGHT_PER_STREAM` items queued,
+    /// and `wait`s for them oldest first; `done(i)` follows each result. Results in input order.
+    fn run_in_order<P, T>(
+        n: usize,
+        queue: impl FnMut(usize) -> Result<Queued<P, T>>,
+        wait: impl FnMut(P) -> Result<T>,
+        done: &(dyn Fn(usize) + Sync),
+    ) -> Result<Vec<T>> {
+        let mut results = Vec::with_capacity(n);
+        run_window(
+            0..n,
+            STREAMS * IN_FLIGHT_PER_STREAM,
+            queue,
+            wait,
+            |i, result| {
+                results.push(result);
+                done(i);
+            },
+        )?;
+        Ok(results)
+    }
 
     #[test]
     fn results_in_order_with_a_bounded_window() {

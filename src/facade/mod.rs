@@ -9,12 +9,14 @@
 //! it) and this file needs no `cfg`.
 
 mod batch;
+mod collection;
 mod extractor;
 mod in_flight;
 mod matcher;
 mod pairs;
 mod pool;
 
+pub use collection::DescriptorCollection;
 pub use extractor::{Extractor, ExtractorConfig};
 pub use matcher::Matcher;
 pub use pool::DevicePool;

@@ -1,10 +1,8 @@
 //! Many pairs of descriptor sets in one call: the collection path (every pair of a photo collection, or
 //! a given pair list), as structure from motion needs it.
 
-use super::Matcher;
-use super::in_flight::{Queued, STREAMS, run_in_order, streams};
+use super::{DescriptorCollection, Matcher};
 use crate::backend::Backend;
-use crate::cuda;
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
 use crate::matching::{self, Match};
@@ -29,8 +27,9 @@ impl Matcher {
     /// width is checked before any work. `done` is called once per finished pair with its index
     /// (in any order on the CPU, in pair order on the GPU), e.g. for progress.
     ///
-    /// The CPU backend spreads the pairs over its threads; the CUDA backend keeps several streams
-    /// busy, each pair's transfers and kernels queued while earlier pairs finish.
+    /// The CPU backend spreads the pairs over its threads; the CUDA backend uploads each set once into
+    /// a [`DescriptorCollection`] and matches many pairs per kernel launch, blocks of pairs one after
+    /// another.
     ///
     /// ```
     /// use clatch::{Backend, DescriptorSet, DescriptorWidth, MatchConfig, Matcher};
@@ -71,22 +70,18 @@ impl Matcher {
                     found
                 })
                 .collect()),
-            Backend::Cuda { device } => {
-                let streams = streams(device)?;
-                run_in_order(
-                    pairs.len(),
-                    |p| {
-                        let pair = &pairs[p];
-                        if !matchable(pair) {
-                            return Ok(Queued::Ready(Vec::new()));
-                        }
-                        let stream = &streams[p % STREAMS];
-                        cuda::match_async(stream, sets[pair.0], sets[pair.1], self.config())
-                            .map(Queued::Pending)
-                    },
-                    cuda::PendingMatches::wait,
-                    done,
-                )
+            Backend::Cuda { .. } => {
+                let Some(first) = sets.first() else {
+                    return Ok(Vec::new()); // no sets, so no pairs (checked above)
+                };
+                let mut collection = DescriptorCollection::new(self, first.width())?;
+                collection.add(sets)?;
+                let mut results = Vec::with_capacity(pairs.len());
+                collection.match_pairs(pairs, |p, matches| {
+                    results.push(matches);
+                    done(p);
+                })?;
+                Ok(results)
             }
         }
     }

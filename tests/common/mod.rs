@@ -206,3 +206,31 @@ pub fn on_threads(
             .sum()
     })
 }
+
+/// Sets of `bits` bits, one per entry of `sizes`, full of ties: every row is a row of a small shared
+/// pool (so rows repeat within and across sets), that row a few bits off, or fresh random bits.
+/// Equal distances, to one query and across queries, are then common at every width.
+pub fn tied_collection(bits: usize, sizes: &[usize], rng: &mut SplitMix64) -> Vec<DescriptorSet> {
+    let width = DescriptorWidth::from_bits(bits).expect("a valid width");
+    let pool = random_set(width, 24, rng);
+    sizes
+        .iter()
+        .map(|&n| {
+            let mut words = Vec::with_capacity(n * width.words());
+            for _ in 0..n {
+                let mut row = pool
+                    .rows()
+                    .nth(rng.below(24) as usize)
+                    .expect("24 rows")
+                    .to_vec();
+                match rng.below(4) {
+                    0 | 1 => {}
+                    2 => flip_bits(&mut row, bits, 1 + rng.below(3) as usize, rng),
+                    _ => random_set(width, 1, rng).as_words().clone_into(&mut row),
+                }
+                words.extend(row);
+            }
+            DescriptorSet::from_words(width, words).expect("whole rows")
+        })
+        .collect()
+}

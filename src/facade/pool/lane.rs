@@ -2,30 +2,20 @@
 //! ([`PairLane`], the plug for a device's own kind of resident set), and images.
 //!
 //! A lane prepares each set a block reads once, keeps it for the whole block, and drops it when the
-//! next block no longer reads it. On the CPU a prepared set is the host set itself. On a CUDA device
-//! it is the host set too, for now: every pair uploads its two sets, as `Matcher::match_pairs` does,
-//! because the CUDA backend has no set that stays on the device across calls yet (both are
-//! `HostSets`). A resident CUDA set plugs in as a `PairLane` of its own whose `Set` is the device
-//! copy, with no change to the scheduler; it needs from the CUDA side:
-//! - a device set type: the rows uploaded once, zero-padded to whole `ROW_PAD` tiles as
-//!   `cuda::matching::upload` pads them, and, on the tensor-core path, their ±1 expansion (today
-//!   `TensorKnn::launch` expands both sets for every pair), behind an `Arc` so that pairs in flight
-//!   keep it alive after the block that prepared it is over;
-//! - an upload on one of the worker's streams followed by an event every other stream of the worker
-//!   waits on before its first use (the device disables cudarc's event tracking, on the promise that
-//!   no buffer is used on a stream other than its own), and a free only after the last pair that
-//!   reads it is waited for (the `Arc` held by each pending pair gives that);
-//! - a `MatchJob` built from two such sets instead of uploading, with its scratch per stream.
+//! next block no longer reads it. On the CPU a prepared set is the host set itself (`HostCpu`). A CUDA
+//! worker takes whole blocks instead ([`match_blocks_grouped`]): each block's sets go into a
+//! `DescriptorCollection` (uploaded once for the block) and its pairs are matched many per launch, as
+//! one-device `Matcher::match_pairs` does with all of its sets.
 
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::convert::Infallible;
 
 use super::super::in_flight::{IN_FLIGHT_PER_STREAM, Queued, STREAMS, run_window, streams};
-use super::super::{Extractor, Matcher};
+use super::super::{DescriptorCollection, Extractor, Matcher};
 use super::schedule::{Block, WorkQueue};
 use crate::backend::Backend;
-use crate::cuda::{self, GpuStream, PendingFeatures, PendingMatches};
+use crate::cuda::PendingFeatures;
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
 use crate::features::Features;
@@ -85,10 +75,15 @@ impl<S> Resident<S> {
     }
 
     fn get(&self, s: usize) -> Result<&S> {
-        self.held.get(&s).ok_or_else(|| Error::Internal {
-            operation: "device pool",
-            message: format!("set {s} is not resident for its block"),
-        })
+        self.held.get(&s).ok_or_else(|| not_resident(s))
+    }
+}
+
+/// The scheduler's promise broken: a block's pair reads set `s`, which the block does not list.
+fn not_resident(s: usize) -> Error {
+    Error::Internal {
+        operation: "device pool",
+        message: format!("set {s} is not resident for its block"),
     }
 }
 
@@ -146,39 +141,66 @@ pub(super) fn match_on(
     queue: &WorkQueue,
     done: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<(usize, Vec<Match>)>> {
-    let mut lane = match matcher.backend() {
-        Backend::Cpu => HostSets::Cpu(matcher),
-        Backend::Cuda { device } => HostSets::Cuda {
-            matcher,
-            streams: streams(device)?,
-            next: 0,
-        },
-    };
-    match_blocks(&mut lane, collection, queue, done)
+    match matcher.backend() {
+        Backend::Cpu => match_blocks(&mut HostCpu(matcher), collection, queue, done),
+        Backend::Cuda { .. } => match_blocks_grouped(matcher, collection, queue, done),
+    }
 }
 
-/// A device that reads its sets from host memory, so that a set needs no preparing: the CPU, one
-/// pair at a time over all of its threads, and (until a CUDA set can stay on the device, see the
-/// module's notes) a CUDA device, which uploads each pair's two sets with the pair and keeps pairs in
-/// flight on the worker's own streams, as `Matcher::match_pairs` does.
-enum HostSets<'m> {
-    Cpu(&'m Matcher),
-    Cuda {
-        matcher: &'m Matcher,
-        streams: Vec<GpuStream>,
-        next: usize,
-    },
+/// [`match_blocks`] for a CUDA worker: each claimed block matched whole on `matcher`'s device, its
+/// sets in a `DescriptorCollection` of their own and its matchable pairs in one grouped run (the
+/// others get no matches).
+fn match_blocks_grouped(
+    matcher: &Matcher,
+    collection: &Collection,
+    queue: &WorkQueue,
+    done: &(dyn Fn(usize) + Sync),
+) -> Result<Vec<(usize, Vec<Match>)>> {
+    let Collection {
+        sets,
+        pairs,
+        blocks,
+        ..
+    } = collection;
+    let mut finished = Vec::new();
+    while let Some(b) = queue.claim() {
+        let block = &blocks[b];
+        let resident = |s: usize| block.sets.binary_search(&s).map_err(|_| not_resident(s));
+        let mut listed = Vec::new();
+        for &p in &block.pairs {
+            let (a, t) = pairs[p];
+            if matcher.matchable(sets, (a, t)) {
+                listed.push((p, (resident(a)?, resident(t)?)));
+            } else {
+                done(p);
+                finished.push((p, Vec::new()));
+            }
+        }
+        let Some(&(first, _)) = listed.first() else {
+            continue;
+        };
+        let held: Vec<&DescriptorSet> = block.sets.iter().map(|&s| sets[s]).collect();
+        let mut on_device = DescriptorCollection::new(matcher, sets[pairs[first].0].width())?;
+        on_device.add(&held)?;
+        let local: Vec<(usize, usize)> = listed.iter().map(|&(_, pair)| pair).collect();
+        on_device.match_pairs(&local, |i, matches| {
+            let p = listed[i].0;
+            done(p);
+            finished.push((p, matches));
+        })?;
+    }
+    Ok(finished)
 }
 
-impl<'s> PairLane<'s> for HostSets<'_> {
+/// The CPU: its sets need no preparing; one pair at a time over all of its threads.
+struct HostCpu<'m>(&'m Matcher);
+
+impl<'s> PairLane<'s> for HostCpu<'_> {
     type Set = &'s DescriptorSet;
-    type Pending = PendingMatches;
+    type Pending = Infallible;
 
     fn window(&self) -> usize {
-        match self {
-            HostSets::Cpu(_) => 1,
-            HostSets::Cuda { .. } => STREAMS * IN_FLIGHT_PER_STREAM,
-        }
+        1
     }
 
     fn prepare(&mut self, set: &'s DescriptorSet) -> Result<Self::Set> {
@@ -189,27 +211,16 @@ impl<'s> PairLane<'s> for HostSets<'_> {
         &mut self,
         query: &Self::Set,
         train: &Self::Set,
-    ) -> Result<Queued<PendingMatches, Vec<Match>>> {
-        match self {
-            HostSets::Cpu(matcher) => Ok(Queued::Ready(matching::cpu::match_descriptors(
-                query,
-                train,
-                matcher.config(),
-            ))),
-            HostSets::Cuda {
-                matcher,
-                streams,
-                next,
-            } => {
-                let stream = &streams[*next % STREAMS];
-                *next += 1;
-                cuda::match_async(stream, query, train, matcher.config()).map(Queued::Pending)
-            }
-        }
+    ) -> Result<Queued<Infallible, Vec<Match>>> {
+        Ok(Queued::Ready(matching::cpu::match_descriptors(
+            query,
+            train,
+            self.0.config(),
+        )))
     }
 
-    fn wait(pending: PendingMatches) -> Result<Vec<Match>> {
-        pending.wait()
+    fn wait(pending: Infallible) -> Result<Vec<Match>> {
+        match pending {}
     }
 }
 

@@ -1,0 +1,237 @@
+//! A collection of descriptor sets held ready for matching on one backend: added once, matched many
+//! times (every pair, listed pairs, or a query set against the held ones), results handed out pair by
+//! pair as they complete.
+
+use std::ops::Range;
+
+use super::Matcher;
+use crate::backend::Backend;
+use crate::cuda;
+use crate::descriptor::{DescriptorSet, DescriptorWidth};
+use crate::error::{Error, Result};
+use crate::matching::{self, Match, MatchConfig};
+use crate::parallel::*;
+
+/// Pairs the CPU matches at once (over all its threads) before handing their results out in order.
+const HOST_BLOCK: usize = 256;
+
+/// Descriptor sets of one width held by a backend for matching, as a gallery (FAISS's
+/// `GpuIndexBinaryFlat` with add and search) or as the photos of a collection (every pair, as structure
+/// from motion needs).
+///
+/// On `Backend::Cuda` the sets live on the device from [`DescriptorCollection::add`] on: each crosses
+/// the bus once, however many pairs read it, and many pairs are matched per kernel launch. On
+/// `Backend::Cpu` they are kept in host memory. Every result equals [`Matcher::match_descriptors`] of
+/// the pair with the collection's [`MatchConfig`], ties included, on either backend; a pair with no
+/// query, or with too small a gallery (none, or one descriptor under the ratio test), gets no matches,
+/// as in [`Matcher::match_pairs`].
+///
+/// Results are handed to a callback, `each(i, matches)`, once per pair `i` of the request, in
+/// increasing `i`, as soon as the block of pairs holding it is back: memory stays bounded for any
+/// number of pairs (blocks of pairs are matched one after another), and the caller may write each
+/// result out and drop it. The callback may match on the same collection again, and several threads
+/// may match one collection at once (it is `Sync`; on CUDA their work shares the collection's stream).
+///
+/// ```
+/// use clatch::{Backend, DescriptorCollection, DescriptorSet, DescriptorWidth, MatchConfig, Matcher};
+///
+/// let width = DescriptorWidth::from_bits(64)?;
+/// let set = |seed: u64| {
+///     let words = (0..100).map(|i| (i as u64 + seed).wrapping_mul(0x9E37_79B9_7F4A_7C15)).collect();
+///     DescriptorSet::from_words(width, words)
+/// };
+/// let (a, b, c) = (set(0)?, set(50)?, set(7)?);
+/// let matcher = Matcher::new(Backend::Cpu, MatchConfig::default())?;
+/// let mut collection = DescriptorCollection::new(&matcher, width)?;
+/// assert_eq!(collection.add(&[&a, &b])?, 0..2);
+/// assert_eq!(collection.add(&[&c])?, 2..3);
+///
+/// let mut all = Vec::new();
+/// collection.match_all_pairs(|i, matches| all.push((i, matches)))?;
+/// assert_eq!(all.len(), 3); // (0, 1), (0, 2), (1, 2)
+/// assert_eq!(all[1].1, matcher.match_descriptors(&a, &c)?);
+///
+/// let mut found = Vec::new();
+/// collection.search(&b, |id, matches| found.push((id, matches.len())))?;
+/// assert_eq!(found.iter().map(|f| f.0).collect::<Vec<_>>(), vec![0, 1, 2]);
+/// # Ok::<(), clatch::Error>(())
+/// ```
+#[derive(Debug)]
+pub struct DescriptorCollection {
+    matcher: Matcher,
+    width: DescriptorWidth,
+    sizes: Vec<usize>,
+    store: Store,
+}
+
+/// Where the sets are held.
+#[derive(Debug)]
+enum Store {
+    Host(Vec<DescriptorSet>),
+    Device(cuda::DeviceCollection),
+}
+
+impl DescriptorCollection {
+    /// An empty collection of `width`-bit sets on `matcher`'s backend, matched with its configuration.
+    pub fn new(matcher: &Matcher, width: DescriptorWidth) -> Result<Self> {
+        let store = match matcher.backend() {
+            Backend::Cpu => Store::Host(Vec::new()),
+            Backend::Cuda { device } => {
+                Store::Device(cuda::DeviceCollection::new(cuda::device(device)?, width)?)
+            }
+        };
+        Ok(Self {
+            matcher: matcher.clone(),
+            width,
+            sizes: Vec::new(),
+            store,
+        })
+    }
+
+    /// The matcher whose backend holds the sets and whose configuration matches them.
+    pub fn matcher(&self) -> &Matcher {
+        &self.matcher
+    }
+
+    /// The width of every set.
+    pub fn width(&self) -> DescriptorWidth {
+        self.width
+    }
+
+    /// Sets held.
+    pub fn len(&self) -> usize {
+        self.sizes.len()
+    }
+
+    /// True when no set is held.
+    pub fn is_empty(&self) -> bool {
+        self.sizes.is_empty()
+    }
+
+    /// Descriptors in set `id`; `None` past the last set.
+    pub fn set_len(&self, id: usize) -> Option<usize> {
+        self.sizes.get(id).copied()
+    }
+
+    /// Adds `sets` after the ones held and returns their ids (consecutive, in order). Every set must
+    /// have the collection's width ([`Error::DescriptorWidthMismatch`], checked before any is added).
+    /// On a CUDA backend this is where the descriptors are uploaded.
+    pub fn add(&mut self, sets: &[&DescriptorSet]) -> Result<Range<usize>> {
+        for set in sets {
+            self.check_width(set)?;
+        }
+        match &mut self.store {
+            Store::Host(held) => held.extend(sets.iter().map(|&s| s.clone())),
+            Store::Device(device) => device.add(sets)?,
+        }
+        let first = self.sizes.len();
+        self.sizes.extend(sets.iter().map(|s| s.len()));
+        Ok(first..self.sizes.len())
+    }
+
+    /// Matches every `(a, b)` of `pairs` (held set `a` the queries, `b` the gallery; any order,
+    /// repeats allowed) and calls `each(i, matches)` for each `pairs[i]`, in increasing `i`. Every id is
+    /// checked before any work ([`Error::PairOutOfRange`]).
+    pub fn match_pairs(
+        &self,
+        pairs: &[(usize, usize)],
+        mut each: impl FnMut(usize, Vec<Match>),
+    ) -> Result<()> {
+        for (p, &(a, b)) in pairs.iter().enumerate() {
+            self.check_id(p, a)?;
+            self.check_id(p, b)?;
+        }
+        let config = self.matcher.config();
+        match &self.store {
+            Store::Host(held) => {
+                in_host_blocks(pairs, each, |&(a, b)| {
+                    match_on_host(&held[a], &held[b], config)
+                });
+                Ok(())
+            }
+            Store::Device(device) => device.match_pairs(pairs, config, &mut each),
+        }
+    }
+
+    /// [`DescriptorCollection::match_pairs`] of every pair `(a, b)`, `a < b`, of the sets held, in
+    /// [`Matcher::all_pairs`] order.
+    pub fn match_all_pairs(&self, each: impl FnMut(usize, Vec<Match>)) -> Result<()> {
+        self.match_pairs(&Matcher::all_pairs(self.len()), each)
+    }
+
+    /// Matches `query` (the queries) against every held set (the galleries) and calls
+    /// `each(id, matches)` for each set, in id order. `query` must have the collection's width.
+    pub fn search(&self, query: &DescriptorSet, each: impl FnMut(usize, Vec<Match>)) -> Result<()> {
+        let ids: Vec<usize> = (0..self.len()).collect();
+        self.search_sets(query, &ids, each)
+    }
+
+    /// Matches `query` against the held sets `ids` (any order, repeats allowed) and calls
+    /// `each(i, matches)` for each `ids[i]`, in increasing `i`. The width and every id are checked
+    /// before any work.
+    pub fn search_sets(
+        &self,
+        query: &DescriptorSet,
+        ids: &[usize],
+        mut each: impl FnMut(usize, Vec<Match>),
+    ) -> Result<()> {
+        self.check_width(query)?;
+        for (i, &id) in ids.iter().enumerate() {
+            self.check_id(i, id)?;
+        }
+        let config = self.matcher.config();
+        match &self.store {
+            Store::Host(held) => {
+                in_host_blocks(ids, each, |&id| match_on_host(query, &held[id], config));
+                Ok(())
+            }
+            Store::Device(device) => device.search(query, ids, config, &mut each),
+        }
+    }
+
+    fn check_width(&self, set: &DescriptorSet) -> Result<()> {
+        if set.width() != self.width {
+            return Err(Error::DescriptorWidthMismatch {
+                query_bits: set.width().bits(),
+                train_bits: self.width.bits(),
+            });
+        }
+        Ok(())
+    }
+
+    fn check_id(&self, pair: usize, index: usize) -> Result<()> {
+        if index >= self.len() {
+            return Err(Error::PairOutOfRange {
+                pair,
+                index,
+                sets: self.len(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// One pair on the CPU, as [`Matcher::match_pairs`] treats it: no matches without queries or with
+/// too small a gallery.
+fn match_on_host(query: &DescriptorSet, train: &DescriptorSet, config: &MatchConfig) -> Vec<Match> {
+    let needed = if config.ratio.is_some() { 2 } else { 1 };
+    if query.is_empty() || train.len() < needed {
+        return Vec::new();
+    }
+    matching::cpu::match_descriptors(query, train, config)
+}
+
+/// `matches(item)` of every item, `HOST_BLOCK` at a time over the CPU's threads, each block's
+/// results handed to `each` in item order before the next block starts.
+fn in_host_blocks<T: Sync>(
+    items: &[T],
+    mut each: impl FnMut(usize, Vec<Match>),
+    matches: impl Fn(&T) -> Vec<Match> + Sync,
+) {
+    for (b, block) in items.chunks(HOST_BLOCK).enumerate() {
+        let found: Vec<Vec<Match>> = block.par_iter().map(&matches).collect();
+        for (i, m) in found.into_iter().enumerate() {
+            each(b * HOST_BLOCK + i, m);
+        }
+    }
+}

@@ -172,23 +172,21 @@ unsafe fn scan_block_words(
             let q0 = g * GROUP;
             // A short group repeats its last query: same keys for `nearest`, results dropped.
             let member = |j: usize| group[j.min(group.len() - 1)];
-            let rows: [[u64; 8]; GROUP] = std::array::from_fn(|j| {
-                let mut row = [0; 8];
-                row[..words].copy_from_slice(member(j));
-                row
-            });
+            // Word `w` of member `j` at `[w][j]`: words past the width stay zero.
+            let member_words: [[u64; GROUP]; 8] =
+                std::array::from_fn(|w| std::array::from_fn(|j| member(j).get(w).copied().unwrap_or(0)));
             let ids: [u32; GROUP] = std::array::from_fn(|j| first + (q0 + j.min(group.len() - 1)) as u32);
             let id_lanes: [__m512i; GROUP] = ids.map(|q| _mm512_set1_epi64(q as i64));
             for b in tile..tile_end {
                 // SAFETY: block `b` < `blocks` is `words` whole registers inside `gallery.blocks`.
                 let base = unsafe { gallery.blocks.as_ptr().add(b * words * LANES) };
                 let mut acc = [_mm512_setzero_si512(); GROUP];
-                for w in 0..words {
+                for (w, query_words) in member_words.iter().enumerate().take(words) {
                     // SAFETY: word `w` < `words` of block `b` (see `base`).
                     let row = unsafe { _mm512_loadu_si512(base.add(w * LANES) as *const __m512i) };
-                    for j in 0..GROUP {
-                        let x = _mm512_xor_si512(row, _mm512_set1_epi64(rows[j][w] as i64));
-                        acc[j] = _mm512_add_epi64(acc[j], _mm512_popcnt_epi64(x));
+                    for (sum, &word) in acc.iter_mut().zip(query_words) {
+                        let x = _mm512_xor_si512(row, _mm512_set1_epi64(word as i64));
+                        *sum = _mm512_add_epi64(*sum, _mm512_popcnt_epi64(x));
                     }
                 }
                 let valid: __mmask8 = if b + 1 == blocks {

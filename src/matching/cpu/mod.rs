@@ -246,6 +246,23 @@ pub fn match_descriptors(
     select(&neighbours, reverse.as_deref(), config)
 }
 
+/// [`match_descriptors`] by the scalar code whatever the CPU has: the named baseline of the matching
+/// bench (`benches/matching.rs`).
+#[cfg(any(test, feature = "internals"))]
+pub fn match_descriptors_scalar(
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    config: &MatchConfig,
+) -> Vec<Match> {
+    let k = if config.ratio.is_some() { 2 } else { 1 };
+    if config.cross_check {
+        let (neighbours, reverse) = knn_and_reverse_scalar(query, train, k);
+        select(&neighbours, Some(&reverse), config)
+    } else {
+        select(&knn_scalar(query, train, k), None, config)
+    }
+}
+
 /// The best matches of `neighbours` that pass the rules of `config` (with `reverse`, the nearest query
 /// of every gallery row, when it cross-checks).
 fn select(neighbours: &KnnMatches, reverse: Option<&[u32]>, config: &MatchConfig) -> Vec<Match> {
@@ -309,7 +326,7 @@ mod tests {
     fn planted(bits: usize, n: usize, pool: &[u64], rng: &mut crate::synthetic::SplitMix64) -> DescriptorSet {
         let width = DescriptorWidth::from_bits(bits).unwrap();
         let w = width.words();
-        let tail = |i: usize| if bits % 64 == 0 || i + 1 < w { u64::MAX } else { (1u64 << (bits % 64)) - 1 };
+        let tail = |i: usize| if bits.is_multiple_of(64) || i + 1 < w { u64::MAX } else { (1u64 << (bits % 64)) - 1 };
         let mut words = Vec::with_capacity(n * w);
         for i in 0..n {
             let r = rng.next_u64();
@@ -326,7 +343,7 @@ mod tests {
                 }
                 _ => words.extend((0..w).map(|i| rng.next_u64() & tail(i))),
             }
-            if r % 11 == 0 {
+            if r.is_multiple_of(11) {
                 // one bit away from what was written: distances differing by one near a tie
                 let bit = (r >> 20) as usize % bits;
                 words[start + bit / 64] ^= 1 << (bit % 64);
@@ -374,6 +391,7 @@ mod tests {
                         config,
                     );
                     assert_eq!(match_descriptors(&query, &train, config), expected, "{at}, {config:?}");
+                    assert_eq!(match_descriptors_scalar(&query, &train, config), expected, "{at}, {config:?}");
                 }
             }
         }

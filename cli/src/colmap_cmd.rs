@@ -70,7 +70,11 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
 
     // Detect and describe every photo.
     let grid = args.detect.grid.unwrap_or(DEFAULT_GRID);
-    let extractor = Extractor::new(settings.backend, extraction_config(&settings, grid))?;
+    let max_keypoints = args.detect.max_keypoints.unwrap_or(DEFAULT_MAX_KEYPOINTS);
+    let extractor = Extractor::new(
+        settings.backend,
+        extraction_config(&settings, grid, max_keypoints),
+    )?;
     let progress = Progress::counter(plan.images.len() as u64, "extracting features");
     let watch = Stopwatch::start();
     let limits = args.input.limits();
@@ -292,11 +296,22 @@ fn default_workspace(database: &Path) -> PathBuf {
 /// photo (foliage, gravel) from taking every keypoint.
 const DEFAULT_GRID: u32 = 8;
 
+/// Keypoints per photo when `--max-keypoints` is not given: COLMAP's own budget of SIFT features
+/// (`SiftExtraction.max_num_features`, 8192). Structure from motion wants many well-spread points per
+/// photo more than a fast match of each pair, and every pair of photos is matched, so its budget is
+/// larger than the library's general default of 5000 (measured: docs/bench/2026-12-02-sfm/).
+const DEFAULT_MAX_KEYPOINTS: usize = 8192;
+
 /// The extractor's settings: the library spreads keypoints over the grid
 /// ([`clatch::DetectorConfig::grid`]).
-fn extraction_config(settings: &crate::pipeline::Settings, grid: u32) -> clatch::ExtractorConfig {
+fn extraction_config(
+    settings: &crate::pipeline::Settings,
+    grid: u32,
+    max_keypoints: usize,
+) -> clatch::ExtractorConfig {
     let mut config = settings.extractor.clone();
     config.detector.grid = grid as usize;
+    config.detector.max_keypoints = max_keypoints;
     config
 }
 

@@ -479,6 +479,9 @@ fn write_match_list(
 
 /// The two COLMAP steps after the database: import with verification, then the mapper, on the given
 /// database, match list and model folder.
+/// The mapper option that `clatch colmap` sets to 0 when --camera-k is given (unless given itself).
+const KEEP_FOCAL_LENGTH: &str = "Mapper.ba_refine_focal_length";
+
 fn colmap_steps(
     args: &ColmapArgs,
     (database, match_list, sparse): (&Path, &Path, &Path),
@@ -503,6 +506,24 @@ fn colmap_steps(
         os("--output_path"),
         sparse.into(),
     ];
+    let key_of = |option: &String| {
+        option
+            .split_once('=')
+            .map_or(option.clone(), |(k, _)| k.to_owned())
+    };
+    // A given K is a calibration: the mapper keeps it. COLMAP's bundle adjustment refines fx and fy
+    // by default (prior_focal_length only seeds them), and on a nearly planar scene they drift apart
+    // by 1 % and tilt the cameras (Herz-Jesu: 0.38° rotation error refined, 0.09° kept; SIFT 0.11°
+    // either way; docs/bench/2026-12-02-sfm/). --mapper-option Mapper.ba_refine_focal_length=1 refines.
+    if args.camera_k.is_some()
+        && !args
+            .mapper_options
+            .iter()
+            .any(|o| key_of(o) == KEEP_FOCAL_LENGTH)
+    {
+        mapper.push(format!("--{KEEP_FOCAL_LENGTH}").into());
+        mapper.push(os("0"));
+    }
     for option in &args.mapper_options {
         let (key, value) = option.split_once('=').unwrap_or((option, ""));
         mapper.push(format!("--{key}").into());

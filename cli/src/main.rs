@@ -279,8 +279,9 @@ pub struct ColmapArgs {
     /// The COLMAP database to create (an existing file is an error unless --force).
     #[arg(long, value_name = "FILE")]
     pub database: PathBuf,
-    /// Camera matrix K (9 numbers, row-major) shared by every photo. Without it: the focal length from
-    /// EXIF's 35 mm equivalent where a photo has one, else COLMAP's guess (1.2 x the larger side),
+    /// Camera matrix K (9 numbers, row-major) shared by every photo, kept fixed by the mapper (it passes
+    /// --Mapper.ba_refine_focal_length 0 unless a --mapper-option sets it). Without it: the focal length
+    /// from EXIF's 35 mm equivalent where a photo has one, else COLMAP's guess (1.2 x the larger side),
     /// principal point at the centre, one camera per image size and focal, refined by the mapper.
     #[arg(long, value_name = "FILE")]
     pub camera_k: Option<PathBuf>,

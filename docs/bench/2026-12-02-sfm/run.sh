@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The SfM table of issue 9 for `clatch colmap`'s defaults of 2026-12-02 (8192 keypoints per photo, the
-# AVX-512 CPU matcher), beside COLMAP SIFT measured in the same run. One job at a time (2 cores).
+# given K kept fixed by the mapper, the AVX-512 CPU matcher), beside COLMAP SIFT measured in the same run. One job at a time (2 cores).
 # Every clatch configuration: `clatch colmap` (extract, match, COLMAP verification and mapper), a
 # second `colmap mapper` on the same database, then extract + match again with --no-colmap for the CPU
 # time, checking that its keypoints and match list are identical to the mapped run's.
@@ -32,14 +32,15 @@ evaluate() { # evaluate SCENE DB MODEL_ROOT [sift]
         fi
     done
 }
-remap() { # remap NAME SCENE DB IMAGES [sift]
-    local name=$1 scene=$2 db=$3 images=$4 out=$work/$1-remap
+remap() { # remap NAME SCENE DB IMAGES KIND [MAPPER_OPTION...]: KIND sift or empty
+    local name=$1 scene=$2 db=$3 images=$4 kind=$5 out=$work/$1-remap
+    shift 5
     rm -rf "$out"; mkdir -p "$out"
-    header "$name: mapper again on the same database"
+    header "$name: mapper again on the same database $*"
     /usr/bin/time -f "map (repeat): wall %e s user %U s sys %S s" \
-        colmap mapper --database_path "$db" --image_path "$images" --output_path "$out" > "$work/$name-remap.log" 2>&1
+        colmap mapper --database_path "$db" --image_path "$images" --output_path "$out" "$@" > "$work/$name-remap.log" 2>&1
     grep -E "Elapsed time|No good initial" "$work/$name-remap.log" | tail -n 2
-    evaluate "$scene" "$db" "$out" "${5:-}"
+    evaluate "$scene" "$db" "$out" "$kind"
 }
 sift() { # sift NAME SCENE IMAGES K
     local name=$1 scene=$2 images=$3 k=$4
@@ -60,7 +61,8 @@ run_clatch() { # run_clatch NAME SCENE IMAGES K ARGS...
         /usr/bin/time -f "total (all stages): wall %e s user %U s sys %S s" \
             "$clatch" colmap --images "$images" --camera-k "$k" --database "$work/$name.db" --backend cpu "$@"
         evaluate "$scene" "$work/$name.db" "$work/$name-colmap/sparse"
-        remap "$name" "$scene" "$work/$name.db" "$images"
+        # the options `clatch colmap` gives the mapper: a given K is kept (--camera-k)
+        remap "$name" "$scene" "$work/$name.db" "$images" "" --Mapper.ba_refine_focal_length 0
         header "$name: extract + match again, --no-colmap"
         db=$work/retime-$name.db
         /usr/bin/time -f "total: wall %e s user %U s sys %S s" "$clatch" colmap --images "$images" --camera-k "$k" \

@@ -177,6 +177,19 @@ unsafe fn scan_block_words(
                 std::array::from_fn(|w| std::array::from_fn(|j| member(j).get(w).copied().unwrap_or(0)));
             let ids: [u32; GROUP] = std::array::from_fn(|j| first + (q0 + j.min(group.len() - 1)) as u32);
             let id_lanes: [__m512i; GROUP] = ids.map(|q| _mm512_set1_epi64(q as i64));
+            // A row is a candidate for member `j` iff its distance is below `limits[j]`: the k-th
+            // distance of a full list, anything while it fills, nothing for a repeated member.
+            let limit = |list: &Vec<Match>| {
+                let below = if list.len() < k { u64::MAX } else { list[k - 1].distance as u64 };
+                _mm512_set1_epi64(below as i64)
+            };
+            let mut limits: [__m512i; GROUP] = std::array::from_fn(|j| {
+                if j < group.len() {
+                    limit(&best[q0 + j])
+                } else {
+                    _mm512_setzero_si512()
+                }
+            });
             for b in tile..tile_end {
                 // SAFETY: block `b` < `blocks` is `words` whole registers inside `gallery.blocks`.
                 let base = unsafe { gallery.blocks.as_ptr().add(b * words * LANES) };
@@ -194,23 +207,23 @@ unsafe fn scan_block_words(
                 } else {
                     0xff
                 };
-                for j in 0..group.len() {
-                    let list = &mut best[q0 + j];
-                    let threshold = if list.len() < k {
-                        u64::MAX
-                    } else {
-                        list[k - 1].distance as u64
-                    };
-                    let mut candidates =
-                        _mm512_mask_cmplt_epu64_mask(valid, acc[j], _mm512_set1_epi64(threshold as i64));
-                    if candidates != 0 {
+                let candidates: [__mmask8; GROUP] =
+                    std::array::from_fn(|j| _mm512_mask_cmplt_epu64_mask(valid, acc[j], limits[j]));
+                // Rare once each list is full: one test for the group.
+                if candidates.iter().any(|&c| c != 0) {
+                    for j in 0..group.len() {
+                        let mut lanes = candidates[j];
+                        if lanes == 0 {
+                            continue;
+                        }
+                        let list = &mut best[q0 + j];
                         // SAFETY: `lane_distances` holds exactly one register.
                         unsafe {
                             _mm512_storeu_si512(lane_distances.as_mut_ptr() as *mut __m512i, acc[j])
                         };
-                        while candidates != 0 {
-                            let lane = candidates.trailing_zeros() as usize;
-                            candidates &= candidates - 1;
+                        while lanes != 0 {
+                            let lane = lanes.trailing_zeros() as usize;
+                            lanes &= lanes - 1;
                             super::insert_neighbour(
                                 list,
                                 k,
@@ -221,6 +234,7 @@ unsafe fn scan_block_words(
                                 },
                             );
                         }
+                        limits[j] = limit(list);
                     }
                 }
                 if let Some(nearest) = nearest.as_deref_mut() {

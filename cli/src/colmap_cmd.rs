@@ -653,3 +653,86 @@ fn print_colmap_report(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn colmap_args(extra: &[&str]) -> ColmapArgs {
+        let args = [
+            &["clatch", "colmap", "--images", "d", "--database", "d.db"][..],
+            extra,
+        ]
+        .concat();
+        let crate::Command::Colmap(c) = crate::Cli::try_parse_from(args).unwrap().command else {
+            panic!("parsed the wrong subcommand")
+        };
+        c
+    }
+
+    fn mapper_args(extra: &[&str]) -> Vec<String> {
+        let args = colmap_args(extra);
+        let [_, (step, mapper)] = colmap_steps(
+            &args,
+            (Path::new("d.db"), Path::new("m.txt"), Path::new("sparse")),
+        );
+        assert_eq!(step, "mapper");
+        mapper
+            .iter()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect()
+    }
+
+    #[test]
+    fn a_given_k_is_kept_by_the_mapper_unless_an_option_says_otherwise() {
+        let keep = ["--Mapper.ba_refine_focal_length".to_owned(), "0".to_owned()];
+        let given = mapper_args(&["--camera-k", "K.txt"]);
+        assert!(given.windows(2).any(|w| w == keep), "{given:?}");
+        let guessed = mapper_args(&[]);
+        assert!(
+            !guessed.iter().any(|a| a.contains("ba_refine_focal_length")),
+            "a guessed focal length is refined: {guessed:?}"
+        );
+        let told = mapper_args(&[
+            "--camera-k",
+            "K.txt",
+            "--mapper-option",
+            "Mapper.ba_refine_focal_length=1",
+        ]);
+        let mentions: Vec<_> = told
+            .iter()
+            .enumerate()
+            .filter(|(_, a)| a.contains("ba_refine_focal_length"))
+            .collect();
+        assert_eq!(mentions.len(), 1, "{told:?}");
+        assert_eq!(told[mentions[0].0 + 1], "1");
+    }
+
+    #[test]
+    fn colmap_keeps_8192_keypoints_unless_told() {
+        let backend = crate::BackendArgs {
+            backend: crate::BackendChoice::Cpu,
+            device: 0,
+        };
+        let budget = |extra: &[&str]| {
+            let args = colmap_args(extra);
+            let settings = crate::settings(&backend, &args.detect, None, None).unwrap();
+            let max = args.detect.max_keypoints.unwrap_or(DEFAULT_MAX_KEYPOINTS);
+            extraction_config(&settings, 8, max).detector.max_keypoints
+        };
+        assert_eq!(budget(&[]), 8192);
+        assert_eq!(budget(&["--max-keypoints", "5000"]), 5000);
+        // Every other command keeps the library's budget.
+        let crate::Command::Demo(demo) = crate::Cli::try_parse_from(["clatch", "demo"])
+            .unwrap()
+            .command
+        else {
+            panic!("parsed the wrong subcommand")
+        };
+        assert_eq!(
+            demo.detect.config().unwrap().detector.max_keypoints,
+            clatch::ExtractorConfig::default().detector.max_keypoints
+        );
+    }
+}

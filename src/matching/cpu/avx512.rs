@@ -102,7 +102,7 @@ impl Avx512 {
             match gallery.words {
                 8 => scan_block::<8>(first, queries, gallery, k, nearest, matches),
                 4 => scan_block::<4>(first, queries, gallery, k, nearest, matches),
-                w => scan_block_any(w, first, queries, gallery, k, nearest, matches),
+                w => scan_block_words(w, first, queries, gallery, k, nearest, matches),
             }
         }
     }
@@ -123,24 +123,6 @@ unsafe fn scan_block<const W: usize>(
 ) {
     // SAFETY: the caller's contract.
     unsafe { scan_block_words(W, first, queries, gallery, k, nearest, matches) }
-}
-
-/// [`scan_block_words`] for any other width.
-///
-/// # Safety
-/// As [`scan_block_words`].
-#[target_feature(enable = "avx512f,avx512vpopcntdq")]
-unsafe fn scan_block_any(
-    words: usize,
-    first: u32,
-    queries: &[&[u64]],
-    gallery: &Gallery,
-    k: usize,
-    nearest: Option<&mut [u64]>,
-    matches: &mut Vec<Match>,
-) {
-    // SAFETY: the caller's contract.
-    unsafe { scan_block_words(words, first, queries, gallery, k, nearest, matches) }
 }
 
 /// See [`Avx512::scan_block`].

@@ -236,14 +236,7 @@ pub fn match_descriptors(
     train: &DescriptorSet,
     config: &MatchConfig,
 ) -> Vec<Match> {
-    let k = if config.ratio.is_some() { 2 } else { 1 };
-    let (neighbours, reverse) = if config.cross_check {
-        let (neighbours, reverse) = knn_and_reverse(query, train, k);
-        (neighbours, Some(reverse))
-    } else {
-        (knn(query, train, k), None)
-    };
-    select(&neighbours, reverse.as_deref(), config)
+    match_with((knn, knn_and_reverse), query, train, config)
 }
 
 /// [`match_descriptors`] by the scalar code whatever the CPU has: the named baseline of the matching
@@ -254,12 +247,33 @@ pub fn match_descriptors_scalar(
     train: &DescriptorSet,
     config: &MatchConfig,
 ) -> Vec<Match> {
+    match_with(
+        (knn_scalar, knn_and_reverse_scalar),
+        query,
+        train,
+        config,
+    )
+}
+
+/// The kNN (and kNN with the reverse 1-NN) that [`match_with`] uses.
+type KnnPaths = (
+    fn(&DescriptorSet, &DescriptorSet, usize) -> KnnMatches,
+    fn(&DescriptorSet, &DescriptorSet, usize) -> (KnnMatches, Vec<u32>),
+);
+
+/// [`match_descriptors`] with the given kNN paths.
+fn match_with(
+    (knn, knn_and_reverse): KnnPaths,
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    config: &MatchConfig,
+) -> Vec<Match> {
     let k = if config.ratio.is_some() { 2 } else { 1 };
     if config.cross_check {
-        let (neighbours, reverse) = knn_and_reverse_scalar(query, train, k);
+        let (neighbours, reverse) = knn_and_reverse(query, train, k);
         select(&neighbours, Some(&reverse), config)
     } else {
-        select(&knn_scalar(query, train, k), None, config)
+        select(&knn(query, train, k), None, config)
     }
 }
 

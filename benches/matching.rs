@@ -1,5 +1,9 @@
-//! Brute-force Hamming matching of random 512-bit descriptors, k = 2: 1000x1000 and 4000x4000
-//! (throughput in descriptor pairs compared per second, N·M).
+//! Brute-force Hamming matching of random 512-bit descriptors: the k = 2 nearest neighbours at 1000x1000,
+//! 4000x4000, 5000x5000 and 8000x8000, and `match_descriptors` with the default configuration (ratio test
+//! and cross-check, one pass) at 5000x5000 and 8000x8000, the sizes of `clatch colmap`'s image pairs
+//! (throughput in descriptor pairs compared per second, N·M). The `scalar` rows are the same calls by the
+//! scalar reference code (POPCNT, no AVX-512: `matching::cpu::match_descriptors_scalar`), the named
+//! baseline in the same run.
 //!
 //! `cargo bench --bench matching`
 
@@ -23,7 +27,7 @@ fn matching(c: &mut Criterion) {
     group
         .measurement_time(Duration::from_secs(5))
         .sample_size(10);
-    for n in [1000, 4000] {
+    for n in [1000, 4000, 5000, 8000] {
         let query = random_set(n, &mut rng);
         let train = random_set(n, &mut rng);
         group.throughput(Throughput::Elements((n * n) as u64));
@@ -32,6 +36,41 @@ fn matching(c: &mut Criterion) {
             &(query, train),
             |b, (query, train)| {
                 b.iter(|| matcher.knn(black_box(query), black_box(train), 2).unwrap())
+            },
+        );
+    }
+    group.finish();
+    let mut group = c.benchmark_group("match ratio 0.8 + cross-check, 512 bits");
+    group
+        .measurement_time(Duration::from_secs(5))
+        .sample_size(10);
+    for n in [5000, 8000] {
+        let query = random_set(n, &mut rng);
+        let train = random_set(n, &mut rng);
+        let sets = (query, train);
+        group.throughput(Throughput::Elements((n * n) as u64));
+        group.bench_with_input(
+            BenchmarkId::from_parameter(format!("{n}x{n}")),
+            &sets,
+            |b, (query, train)| {
+                b.iter(|| {
+                    matcher
+                        .match_descriptors(black_box(query), black_box(train))
+                        .unwrap()
+                })
+            },
+        );
+        group.bench_with_input(
+            BenchmarkId::from_parameter(format!("{n}x{n} scalar")),
+            &sets,
+            |b, (query, train)| {
+                b.iter(|| {
+                    clatch::matching::cpu::match_descriptors_scalar(
+                        black_box(query),
+                        black_box(train),
+                        &MatchConfig::default(),
+                    )
+                })
             },
         );
     }

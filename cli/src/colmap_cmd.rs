@@ -53,12 +53,7 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let mut times = Times::default();
 
     // Detect and describe every photo.
-    let mut config = settings.extractor.clone();
-    config.detector.grid = args
-        .detect
-        .grid
-        .map_or(clatch::colmap::DEFAULT_GRID, |g| g as usize);
-    let extractor = Extractor::new(settings.backend, config)?;
+    let extractor = Extractor::new(settings.backend, extraction_config(&settings, args))?;
     let progress = Progress::counter(plan.folder.paths.len() as u64, "extracting features");
     let watch = Stopwatch::start();
     let (photos, descriptors): (Vec<Photo>, Vec<DescriptorSet>) = clatch::colmap::extract_photos(
@@ -252,6 +247,25 @@ fn default_workspace(database: &Path) -> PathBuf {
     database.with_file_name(format!("{stem}-colmap"))
 }
 
+/// The extractor's settings: the library's grid and keypoint budget for structure from motion
+/// ([`clatch::colmap::DEFAULT_GRID`], [`clatch::colmap::DEFAULT_MAX_KEYPOINTS`]) unless `--grid` or
+/// `--max-keypoints` says otherwise.
+fn extraction_config(
+    settings: &crate::pipeline::Settings,
+    args: &ColmapArgs,
+) -> clatch::ExtractorConfig {
+    let mut config = settings.extractor.clone();
+    config.detector.grid = args
+        .detect
+        .grid
+        .map_or(clatch::colmap::DEFAULT_GRID, |g| g as usize);
+    config.detector.max_keypoints = args
+        .detect
+        .max_keypoints
+        .unwrap_or(clatch::colmap::DEFAULT_MAX_KEYPOINTS);
+    config
+}
+
 /// Writes the database at `path` and returns the match list: the library's one writer of a folder
 /// ([`FolderWriter`]), in the order every run writes.
 fn write_all(
@@ -272,6 +286,9 @@ fn write_all(
 
 /// The two COLMAP steps after the database: import with verification, then the mapper, on the given
 /// database, match list and model folder.
+/// The mapper option that `clatch colmap` sets to 0 when --camera-k is given (unless given itself).
+const KEEP_FOCAL_LENGTH: &str = "Mapper.ba_refine_focal_length";
+
 fn colmap_steps(
     args: &ColmapArgs,
     (database, match_list, sparse): (&Path, &Path, &Path),
@@ -296,6 +313,24 @@ fn colmap_steps(
         os("--output_path"),
         sparse.into(),
     ];
+    let key_of = |option: &String| {
+        option
+            .split_once('=')
+            .map_or(option.clone(), |(k, _)| k.to_owned())
+    };
+    // A given K is a calibration: the mapper keeps it. COLMAP's bundle adjustment refines fx and fy
+    // by default (prior_focal_length only seeds them), and on a nearly planar scene they drift apart
+    // by 1 % and tilt the cameras (Herz-Jesu: 0.38° rotation error refined, 0.09° kept; SIFT 0.11°
+    // either way; docs/bench/2026-12-02-sfm/). --mapper-option Mapper.ba_refine_focal_length=1 refines.
+    if args.camera_k.is_some()
+        && !args
+            .mapper_options
+            .iter()
+            .any(|o| key_of(o) == KEEP_FOCAL_LENGTH)
+    {
+        mapper.push(format!("--{KEEP_FOCAL_LENGTH}").into());
+        mapper.push(os("0"));
+    }
     for option in &args.mapper_options {
         let (key, value) = option.split_once('=').unwrap_or((option, ""));
         mapper.push(format!("--{key}").into());
@@ -431,5 +466,87 @@ fn print_colmap_report(
             );
             println!("  reproj.     {:.3} px mean", best.mean_reprojection_error);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn colmap_args(extra: &[&str]) -> ColmapArgs {
+        let args = [
+            &["clatch", "colmap", "--images", "d", "--database", "d.db"][..],
+            extra,
+        ]
+        .concat();
+        let crate::Command::Colmap(c) = crate::Cli::try_parse_from(args).unwrap().command else {
+            panic!("parsed the wrong subcommand")
+        };
+        c
+    }
+
+    fn mapper_args(extra: &[&str]) -> Vec<String> {
+        let args = colmap_args(extra);
+        let [_, (step, mapper)] = colmap_steps(
+            &args,
+            (Path::new("d.db"), Path::new("m.txt"), Path::new("sparse")),
+        );
+        assert_eq!(step, "mapper");
+        mapper
+            .iter()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect()
+    }
+
+    #[test]
+    fn a_given_k_is_kept_by_the_mapper_unless_an_option_says_otherwise() {
+        let keep = ["--Mapper.ba_refine_focal_length".to_owned(), "0".to_owned()];
+        let given = mapper_args(&["--camera-k", "K.txt"]);
+        assert!(given.windows(2).any(|w| w == keep), "{given:?}");
+        let guessed = mapper_args(&[]);
+        assert!(
+            !guessed.iter().any(|a| a.contains("ba_refine_focal_length")),
+            "a guessed focal length is refined: {guessed:?}"
+        );
+        let told = mapper_args(&[
+            "--camera-k",
+            "K.txt",
+            "--mapper-option",
+            "Mapper.ba_refine_focal_length=1",
+        ]);
+        let mentions: Vec<_> = told
+            .iter()
+            .enumerate()
+            .filter(|(_, a)| a.contains("ba_refine_focal_length"))
+            .collect();
+        assert_eq!(mentions.len(), 1, "{told:?}");
+        assert_eq!(told[mentions[0].0 + 1], "1");
+    }
+
+    #[test]
+    fn colmap_keeps_8192_keypoints_unless_told() {
+        let backend = crate::BackendArgs {
+            backend: crate::BackendChoice::Cpu,
+            device: 0,
+        };
+        let budget = |extra: &[&str]| {
+            let args = colmap_args(extra);
+            let settings = crate::settings(&backend, &args.detect, None, None).unwrap();
+            extraction_config(&settings, &args).detector.max_keypoints
+        };
+        assert_eq!(budget(&[]), 8192);
+        assert_eq!(budget(&["--max-keypoints", "5000"]), 5000);
+        // Every other command keeps the library's budget.
+        let crate::Command::Demo(demo) = crate::Cli::try_parse_from(["clatch", "demo"])
+            .unwrap()
+            .command
+        else {
+            panic!("parsed the wrong subcommand")
+        };
+        assert_eq!(
+            demo.detect.config().unwrap().detector.max_keypoints,
+            clatch::ExtractorConfig::default().detector.max_keypoints
+        );
     }
 }

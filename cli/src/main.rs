@@ -284,8 +284,9 @@ pub struct ColmapArgs {
     /// The COLMAP database to create (an existing file is an error unless --force).
     #[arg(long, value_name = "FILE")]
     pub database: PathBuf,
-    /// Camera matrix K (9 numbers, row-major) shared by every photo. Without it: the focal length from
-    /// EXIF's 35 mm equivalent where a photo has one, else COLMAP's guess (1.2 x the larger side),
+    /// Camera matrix K (9 numbers, row-major) shared by every photo, kept fixed by the mapper (it passes
+    /// --Mapper.ba_refine_focal_length 0 unless a --mapper-option sets it). Without it: the focal length
+    /// from EXIF's 35 mm equivalent where a photo has one, else COLMAP's guess (1.2 x the larger side),
     /// principal point at the centre, one camera per image size and focal, refined by the mapper.
     #[arg(long, value_name = "FILE")]
     pub camera_k: Option<PathBuf>,
@@ -369,9 +370,10 @@ pub struct DetectArgs {
     /// FAST threshold (1..=254): nine contiguous circle pixels must differ from the centre by more.
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u8).range(1..=254))]
     pub threshold: u8,
-    /// Keep at most this many keypoints per image, strongest first.
-    #[arg(long, default_value_t = 5000, value_name = "N", value_parser = parse_positive)]
-    pub max_keypoints: usize,
+    /// Keep at most this many keypoints per image, strongest first (default 5000, the library's, and
+    /// 8192 for `colmap`, COLMAP's own budget of SIFT features per image).
+    #[arg(long, value_name = "N", value_parser = parse_positive)]
+    pub max_keypoints: Option<usize>,
     /// Side in pixels of the window each detected keypoint is described over (the 64x64 samples are
     /// spread over it): 1 to 1024. Default 40, and 64 with --single-scale.
     #[arg(long, value_name = "PIXELS", value_parser = parse_keypoint_size)]
@@ -611,7 +613,7 @@ impl DetectArgs {
         Ok(ExtractorConfig {
             detector: DetectorConfig {
                 threshold: self.threshold,
-                max_keypoints: self.max_keypoints,
+                max_keypoints: self.max_keypoints.unwrap_or(base.detector.max_keypoints),
                 keypoint_size: self.keypoint_size.unwrap_or(base.detector.keypoint_size),
                 grid: self.grid.unwrap_or(1) as usize,
                 level_budget: match self.level_budget {

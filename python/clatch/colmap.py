@@ -1,7 +1,7 @@
 """A folder of photos → a COLMAP 3.8 database and match list, as ``clatch colmap`` writes them.
 
 ``match_folder(images, database)`` lists the folder, extracts every photo with the structure-from-
-motion settings of ``clatch colmap`` (keypoints spread over an 8 x 8 grid, sub-pixel positions),
+motion settings of ``clatch colmap`` (8192 keypoints a photo spread over an 8 x 8 grid, sub-pixel positions),
 matches every pair (or the ``pairs`` given) and writes the database (cameras, images, keypoints) and
 the match list (``<workspace>/matches.txt``) with the Rust library's one writer
 (``clatch::colmap::FolderWriter``), the code the command-line tool runs: with the same options the
@@ -37,6 +37,7 @@ from ._exceptions import DatabaseError, InvalidInputError
 
 __all__ = [
     "DEFAULT_GRID",
+    "DEFAULT_MAX_KEYPOINTS",
     "SUBPIXEL_METHODS",
     "ImageFolder",
     "MatchFolderResult",
@@ -48,6 +49,9 @@ __all__ = [
 
 #: The grid keypoints are spread over unless ``extractor`` says otherwise (``clatch colmap``'s).
 DEFAULT_GRID = 8
+#: Keypoints per photo unless ``extractor`` says otherwise (``clatch colmap``'s: COLMAP's own SIFT
+#: budget, 8192, instead of the library's general 5000).
+DEFAULT_MAX_KEYPOINTS = 8192
 #: ``subpixel=``: the extractor's FAST-score peak (default), whole pixels, or Förstner's corner.
 SUBPIXEL_METHODS = ("score", "none", "corner")
 #: Pairs matched per call in the single-process run (the match list is written as they finish).
@@ -97,11 +101,11 @@ class MatchFolderResult:
 
 
 def _extractor_options(extractor: Optional[Mapping[str, Any]], subpixel: str) -> Dict[str, Any]:
-    """The Extractor keywords of a run: ``clatch colmap``'s grid, then the caller's, then the
+    """The Extractor keywords of a run: ``clatch colmap``'s grid and budget, then the caller's, then the
     detector's half of ``subpixel``."""
     if subpixel not in SUBPIXEL_METHODS:
         raise _invalid("InvalidConfig", f"subpixel must be one of {SUBPIXEL_METHODS}, got {subpixel!r}")
-    options: Dict[str, Any] = {"grid": DEFAULT_GRID}
+    options: Dict[str, Any] = {"grid": DEFAULT_GRID, "max_keypoints": DEFAULT_MAX_KEYPOINTS}
     options.update(extractor or {})
     if "subpixel" in options:
         raise _invalid(

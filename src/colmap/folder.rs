@@ -28,6 +28,12 @@ pub const IMAGE_EXTENSIONS: [&str; 7] = ["jpg", "jpeg", "png", "pgm", "ppm", "pb
 /// keypoint.
 pub const DEFAULT_GRID: usize = 8;
 
+/// Keypoints per photo for structure from motion unless the caller chooses another: COLMAP's own
+/// budget of SIFT features (`SiftExtraction.max_num_features`, 8192). Structure from motion wants many
+/// well-spread points per photo more than a fast match of each pair, so its budget is larger than the
+/// library's general default of 5000 (measured: docs/bench/2026-12-02-sfm/ in the repository).
+pub const DEFAULT_MAX_KEYPOINTS: usize = 8192;
+
 /// Photos decoded at a time by [`extract_photos`]: the next group is decoded on the CPU threads while
 /// the extractor works on this one (with several images in flight on the GPU).
 const DECODE_GROUP: usize = 8;

@@ -42,8 +42,8 @@ pub use corner::{Refinement, refine_corners};
 pub use database::{Database, check_match_indices};
 pub use error::ColmapError;
 pub use folder::{
-    DEFAULT_GRID, IMAGE_EXTENSIONS, ImageFolder, Photo, check_detectable, extract_photo,
-    extract_photos, image_name, list_images, photo_camera,
+    DEFAULT_GRID, DEFAULT_MAX_KEYPOINTS, IMAGE_EXTENSIONS, ImageFolder, Photo, check_detectable,
+    extract_photo, extract_photos, image_name, list_images, photo_camera,
 };
 pub use match_list::MatchList;
 pub use writer::FolderWriter;

@@ -112,7 +112,11 @@ fn run_opencv_script(
         .arg("--inlier-px")
         .arg(args.check.inlier_px.to_string())
         .arg("--max-keypoints")
-        .arg(args.detect.max_keypoints.to_string());
+        .arg(
+            (args.detect.max_keypoints)
+                .unwrap_or(clatch::ExtractorConfig::default().detector.max_keypoints)
+                .to_string(),
+        );
     // The same matcher rules; the distance limit is in Hamming bits and has no SIFT counterpart.
     match args.matching.config().ratio {
         Some(ratio) => command.arg("--ratio").arg(ratio.to_string()),
@@ -325,7 +329,7 @@ pub fn main(args: &EvalArgs) -> Result<(), CliError> {
         "{}; FAST threshold {}, at most {} keypoints, {} bits; {}",
         from_flags.backend,
         args.detect.threshold,
-        args.detect.max_keypoints,
+        from_flags.extractor.detector.max_keypoints,
         args.detect.bits,
         crate::report::describe_matching(&from_flags.matching),
     );

@@ -1,4 +1,13 @@
 //! The reference matcher (see the parent module for the contract).
+//!
+//! [`scan`] and [`neighbours`] are the specification: every query against every gallery row in
+//! increasing index, one insertion at a time. Where the CPU has AVX512F and AVX512-VPOPCNTDQ (checked at
+//! run time) [`knn`] and [`knn_and_reverse`] take the [`avx512`] kernels instead, which give the same
+//! results (tested against the scalar code over random sets with planted ties, every width and size);
+//! elsewhere the scalar code, compiled with POPCNT where the CPU has it.
+
+#[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+mod avx512;
 
 use crate::parallel::*;
 
@@ -21,6 +30,15 @@ fn insert_neighbour(best: &mut Vec<Match>, k: usize, candidate: Match) {
 
 /// The `k` nearest gallery descriptors of every query (validated: same width, `1 <= k <= train.len()`).
 pub fn knn(query: &DescriptorSet, train: &DescriptorSet, k: usize) -> KnnMatches {
+    #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+    if let Some(simd) = avx512::Avx512::detect() {
+        return knn_avx512(simd, query, train, k, false).0;
+    }
+    knn_scalar(query, train, k)
+}
+
+/// [`knn`] by the scalar code, whatever the CPU has.
+fn knn_scalar(query: &DescriptorSet, train: &DescriptorSet, k: usize) -> KnnMatches {
     let popcnt = has_popcnt();
     let matches = query
         .rows()
@@ -70,10 +88,10 @@ fn neighbours_popcnt(q: u32, qd: &[u64], train: &DescriptorSet, k: usize) -> Vec
     neighbours(q, qd, train, k)
 }
 
-/// The nearest query of every gallery descriptor (lowest query index on ties).
+/// The nearest query of every gallery descriptor (lowest query index on ties), by the scalar code.
 #[cfg(test)]
 fn nearest_query_of_each_train(query: &DescriptorSet, train: &DescriptorSet) -> Vec<u32> {
-    knn(train, query, 1)
+    knn_scalar(train, query, 1)
         .matches
         .iter()
         .map(|m| m.train)
@@ -87,6 +105,57 @@ const QUERY_BLOCK: usize = 64;
 /// (lowest query index on ties), as [`knn`] of the gallery against the queries would give it: each
 /// distance is computed once instead of twice. Integer comparisons only, so the same result.
 pub fn knn_and_reverse(
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    k: usize,
+) -> (KnnMatches, Vec<u32>) {
+    #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+    if let Some(simd) = avx512::Avx512::detect() {
+        let (matches, reverse) = knn_avx512(simd, query, train, k, true);
+        return (matches, reverse.unwrap_or_default());
+    }
+    knn_and_reverse_scalar(query, train, k)
+}
+
+/// [`knn`] (and, with `reverse`, the nearest query of every gallery row) by the AVX-512 kernels, in the
+/// query blocks of [`knn_and_reverse_scalar`].
+#[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+fn knn_avx512(
+    simd: avx512::Avx512,
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    k: usize,
+    reverse: bool,
+) -> (KnnMatches, Option<Vec<u32>>) {
+    let gallery = avx512::Gallery::new(train);
+    let padded = train.len().div_ceil(avx512::LANES) * avx512::LANES;
+    let rows: Vec<&[u64]> = query.rows().collect();
+    let blocks: Vec<(Vec<Match>, Vec<u64>)> = (0..rows.len().div_ceil(QUERY_BLOCK))
+        .into_par_iter()
+        .map(|b| {
+            let first = b * QUERY_BLOCK;
+            let block = &rows[first..(first + QUERY_BLOCK).min(rows.len())];
+            let mut nearest = if reverse { vec![u64::MAX; padded] } else { Vec::new() };
+            let mut matches = Vec::with_capacity(block.len() * k);
+            let nearest_rows = reverse.then_some(nearest.as_mut_slice());
+            simd.scan_block(first as u32, block, &gallery, k, nearest_rows, &mut matches);
+            (matches, nearest)
+        })
+        .collect();
+    let mut matches = Vec::with_capacity(rows.len() * k);
+    let mut nearest = vec![u64::MAX; if reverse { padded } else { 0 }];
+    for (block_matches, block_nearest) in blocks {
+        matches.extend(block_matches);
+        for (n, b) in nearest.iter_mut().zip(block_nearest) {
+            *n = (*n).min(b);
+        }
+    }
+    let reverse = reverse.then(|| nearest[..train.len()].iter().map(|&n| n as u32).collect());
+    (KnnMatches::from_parts(k, matches), reverse)
+}
+
+/// [`knn_and_reverse`] by the scalar code, whatever the CPU has.
+fn knn_and_reverse_scalar(
     query: &DescriptorSet,
     train: &DescriptorSet,
     k: usize,
@@ -167,13 +236,50 @@ pub fn match_descriptors(
     train: &DescriptorSet,
     config: &MatchConfig,
 ) -> Vec<Match> {
+    match_with((knn, knn_and_reverse), query, train, config)
+}
+
+/// [`match_descriptors`] by the scalar code whatever the CPU has: the named baseline of the matching
+/// bench (`benches/matching.rs`).
+#[cfg(any(test, feature = "internals"))]
+pub fn match_descriptors_scalar(
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    config: &MatchConfig,
+) -> Vec<Match> {
+    match_with(
+        (knn_scalar, knn_and_reverse_scalar),
+        query,
+        train,
+        config,
+    )
+}
+
+/// The kNN (and kNN with the reverse 1-NN) that [`match_with`] uses.
+type KnnPaths = (
+    fn(&DescriptorSet, &DescriptorSet, usize) -> KnnMatches,
+    fn(&DescriptorSet, &DescriptorSet, usize) -> (KnnMatches, Vec<u32>),
+);
+
+/// [`match_descriptors`] with the given kNN paths.
+fn match_with(
+    (knn, knn_and_reverse): KnnPaths,
+    query: &DescriptorSet,
+    train: &DescriptorSet,
+    config: &MatchConfig,
+) -> Vec<Match> {
     let k = if config.ratio.is_some() { 2 } else { 1 };
-    let (neighbours, reverse) = if config.cross_check {
+    if config.cross_check {
         let (neighbours, reverse) = knn_and_reverse(query, train, k);
-        (neighbours, Some(reverse))
+        select(&neighbours, Some(&reverse), config)
     } else {
-        (knn(query, train, k), None)
-    };
+        select(&knn(query, train, k), None, config)
+    }
+}
+
+/// The best matches of `neighbours` that pass the rules of `config` (with `reverse`, the nearest query
+/// of every gallery row, when it cross-checks).
+fn select(neighbours: &KnnMatches, reverse: Option<&[u32]>, config: &MatchConfig) -> Vec<Match> {
     neighbours
         .iter()
         .filter_map(|n| {
@@ -184,7 +290,7 @@ pub fn match_descriptors(
                     return None;
                 }
             }
-            if let Some(reverse) = &reverse
+            if let Some(reverse) = reverse
                 && reverse[best.train as usize] != best.query
             {
                 return None;
@@ -220,13 +326,103 @@ mod tests {
             let query = random(nq, &mut next);
             let train = random(nt, &mut next);
             for k in [1, 2.min(nt)] {
-                let (neighbours, reverse) = knn_and_reverse(&query, &train, k);
-                assert_eq!(neighbours, knn(&query, &train, k), "{bits} bits, {nq}x{nt}, k {k}");
+                let (neighbours, reverse) = knn_and_reverse_scalar(&query, &train, k);
+                assert_eq!(neighbours, knn_scalar(&query, &train, k), "{bits} bits, {nq}x{nt}, k {k}");
                 assert_eq!(reverse, nearest_query_of_each_train(&query, &train), "{bits} bits, {nq}x{nt}");
             }
         }
     }
     use crate::descriptor::DescriptorWidth;
+
+    /// Random descriptors of `bits` bits with planted ties: a third of the rows are copies of earlier
+    /// rows (equal distances to every query, so ties between gallery rows and, for the cross-check,
+    /// between queries), some one bit away from a copy, placed across block (8) and tile (256) edges.
+    fn planted(bits: usize, n: usize, pool: &[u64], rng: &mut crate::synthetic::SplitMix64) -> DescriptorSet {
+        let width = DescriptorWidth::from_bits(bits).unwrap();
+        let w = width.words();
+        let tail = |i: usize| if bits.is_multiple_of(64) || i + 1 < w { u64::MAX } else { (1u64 << (bits % 64)) - 1 };
+        let mut words = Vec::with_capacity(n * w);
+        for i in 0..n {
+            let r = rng.next_u64();
+            let start = words.len();
+            match r % 6 {
+                // a copy of an earlier row of this set, or of a row of the pool (the other set)
+                0 | 1 if i > 0 => {
+                    let j = (r >> 8) as usize % i;
+                    words.extend_from_within(j * w..(j + 1) * w);
+                }
+                2 if pool.len() >= w => {
+                    let j = (r >> 8) as usize % (pool.len() / w);
+                    words.extend_from_slice(&pool[j * w..(j + 1) * w]);
+                }
+                _ => words.extend((0..w).map(|i| rng.next_u64() & tail(i))),
+            }
+            if r.is_multiple_of(11) {
+                // one bit away from what was written: distances differing by one near a tie
+                let bit = (r >> 20) as usize % bits;
+                words[start + bit / 64] ^= 1 << (bit % 64);
+            }
+        }
+        DescriptorSet::from_words(width, words).unwrap()
+    }
+
+    /// The dispatched matcher (AVX-512 where the CPU has it) equals the scalar reference: neighbours,
+    /// nearest queries and kept matches, over widths of every word count, sizes around the block, group,
+    /// query-block and tile edges, several k, with planted ties.
+    #[test]
+    fn every_path_equals_the_scalar_reference() {
+        #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+        eprintln!("AVX-512 kernels under test: {}", avx512::Avx512::detect().is_some());
+        let mut rng = crate::synthetic::SplitMix64::new(9);
+        let configs = [
+            MatchConfig::default(),
+            MatchConfig { ratio: None, cross_check: true, max_distance: None },
+            MatchConfig { ratio: Some(0.9), cross_check: false, max_distance: Some(200) },
+            MatchConfig { ratio: None, cross_check: false, max_distance: None },
+        ];
+        let sizes = [
+            (1, 1), (1, 2), (3, 7), (4, 8), (5, 9), (63, 255), (64, 256), (65, 257), (130, 300),
+            (7, 513), (200, 16), (9, 600),
+        ];
+        for bits in [8, 16, 64, 72, 128, 192, 256, 320, 384, 448, 504, 512] {
+            for &(nq, nt) in &sizes {
+                let train = planted(bits, nt, &[], &mut rng);
+                let query = planted(bits, nq, train.as_words(), &mut rng);
+                let at = format!("{bits} bits, {nq}x{nt}");
+                for k in [1, 2, 3, 9].into_iter().filter(|&k| k <= nt) {
+                    let expected = knn_scalar(&query, &train, k);
+                    assert_eq!(knn(&query, &train, k), expected, "knn, {at}, k {k}");
+                    let (neighbours, reverse) = knn_and_reverse(&query, &train, k);
+                    assert_eq!(neighbours, expected, "knn_and_reverse, {at}, k {k}");
+                    assert_eq!(reverse, nearest_query_of_each_train(&query, &train), "reverse, {at}");
+                }
+                for config in configs.iter().filter(|c| nt >= 2 || c.ratio.is_none()) {
+                    let k = if config.ratio.is_some() { 2 } else { 1 };
+                    let reverse = nearest_query_of_each_train(&query, &train);
+                    let expected = select(
+                        &knn_scalar(&query, &train, k),
+                        config.cross_check.then_some(reverse.as_slice()),
+                        config,
+                    );
+                    assert_eq!(match_descriptors(&query, &train, config), expected, "{at}, {config:?}");
+                    assert_eq!(match_descriptors_scalar(&query, &train, config), expected, "{at}, {config:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn planted_ties_reach_the_tie_rules() {
+        // The test sets above must exercise ties: equal best and second distances, and gallery rows
+        // whose nearest distance is shared by several queries.
+        let mut rng = crate::synthetic::SplitMix64::new(9);
+        let train = planted(512, 300, &[], &mut rng);
+        let query = planted(512, 130, train.as_words(), &mut rng);
+        let knn2 = knn_scalar(&query, &train, 2);
+        assert!(knn2.iter().filter(|n| n[0].distance == n[1].distance).count() > 10);
+        let back = knn_scalar(&train, &query, 2);
+        assert!(back.iter().filter(|n| n[0].distance == n[1].distance).count() > 10);
+    }
 
     fn set(rows: &[u64]) -> DescriptorSet {
         DescriptorSet::from_words(DescriptorWidth::from_bits(64).unwrap(), rows.to_vec()).unwrap()

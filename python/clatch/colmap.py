@@ -1,8 +1,8 @@
 """A folder of photos → a COLMAP 3.8 database and match list, as ``clatch colmap`` writes them.
 
 ``match_folder(images, database)`` lists the folder, extracts every photo with the structure-from-
-motion settings of ``clatch colmap`` (8192 keypoints a photo spread over an 8 x 8 grid, sub-pixel positions),
-matches every pair (or the ``pairs`` given) and writes the database (cameras, images, keypoints) and
+motion settings of ``clatch colmap`` (8192 keypoints a photo spread over an 8 x 8 grid, sub-pixel
+positions), matches every pair (or the ``pairs`` given) and writes the database (cameras, images, keypoints) and
 the match list (``<workspace>/matches.txt``) with the Rust library's one writer
 (``clatch::colmap::FolderWriter``), the code the command-line tool runs: with the same options the
 files are byte-identical to those of ``clatch colmap --images DIR --database DB --no-colmap``.

@@ -140,13 +140,14 @@ impl Free {
         gone
     }
 
-    fn is_empty(&self) -> bool {
-        let empty = |device: usize, host: usize| device + host == 0;
-        empty(self.bytes.device.len(), self.bytes.host.len())
-            && empty(self.words.device.len(), self.words.host.len())
-            && empty(self.ints.device.len(), self.ints.host.len())
-            && empty(self.longs.device.len(), self.longs.host.len())
-            && empty(self.keypoints.device.len(), self.keypoints.host.len())
+    /// How many buffers (device and pinned) the lists hold.
+    fn count(&self) -> usize {
+        let both = |device: usize, host: usize| device + host;
+        both(self.bytes.device.len(), self.bytes.host.len())
+            + both(self.words.device.len(), self.words.host.len())
+            + both(self.ints.device.len(), self.ints.host.len())
+            + both(self.longs.device.len(), self.longs.host.len())
+            + both(self.keypoints.device.len(), self.keypoints.host.len())
     }
 
     /// Whether a texture object is kept with one of the device buffers.
@@ -239,9 +240,11 @@ impl Arena {
         // Taken out first: work queued from now on cannot use them, so after the wait below nothing
         // queued reads them (or their textures).
         let gone = self.lock().split_off(largest, total);
-        if gone.is_empty() {
+        if gone.count() == 0 {
             return Ok(false);
         }
+        #[cfg(feature = "internals")]
+        hooks::FREED.set(hooks::FREED.get() + gone.count());
         if gone.has_texture() {
             // Texture objects are destroyed at once, not in stream order: queued work may read them.
             lane.synchronize_all()?;
@@ -668,6 +671,20 @@ impl Drop for Leased<'_> {
         if let Some(lane) = self.lane.take() {
             self.dev.lanes.give(lane);
         }
+    }
+}
+
+/// Test hooks of the arenas (the `internals` feature only): not part of the API.
+#[cfg(feature = "internals")]
+pub mod hooks {
+    thread_local! {
+        pub(super) static FREED: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    }
+
+    /// How many kept buffers (device and pinned) this thread's calls have freed so far: trimmed when
+    /// a lane went back to the device's pool, or released on request.
+    pub fn buffers_freed() -> usize {
+        FREED.get()
     }
 }
 

@@ -50,6 +50,7 @@ pub(crate) use texture::ImageLife;
 #[cfg(feature = "internals")]
 #[doc(hidden)]
 pub mod hooks {
+    pub use super::arena::hooks::*;
     pub use super::collection::hooks::*;
     pub use super::describe::hooks::*;
     pub use super::detect::hooks::*;
@@ -60,6 +61,7 @@ pub mod hooks {
     pub use super::memory::hooks::*;
     pub use super::pyramid::hooks::*;
     pub use super::spans::hooks::*;
+    pub use super::texture::hooks::*;
 }
 
 use crate::error::Result;

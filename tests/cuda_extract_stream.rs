@@ -598,9 +598,10 @@ mod gpu {
         let viewed = std::cell::RefCell::new(Some(items(Some(3))?));
         let by_view = caught(&|| {
             let images = viewed.borrow_mut().take().unwrap_or_default();
-            Ok(gpu.detect_and_describe_stream(images.into_iter().map(Ok::<_, Error>), |_, _, _| {
-                Ok(())
-            })?)
+            Ok(gpu
+                .detect_and_describe_stream(images.into_iter().map(Ok::<_, Error>), |_, _, _| {
+                    Ok(())
+                })?)
         });
         std::panic::set_hook(quiet);
         if !(by_consumer && by_producer && by_view) {

@@ -721,12 +721,22 @@ mod tests {
     fn a_lane_keeps_its_smallest_buffers_up_to_the_bounds() {
         let mb = 1 << 20;
         // Everything fits: the largest size is kept.
-        assert_eq!(kept_size(vec![8 * mb, 2 * mb, 2 * mb], 256 * mb, 512 * mb), 8 * mb);
+        assert_eq!(
+            kept_size(vec![8 * mb, 2 * mb, 2 * mb], 256 * mb, 512 * mb),
+            8 * mb
+        );
         // One buffer over the largest kept size goes, whatever the total.
-        assert_eq!(kept_size(vec![4 * mb, 300 * mb, 2 * mb], 256 * mb, 512 * mb), 4 * mb);
+        assert_eq!(
+            kept_size(vec![4 * mb, 300 * mb, 2 * mb], 256 * mb, 512 * mb),
+            4 * mb
+        );
         // Over the total: the smallest sizes kept, a size whole or not at all.
         assert_eq!(
-            kept_size(vec![200 * mb, 200 * mb, 100 * mb, 10 * mb], 256 * mb, 512 * mb),
+            kept_size(
+                vec![250 * mb, 250 * mb, 100 * mb, 10 * mb],
+                256 * mb,
+                512 * mb
+            ),
             100 * mb
         );
         assert_eq!(kept_size(vec![10, 20], 0, 0), 0);

@@ -22,6 +22,12 @@ use crate::pyramid::Pyramid;
 
 pub use crate::matching::GPU_MAX_K as MAX_K;
 
+/// Frees the memory clatch keeps between calls on CUDA device `ordinal`: always
+/// [`crate::Error::BackendUnavailable`] in this build.
+pub fn release_cached_memory(ordinal: usize) -> Result<()> {
+    Err(cuda_unavailable(ordinal, NOT_BUILT))
+}
+
 /// A CUDA stream owned by clatch, on one device. Without the `cuda` feature none can be created.
 #[derive(Debug, Clone)]
 pub struct GpuStream {
@@ -47,6 +53,11 @@ impl GpuStream {
 
     /// Blocks until everything queued so far has run.
     pub fn synchronize(&self) -> Result<()> {
+        match self.never {}
+    }
+
+    /// Frees the buffers this stream keeps between calls.
+    pub fn release_cached_memory(&self) -> Result<()> {
         match self.never {}
     }
 

@@ -35,6 +35,7 @@ pub mod cuda;
 #[cfg(feature = "image")]
 #[cfg_attr(docsrs, doc(cfg(feature = "image")))]
 pub mod decode;
+pub mod prefetch;
 pub mod synthetic;
 
 /// The numeric contract: every rule whose arithmetic decides a keypoint, a bit or a match, exactly as

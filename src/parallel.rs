@@ -18,21 +18,6 @@ pub(crate) fn threads() -> usize {
     1
 }
 
-/// Runs `a` and `b`, side by side with `cpu` (rayon's `join`), one after the other without.
-#[cfg(feature = "colmap")]
-pub(crate) fn join<A, B, RA, RB>(a: A, b: B) -> (RA, RB)
-where
-    A: FnOnce() -> RA + Send,
-    B: FnOnce() -> RB + Send,
-    RA: Send,
-    RB: Send,
-{
-    #[cfg(feature = "cpu")]
-    return rayon::join(a, b);
-    #[cfg(not(feature = "cpu"))]
-    (a(), b())
-}
-
 #[cfg(not(feature = "cpu"))]
 mod sequential {
     use std::ops::Range;

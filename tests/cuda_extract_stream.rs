@@ -35,13 +35,21 @@ fn trials() -> Vec<Trial> {
             "threads_sharing_one_stream",
             gpu::threads_sharing_one_stream,
         ),
+        Trial::test(
+            "a_panic_in_a_stream_waits_for_the_copies",
+            gpu::panics_wait_for_the_copies,
+        ),
+        Trial::test("release_cached_memory", gpu::release_cached_memory),
     ]
 }
 
 #[cfg(feature = "cuda")]
 mod gpu {
     use clatch::cuda::GpuStream;
-    use clatch::cuda::hooks::{PinnedBytes, allocations, device_allocations, is_pinned_for_upload};
+    use clatch::cuda::hooks::{
+        PinnedBytes, allocations, band_arrivals, buffers_freed, device_allocations,
+        is_pinned_for_upload,
+    };
     use clatch::{
         AsGrayView, Backend, Error, Extractor, ExtractorConfig, Features, GrayView, Subpixel,
     };
@@ -419,10 +427,23 @@ mod gpu {
                     .map(|g| cpu.detect_and_describe(&g.view()))
                     .collect::<Result<_, _>>()?;
                 let stream = GpuStream::new(0)?;
+                // Every upload below must take the banded path: at least two bands per image.
+                let banded = |what: &str, images: usize, before: usize| -> Result<usize, Failed> {
+                    let bands = band_arrivals() - before;
+                    if bands < 2 * images {
+                        return Err(format!(
+                            "{name}, {w}x{h}, {what}: {bands} bands for {images} image(s)"
+                        )
+                        .into());
+                    }
+                    Ok(bands)
+                };
+                let before = band_arrivals();
                 let in_flight = [
                     gpu.detect_and_describe_async(&stream, &pageable[0].view())?,
                     gpu.detect_and_describe_async(&stream, &pinned_views[1])?,
                 ];
+                let bands = banded("async", 2, before)?;
                 for (i, pending) in in_flight.into_iter().enumerate() {
                     compare(
                         &format!("{name}, {w}x{h}, async {i}"),
@@ -431,17 +452,22 @@ mod gpu {
                     )?;
                 }
                 for i in 0..2 {
+                    let before = band_arrivals();
                     compare(
                         &format!("{name}, {w}x{h}, pageable, blocking {i}"),
                         &gpu.detect_and_describe(&pageable[i].view())?,
                         &expected[i],
                     )?;
+                    banded("pageable, blocking", 1, before)?;
+                    let before = band_arrivals();
                     compare(
                         &format!("{name}, {w}x{h}, pinned, blocking {i}"),
                         &gpu.detect_and_describe(&pinned_views[i])?,
                         &expected[i],
                     )?;
+                    banded("pinned, blocking", 1, before)?;
                 }
+                let before = band_arrivals();
                 let mut streamed = Vec::new();
                 gpu.detect_and_describe_stream(
                     pinned_views.iter().map(Ok::<_, Error>),
@@ -450,10 +476,14 @@ mod gpu {
                         Ok(())
                     },
                 )?;
+                banded("stream", 2, before)?;
                 for (i, f) in streamed.iter().enumerate() {
                     compare(&format!("{name}, {w}x{h}, stream {i}"), f, &expected[i])?;
                 }
-                println!("{name}: {w}x{h} in bands, pageable and page-locked, identical");
+                println!(
+                    "{name}: {w}x{h} in bands ({} per image), pageable and page-locked, identical",
+                    bands / 2
+                );
             }
         }
         Ok(())
@@ -485,6 +515,189 @@ mod gpu {
             Ok(compared)
         })?;
         println!("{threads} threads x {rounds} rounds on one stream: {total} keypoints identical");
+        Ok(())
+    }
+
+    /// A page-locked image owned by the stream's items, so that dropping an item frees its memory.
+    struct PinnedImage {
+        bytes: PinnedBytes,
+        width: usize,
+        height: usize,
+        /// Its `gray_view` panics (a producer's type with a bug).
+        panics: bool,
+    }
+
+    impl AsGrayView for PinnedImage {
+        fn gray_view(&self) -> clatch::Result<GrayView<'_>> {
+            if self.panics {
+                panic!("gray_view panics (on purpose)");
+            }
+            GrayView::new(self.bytes.as_slice()?, self.width, self.height, self.width)
+        }
+    }
+
+    /// A panic in `detect_and_describe_stream` (of the consumer, of the producer's iterator, of an
+    /// item's `gray_view`) while images in page-locked memory are still being copied straight from
+    /// where they are: it reaches the caller, the items are released only after the streams were
+    /// waited for (the sanitizer's memcheck sees a copy reading freed memory otherwise), and the
+    /// extractor gives the CPU's results afterwards.
+    pub fn panics_wait_for_the_copies() -> Result<(), Failed> {
+        let (w, h) = scale::pick((1920, 1080), (480, 320));
+        let gpu = Extractor::new(GPU, ExtractorConfig::default())?;
+        let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+        let sources: Vec<Gray> = (0..6)
+            .map(|i| varied(&rectangles(w, h, 700 + i as u64), i))
+            .collect();
+        let items = |panic_at: Option<usize>| -> Result<Vec<PinnedImage>, Failed> {
+            sources
+                .iter()
+                .enumerate()
+                .map(|(i, g)| {
+                    let mut bytes = PinnedBytes::new(0, w * h)?;
+                    bytes.as_mut_slice()?.copy_from_slice(&g.pixels);
+                    Ok(PinnedImage {
+                        bytes,
+                        width: w,
+                        height: h,
+                        panics: panic_at == Some(i),
+                    })
+                })
+                .collect()
+        };
+        // The three panics below are on purpose (their messages go to stderr).
+        let caught = |run: &dyn Fn() -> Result<usize, Failed>| {
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)).is_err()
+        };
+        let consumer = std::cell::RefCell::new(Some(items(None)?));
+        let by_consumer = caught(&|| {
+            let images = consumer.borrow_mut().take().unwrap_or_default();
+            Ok(gpu.detect_and_describe_stream(
+                images.into_iter().map(Ok::<_, Error>),
+                |i, _, _| {
+                    if i == 1 {
+                        panic!("the consumer panics (on purpose)");
+                    }
+                    Ok(())
+                },
+            )?)
+        });
+        let producer = std::cell::RefCell::new(Some(items(None)?));
+        let by_producer = caught(&|| {
+            let images = producer.borrow_mut().take().unwrap_or_default();
+            Ok(gpu.detect_and_describe_stream(
+                images.into_iter().enumerate().map(|(i, image)| {
+                    if i == 4 {
+                        panic!("the producer panics (on purpose)");
+                    }
+                    Ok::<_, Error>(image)
+                }),
+                |_, _, _| Ok(()),
+            )?)
+        });
+        let viewed = std::cell::RefCell::new(Some(items(Some(3))?));
+        let by_view = caught(&|| {
+            let images = viewed.borrow_mut().take().unwrap_or_default();
+            Ok(gpu
+                .detect_and_describe_stream(images.into_iter().map(Ok::<_, Error>), |_, _, _| {
+                    Ok(())
+                })?)
+        });
+        if !(by_consumer && by_producer && by_view) {
+            return Err(format!(
+                "panics reached the caller: consumer {by_consumer}, producer {by_producer}, gray_view {by_view}"
+            )
+            .into());
+        }
+        let after = items(None)?;
+        let mut got = Vec::new();
+        gpu.detect_and_describe_stream(after.iter().map(Ok::<_, Error>), |_, _, f| {
+            got.push(f);
+            Ok(())
+        })?;
+        for (i, (g, source)) in got.iter().zip(&sources).enumerate() {
+            compare(
+                &format!("after the panics, image {i}"),
+                g,
+                &cpu.detect_and_describe(&source.view())?,
+            )?;
+        }
+        println!(
+            "panics of the consumer, the producer and gray_view reach the caller; {} images identical after",
+            got.len()
+        );
+        Ok(())
+    }
+
+    /// `GpuStream::release_cached_memory` frees a warm stream's buffers (the next call allocates
+    /// again, the one after nothing); `clatch::cuda::release_cached_memory` frees the pooled streams'
+    /// (the blocking call still gives the CPU's results after); and a pooled stream going back to the
+    /// pool frees a buffer over 256 MiB (a 9000 x 9000 image's quad texture, full scale only), so
+    /// every such call allocates on the device.
+    pub fn release_cached_memory() -> Result<(), Failed> {
+        let (w, h) = scale::pick((1280, 720), (480, 320));
+        let gpu = Extractor::new(GPU, ExtractorConfig::default())?;
+        let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+        let image = rectangles(w, h, 900);
+        let expected = cpu.detect_and_describe(&image.view())?;
+        let stream = GpuStream::new(0)?;
+        let on_stream = |what: &str| -> Result<usize, Failed> {
+            let before = allocations();
+            let got = gpu
+                .detect_and_describe_async(&stream, &image.view())?
+                .wait()?;
+            compare(what, &got, &expected)?;
+            Ok(allocations() - before)
+        };
+        on_stream("warming")?;
+        on_stream("warming")?;
+        let warm = on_stream("warm")?;
+        let freed_before = buffers_freed();
+        stream.release_cached_memory()?;
+        let freed = buffers_freed() - freed_before;
+        let cold = on_stream("after release")?;
+        let warm_again = on_stream("warm again")?;
+        if warm != 0 || freed == 0 || cold == 0 || warm_again != 0 {
+            return Err(format!(
+                "own stream: {warm} allocations warm, {freed} buffers released, {cold} allocations after, {warm_again} warm again"
+            )
+            .into());
+        }
+        for _ in 0..2 {
+            gpu.detect_and_describe(&image.view())?;
+        }
+        let freed_before = buffers_freed();
+        clatch::cuda::release_cached_memory(0)?;
+        // Other trials may hold the pooled streams meanwhile: reported, not asserted.
+        let pool_freed = buffers_freed() - freed_before;
+        compare(
+            "blocking, after releasing the pool",
+            &gpu.detect_and_describe(&image.view())?,
+            &expected,
+        )?;
+        let huge = scale::pick(Some(9000), None).map(|side| rectangles(side, side, 901));
+        if let Some(huge) = &huge {
+            for call in 0..2 {
+                let (freed_before, device_before) = (buffers_freed(), device_allocations());
+                let features = gpu.detect_and_describe(&huge.view())?;
+                let freed = buffers_freed() - freed_before;
+                let allocated = device_allocations() - device_before;
+                if features.keypoints.is_empty() || freed == 0 || allocated == 0 {
+                    return Err(format!(
+                        "9000x9000, call {call}: {} keypoints, {allocated} device allocations, {freed} buffers trimmed on give-back",
+                        features.keypoints.len()
+                    )
+                    .into());
+                }
+            }
+        }
+        println!(
+            "own stream: {freed} buffers released, {cold} allocations after, 0 warm; pool: {pool_freed} released by this thread{}",
+            if huge.is_some() {
+                "; 9000x9000: its buffers over 256 MiB trimmed on give-back"
+            } else {
+                ""
+            }
+        );
         Ok(())
     }
 }

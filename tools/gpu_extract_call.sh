@@ -8,8 +8,9 @@
 #    (tests/cuda_extract_stream.rs: no allocation when warm, shrinking and growing sizes, iterator
 #    stream, pinned and pageable, images in bands, threads on one stream; cuda_faults with cold starts
 #    and the arena-growth trial). Log: $OUT/suite.txt. Then `bash tools/gpu_extract_call.sh sanitize`,
-#    same carry (about 5 minutes): memcheck, initcheck and synccheck on cuda_extract_stream and
-#    cuda_faults with CLATCH_TEST_SCALE=sanitizer. Log: $OUT/sanitize.txt.
+#    same carry (about 8 minutes): memcheck, initcheck and synccheck with CLATCH_TEST_SCALE=sanitizer
+#    on the banded-upload, panic and release trials of cuda_extract_stream one by one, then on the
+#    whole of cuda_extract_stream and cuda_faults. Log: $OUT/sanitize.txt.
 #
 # 2. Measurements. Prepare here: bash tools/pack_gpu_extract.sh
 #    then: run `bash tools/gpu_extract_call.sh bench`, carry [".gpu/extract.tar.xz", ".gpu/folders"],
@@ -38,13 +39,23 @@ if [ "$part" = tests ]; then
         timeout 240 "$B/$t" >> "$OUT/suite.txt" 2>&1; rc=$?
         summary+=("$t rc=$rc $(( $(date +%s) - start ))s: $(grep -E '^test result' "$OUT/suite.txt" | tail -1)")
     done
-    grep -E "allocations|growth sites|streamed|page-locked|on one stream|in bands" "$OUT/suite.txt" | head -24
+    grep -E "allocations|growth sites|streamed|page-locked|on one stream|in bands|released|panics" "$OUT/suite.txt" | head -30
 fi
 if [ "$part" = sanitize ]; then
     mkdir -p .gpu/bin
     [ .gpu/bin/.unpacked -nt .gpu/suite.tar.xz ] || { tar -xJf .gpu/suite.tar.xz -C .gpu/bin && touch .gpu/bin/.unpacked; }
     B=.gpu/bin
     for tool in memcheck initcheck synccheck; do
+        # The banded upload (2100x2100 at this scale: 2 bands on the copy stream), the panics that
+        # must wait for copies reading page-locked images, and the release call, each on its own
+        # first, so that a whole-binary run cut short by its timeout cannot hide them.
+        for trial in large_images_arrive_in_bands a_panic_in_a_stream_waits_for_the_copies release_cached_memory; do
+            echo "== $tool cuda_extract_stream $trial (CLATCH_TEST_SCALE=sanitizer)" >> "$OUT/sanitize.txt"
+            CLATCH_TEST_SCALE=sanitizer timeout 150 compute-sanitizer --tool "$tool" "$B/cuda_extract_stream" --exact "$trial" > /tmp/san.txt 2>&1; rc=$?
+            grep -E "^test result|SUMMARY|in bands|released|panics" /tmp/san.txt >> "$OUT/sanitize.txt"
+            [ $rc -ne 0 ] && tail -30 /tmp/san.txt >> "$OUT/sanitize.txt"
+            summary+=("$tool $trial rc=$rc: $(grep -E '^test result' /tmp/san.txt | tail -1 | cut -c1-60) $(grep -E 'ERROR SUMMARY' /tmp/san.txt | tail -1)")
+        done
         for t in cuda_extract_stream cuda_faults; do
             echo "== $tool $t (CLATCH_TEST_SCALE=sanitizer)" >> "$OUT/sanitize.txt"
             CLATCH_TEST_SCALE=sanitizer timeout 80 compute-sanitizer --tool "$tool" "$B/$t" > /tmp/san.txt 2>&1; rc=$?

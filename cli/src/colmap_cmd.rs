@@ -6,6 +6,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use clatch::colmap::{ColmapError, FolderWriter, ImageFolder, Photo, PinholeCamera};
+use clatch::prefetch::Prefetched;
 use clatch::{Backend, DescriptorSet, Extractor, Match, Matcher};
 
 use crate::ColmapArgs;
@@ -21,6 +22,8 @@ use crate::{report, settings};
 #[derive(Default)]
 struct Times {
     extract: StageTime,
+    /// The decoders' side of `extract`.
+    decoding: Prefetched,
     matching: StageTime,
     write: StageTime,
     verify: StageTime,
@@ -56,16 +59,16 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let extractor = Extractor::new(settings.backend, extraction_config(&settings, args))?;
     let progress = Progress::counter(plan.folder.paths.len() as u64, "extracting features");
     let watch = Stopwatch::start();
-    let (photos, descriptors): (Vec<Photo>, Vec<DescriptorSet>) = clatch::colmap::extract_photos(
+    let (extracted, decoding) = clatch::colmap::extract_photos(
         &extractor,
         (&plan.folder.paths, &plan.folder.names),
         &args.input.limits(),
         refinement,
         &|_| progress.done(),
-    )?
-    .into_iter()
-    .unzip();
+    )?;
+    let (photos, descriptors): (Vec<Photo>, Vec<DescriptorSet>) = extracted.into_iter().unzip();
     times.extract = watch.stop();
+    times.decoding = decoding;
     progress.finish();
 
     // Match every pair.
@@ -422,6 +425,12 @@ fn print_extraction_report(
         "  extract     {} ({})",
         times.extract,
         report::per_second(photos.len(), times.extract.wall, "images")
+    );
+    println!(
+        "  decode      {} summed over {} decoding thread(s); extraction waited {} for it",
+        report::ms(times.decoding.produce),
+        times.decoding.threads,
+        report::ms(times.decoding.waited)
     );
     println!(
         "  match       {} ({})",

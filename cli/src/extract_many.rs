@@ -10,11 +10,11 @@ use clatch::{Extractor, GrayView};
 use crate::ExtractArgs;
 use crate::error::CliError;
 use crate::extract::{write_descriptors_npy, write_keypoints_csv, write_keypoints_json};
-use crate::extract_stream::extract_decoded;
 use crate::input::{check_detectable, load_gray};
 use crate::output::{Staged, check_distinct, check_writable};
 use crate::progress::Progress;
 use crate::report::{ms, per_second};
+use clatch::prefetch::extract_decoded;
 
 /// A decoded image waiting for extraction.
 struct Decoded {
@@ -91,7 +91,7 @@ pub fn main(args: &ExtractArgs, extractor: &Extractor) -> Result<(), CliError> {
             let path = &args.images[i];
             let img = load_gray(path, &limits)?;
             check_detectable(path, img.width(), img.height())?;
-            Ok(Decoded { img, index: i })
+            Ok::<_, CliError>(Decoded { img, index: i })
         },
         |_, decoded, features| {
             let [csv, json, npy] = &outputs[decoded.index];

@@ -180,7 +180,7 @@ fn _extract_photos<'py>(
         }
     };
     let limits = DecodeLimits { max_pixels };
-    let photos = compute_with(py, || {
+    let (photos, _decoding) = compute_with(py, || {
         clatch::colmap::extract_photos(
             &extractor.inner,
             (&paths, &names),

@@ -16,9 +16,9 @@ use crate::descriptor::DescriptorSet;
 use crate::detect::DetectorConfig;
 use crate::facade::Extractor;
 use crate::features::Features;
-use crate::gray_view::GrayView;
+use crate::gray_view::{AsGrayView, GrayView};
 use crate::keypoint::KeyPoint;
-use crate::parallel::*;
+use crate::prefetch::{Prefetched, extract_decoded};
 
 /// File extensions read as images (compared without case).
 pub const IMAGE_EXTENSIONS: [&str; 7] = ["jpg", "jpeg", "png", "pgm", "ppm", "pbm", "pnm"];
@@ -33,10 +33,6 @@ pub const DEFAULT_GRID: usize = 8;
 /// well-spread points per photo more than a fast match of each pair, so its budget is larger than the
 /// library's general default of 5000 (measured: docs/bench/2026-12-02-sfm/ in the repository).
 pub const DEFAULT_MAX_KEYPOINTS: usize = 8192;
-
-/// Photos decoded at a time by [`extract_photos`]: the next group is decoded on the CPU threads while
-/// the extractor works on this one (with several images in flight on the GPU).
-const DECODE_GROUP: usize = 8;
 
 /// The image files directly inside `dir` (no subfolders), sorted by path so that image ids are the
 /// same on every run. A missing folder and a folder with no image are errors.
@@ -221,6 +217,12 @@ fn decode<'a>(
     })
 }
 
+impl AsGrayView for Decoded<'_> {
+    fn gray_view(&self) -> crate::Result<GrayView<'_>> {
+        self.img.gray_view()
+    }
+}
+
 impl Decoded<'_> {
     fn view(&self) -> Result<GrayView<'_>, ColmapError> {
         GrayView::try_from(&self.img).map_err(|source| ColmapError::Image {
@@ -262,59 +264,31 @@ pub fn extract_photo(
     Ok(decoded.photo(features, refinement))
 }
 
-/// [`extract_photo`] of every photo, in order: groups of photos through
-/// [`Extractor::detect_and_describe_batch`], the next group decoded meanwhile on the CPU threads.
-/// `done(i)` is called as photo `i` is extracted (from any thread).
+/// [`extract_photo`] of every photo, in order: the photos decoded on worker threads ahead of the
+/// extractor ([`crate::prefetch::extract_decoded`]), which takes them as a stream
+/// ([`Extractor::detect_and_describe_stream`]: on the GPU several in flight on several streams).
+/// `done(i)` is called as photo `i` is extracted, in order. Returns the photos and the decoders'
+/// timings (their summed time, and how long extraction waited for them).
 pub fn extract_photos(
     extractor: &Extractor,
     (paths, names): (&[PathBuf], &[String]),
     limits: &DecodeLimits,
     refinement: Refinement,
     done: &(dyn Fn(usize) + Sync),
-) -> Result<Vec<(Photo, DescriptorSet)>, ColmapError> {
-    let all: Vec<(&Path, &str)> = paths
-        .iter()
-        .map(PathBuf::as_path)
-        .zip(names.iter().map(String::as_str))
-        .collect();
-    fn decode_group<'a>(
-        group: &[(&'a Path, &'a str)],
-        limits: &DecodeLimits,
-    ) -> Result<Vec<Decoded<'a>>, ColmapError> {
-        group
-            .par_iter()
-            .map(|&(path, name)| decode(path, name, limits))
-            .collect()
-    }
-    let groups: Vec<&[(&Path, &str)]> = all.chunks(DECODE_GROUP).collect();
-    let mut photos = Vec::with_capacity(all.len());
-    let mut current = match groups.first() {
-        Some(group) => decode_group(group, limits)?,
-        None => return Ok(photos),
-    };
-    for g in 0..groups.len() {
-        let first = g * DECODE_GROUP;
-        let (next, extracted) = crate::parallel::join(
-            || {
-                groups
-                    .get(g + 1)
-                    .map(|group| decode_group(group, limits))
-                    .transpose()
-            },
-            || -> Result<Vec<Features>, ColmapError> {
-                let views = current
-                    .iter()
-                    .map(Decoded::view)
-                    .collect::<Result<Vec<_>, _>>()?;
-                Ok(extractor.detect_and_describe_batch(&views, &|i| done(first + i))?)
-            },
-        );
-        for (decoded, features) in current.into_iter().zip(extracted?) {
+) -> Result<(Vec<(Photo, DescriptorSet)>, Prefetched), ColmapError> {
+    let n = paths.len().min(names.len());
+    let mut photos = Vec::with_capacity(n);
+    let decoding = extract_decoded(
+        extractor,
+        n,
+        |i| decode(&paths[i], &names[i], limits),
+        |i, decoded, features| {
             photos.push(decoded.photo(features, refinement));
-        }
-        current = next?.unwrap_or_default();
-    }
-    Ok(photos)
+            done(i);
+            Ok(())
+        },
+    )?;
+    Ok((photos, decoding))
 }
 
 #[cfg(test)]

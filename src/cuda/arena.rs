@@ -7,12 +7,19 @@
 //! is off, `device.rs`). Returning it to the arena when its owner drops, even while that work is still
 //! queued, is therefore safe: whoever takes it next queues its own work on the same stream, after. This
 //! is the argument of cudarc's stream-ordered free. Pinned host buffers are read and written by the
-//! host too, so each carries cudarc's event of its last copy, and the host waits for it before touching
-//! the buffer ([`cudarc::driver::PinnedHostSlice::as_slice`] synchronises on it).
+//! host too, so each carries its own event ([`KeptHost::copied`]), recorded after every copy queued on
+//! it, and the host waits for that event before touching the buffer ([`PinnedScratch::host`]) or
+//! freeing it. cudarc's own event in a [`cudarc::driver::PinnedHostSlice`] is no help here: with event
+//! tracking off cudarc never records it, so the waits in its `as_slice` and `as_mut_ptr` return at
+//! once.
 //!
-//! Buffers grow geometrically (capacities rounded up to eighths of a power of two) and never shrink; a
-//! call takes the smallest free buffer that holds what it asks for. Everything is freed with the arena,
-//! i.e. with the stream ([`Lane`]).
+//! Buffers grow geometrically (capacities rounded up to eighths of a power of two); a call takes the
+//! smallest free buffer that holds what it asks for. A stream's arena never shrinks by itself, but a
+//! lane of the device's pool is trimmed when it goes back to the pool ([`Free::split_off`]: buffers
+//! over [`KEPT_BUFFER_BYTES`], and the largest beyond [`KEPT_LANE_BYTES`] in all), so one huge image
+//! does not keep gigabytes for the life of the process, while calls of a size seen before allocate
+//! nothing. [`release_cached_memory`] and [`super::GpuStream::release_cached_memory`] free what the
+//! arenas hold on request. Everything is freed with the arena, i.e. with the stream ([`Lane`]).
 
 use std::ops::Deref;
 use std::sync::{Arc, Mutex};
@@ -42,6 +49,8 @@ pub(crate) struct KeptDevice<T> {
 /// A free pinned host buffer and the event recorded after the last copy queued on it.
 pub(crate) struct KeptHost<T> {
     buffer: PinnedHostSlice<T>,
+    /// Recorded by [`PinnedScratch::queue_copy`] after each copy; waited for before the host touches
+    /// the buffer and before it is freed (cudarc's own event in the buffer is never recorded).
     copied: CudaEvent,
 }
 
@@ -67,6 +76,30 @@ impl<T> Default for Lists<T> {
     }
 }
 
+impl<T> Lists<T> {
+    /// Appends the size in bytes of every buffer to `sizes`.
+    fn sizes(&self, sizes: &mut Vec<usize>) {
+        let bytes = |len: usize| len * std::mem::size_of::<T>();
+        sizes.extend(self.device.iter().map(|k| bytes(k.buffer.len())));
+        sizes.extend(self.host.iter().map(|k| bytes(k.buffer.len())));
+    }
+
+    /// Moves every buffer of more than `keep` bytes to `out`.
+    fn split_off(&mut self, keep: usize, out: &mut Self) {
+        let fits = |len: usize| len * std::mem::size_of::<T>() <= keep;
+        let (device, gone): (Vec<_>, Vec<_>) = std::mem::take(&mut self.device)
+            .into_iter()
+            .partition(|k| fits(k.buffer.len()));
+        self.device = device;
+        out.device.extend(gone);
+        let (host, gone): (Vec<_>, Vec<_>) = std::mem::take(&mut self.host)
+            .into_iter()
+            .partition(|k| fits(k.buffer.len()));
+        self.host = host;
+        out.host.extend(gone);
+    }
+}
+
 /// Free buffers of every element type the extraction path uses.
 #[derive(Default)]
 pub(crate) struct Free {
@@ -75,6 +108,73 @@ pub(crate) struct Free {
     ints: Lists<i32>,
     longs: Lists<u64>,
     keypoints: Lists<KeyPoint>,
+}
+
+/// The largest free buffer a lane of the device's pool keeps when it goes back to the pool (256 MiB:
+/// the quad texture of a 64-megapixel image); larger ones are freed and allocated again by the next
+/// image that needs them, whose own work dwarfs the allocation.
+pub(crate) const KEPT_BUFFER_BYTES: usize = 256 << 20;
+
+/// The most free bytes a lane of the device's pool keeps when it goes back to the pool, smallest buffers
+/// first (512 MiB: by estimate, not measured on a device, the buffers of two 21-megapixel photos in
+/// flight with the default pyramid).
+pub(crate) const KEPT_LANE_BYTES: usize = 512 << 20;
+
+impl Free {
+    /// Splits off (into the returned lists) the buffers beyond what a lane keeps: every buffer of more
+    /// than `largest` bytes, and of the rest those beyond the first `total` bytes, smallest kept first
+    /// (a size is kept whole or not at all). `split_off(0, 0)` takes everything.
+    fn split_off(&mut self, largest: usize, total: usize) -> Free {
+        let mut sizes = Vec::new();
+        self.bytes.sizes(&mut sizes);
+        self.words.sizes(&mut sizes);
+        self.ints.sizes(&mut sizes);
+        self.longs.sizes(&mut sizes);
+        self.keypoints.sizes(&mut sizes);
+        let keep = kept_size(sizes, largest, total);
+        let mut gone = Free::default();
+        self.bytes.split_off(keep, &mut gone.bytes);
+        self.words.split_off(keep, &mut gone.words);
+        self.ints.split_off(keep, &mut gone.ints);
+        self.longs.split_off(keep, &mut gone.longs);
+        self.keypoints.split_off(keep, &mut gone.keypoints);
+        gone
+    }
+
+    /// How many buffers (device and pinned) the lists hold.
+    fn count(&self) -> usize {
+        let both = |device: usize, host: usize| device + host;
+        both(self.bytes.device.len(), self.bytes.host.len())
+            + both(self.words.device.len(), self.words.host.len())
+            + both(self.ints.device.len(), self.ints.host.len())
+            + both(self.longs.device.len(), self.longs.host.len())
+            + both(self.keypoints.device.len(), self.keypoints.host.len())
+    }
+
+    /// Whether a texture object is kept with one of the device buffers.
+    fn has_texture(&self) -> bool {
+        self.bytes.device.iter().any(|k| k.texture.is_some())
+    }
+}
+
+/// The largest buffer size (in bytes) kept of buffers of `sizes`: at most `largest`, and such that all
+/// buffers of at most that size together hold at most `total` bytes (0 keeps nothing).
+fn kept_size(mut sizes: Vec<usize>, largest: usize, total: usize) -> usize {
+    sizes.sort_unstable();
+    let mut keep = 0;
+    let mut sum = 0usize;
+    let mut i = 0;
+    while i < sizes.len() {
+        let size = sizes[i];
+        let same = sizes[i..].iter().take_while(|&&s| s == size).count();
+        sum = sum.saturating_add(size.saturating_mul(same));
+        if size > largest || sum > total {
+            break;
+        }
+        keep = size;
+        i += same;
+    }
+    keep
 }
 
 /// An element type an [`Arena`] keeps buffers of.
@@ -134,6 +234,28 @@ impl Arena {
     fn lock(&self) -> std::sync::MutexGuard<'_, Free> {
         self.free.lock().unwrap_or_else(|p| p.into_inner())
     }
+
+    /// Frees the free buffers beyond `largest` and `total` bytes ([`Free::split_off`]) of this arena,
+    /// whose buffers all belong to `lane`. Buffers in use stay in use. Returns whether any was freed.
+    fn trim(&self, lane: &Lane, largest: usize, total: usize) -> Result<bool> {
+        // Taken out first: work queued from now on cannot use them, so after the wait below nothing
+        // queued reads them (or their textures).
+        let gone = self.lock().split_off(largest, total);
+        if gone.count() == 0 {
+            return Ok(false);
+        }
+        #[cfg(feature = "internals")]
+        hooks::FREED.set(hooks::FREED.get() + gone.count());
+        if gone.has_texture() {
+            // Texture objects are destroyed at once, not in stream order: queued work may read them.
+            lane.synchronize_all()?;
+        }
+        // Device buffers: freed in stream order; pinned ones: each waits for its last copy.
+        drop(gone);
+        // The device's memory pool gives freed memory back to the system at a synchronisation.
+        lane.synchronize_all()?;
+        Ok(true)
+    }
 }
 
 /// A stream and the arena of its buffers. Derefs to the stream, so it goes wherever a stream does;
@@ -167,6 +289,12 @@ impl Lane {
     /// The lane's copy stream (see the field).
     pub(crate) fn copy_stream(&self) -> &Arc<CudaStream> {
         &self.copy
+    }
+
+    /// Frees every free buffer of the lane's arena (buffers held by work in flight stay with it and
+    /// come back when that work's owner drops them).
+    pub(crate) fn release_cached_memory(&self) -> Result<()> {
+        self.arena.trim(self, 0, 0).map(|_| ())
     }
 
     /// Waits until everything queued on the lane (its stream and its copy stream) has run.
@@ -470,12 +598,35 @@ impl LanePool {
         }
     }
 
-    /// Gives `lane` back (work it queued may still run: whoever takes it next queues after it).
+    /// Gives `lane` back (work it queued may still run: whoever takes it next queues after it), its
+    /// arena trimmed to [`KEPT_BUFFER_BYTES`] and [`KEPT_LANE_BYTES`].
+    ///
+    /// While the thread panics, the lane is waited for first: the call that held it may have queued a
+    /// copy that reads the caller's image straight from its memory ([`super::texture::ImageLife::Work`]),
+    /// which the unwinding may release next.
     pub(crate) fn give(&self, lane: Lane) {
+        if std::thread::panicking() {
+            let _ = lane.synchronize_all();
+        }
+        // A failed wait while trimming leaves the lane as it is: its next user meets the same error.
+        let _ = lane.arena.trim(&lane, KEPT_BUFFER_BYTES, KEPT_LANE_BYTES);
         let mut idle = self.idle.lock().unwrap_or_else(|p| p.into_inner());
         if idle.len() < KEPT_LANES {
             idle.push(lane);
         }
+    }
+
+    /// Frees every free buffer of the idle lanes' arenas ([`Lane::release_cached_memory`]); the lanes
+    /// (their streams) stay idle in the pool.
+    pub(crate) fn release_cached_memory(&self) -> Result<()> {
+        let idle = self.idle.lock().unwrap_or_else(|p| p.into_inner()).clone();
+        let mut first_error = Ok(());
+        for lane in &idle {
+            if let Err(e) = lane.release_cached_memory() {
+                first_error = first_error.and(Err(e));
+            }
+        }
+        first_error
     }
 
     /// Drops every idle lane and its buffers (test hooks: a cold start).
@@ -485,7 +636,15 @@ impl LanePool {
     }
 }
 
-/// A lane of the device's pool, given back when dropped.
+/// Frees the device memory (and pinned host memory) clatch keeps between calls on CUDA device `ordinal`
+/// in the idle streams of the device's pool, which the blocking calls, batches and image streams of
+/// [`crate::Extractor`] and [`crate::Matcher`] use. See [`super::release_cached_memory`].
+pub(crate) fn release_cached_memory(ordinal: usize) -> Result<()> {
+    super::device(ordinal)?.lanes.release_cached_memory()
+}
+
+/// A lane of the device's pool, given back when dropped (waited for first if the thread panics,
+/// [`LanePool::give`]).
 pub(crate) struct Leased<'a> {
     lane: Option<Lane>,
     dev: &'a GpuDevice,
@@ -516,6 +675,20 @@ impl Drop for Leased<'_> {
     }
 }
 
+/// Test hooks of the arenas (the `internals` feature only): not part of the API.
+#[cfg(feature = "internals")]
+pub mod hooks {
+    thread_local! {
+        pub(super) static FREED: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    }
+
+    /// How many kept buffers (device and pinned) this thread's calls have freed so far: trimmed when
+    /// a lane went back to the device's pool, or released on request.
+    pub fn buffers_freed() -> usize {
+        FREED.get()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -543,6 +716,33 @@ mod tests {
         assert_eq!(capacity_for(1025), 1280);
         // Sizes close together share a capacity.
         assert_eq!(capacity_for(2_000_000), capacity_for(2_090_000));
+    }
+
+    #[test]
+    fn a_lane_keeps_its_smallest_buffers_up_to_the_bounds() {
+        let mb = 1 << 20;
+        // Everything fits: the largest size is kept.
+        assert_eq!(
+            kept_size(vec![8 * mb, 2 * mb, 2 * mb], 256 * mb, 512 * mb),
+            8 * mb
+        );
+        // One buffer over the largest kept size goes, whatever the total.
+        assert_eq!(
+            kept_size(vec![4 * mb, 300 * mb, 2 * mb], 256 * mb, 512 * mb),
+            4 * mb
+        );
+        // Over the total: the smallest sizes kept, a size whole or not at all.
+        assert_eq!(
+            kept_size(
+                vec![250 * mb, 250 * mb, 100 * mb, 10 * mb],
+                256 * mb,
+                512 * mb
+            ),
+            100 * mb
+        );
+        assert_eq!(kept_size(vec![10, 20], 0, 0), 0);
+        assert_eq!(kept_size(Vec::new(), 256 * mb, 512 * mb), 0);
+        assert_eq!(kept_size(vec![1, 1, 1], 1, 2), 0);
     }
 
     #[test]

@@ -50,6 +50,7 @@ pub(crate) use texture::ImageLife;
 #[cfg(feature = "internals")]
 #[doc(hidden)]
 pub mod hooks {
+    pub use super::arena::hooks::*;
     pub use super::collection::hooks::*;
     pub use super::describe::hooks::*;
     pub use super::detect::hooks::*;
@@ -60,6 +61,7 @@ pub mod hooks {
     pub use super::memory::hooks::*;
     pub use super::pyramid::hooks::*;
     pub use super::spans::hooks::*;
+    pub use super::texture::hooks::*;
 }
 
 use crate::error::Result;
@@ -81,6 +83,33 @@ pub(crate) fn invariant(
             message: message(),
         })
     }
+}
+
+/// Frees the device memory (and page-locked host memory) that clatch keeps between calls on CUDA device
+/// `ordinal` for the blocking calls, batches and image streams of [`crate::Extractor`] and
+/// [`crate::Matcher`]: the free buffers of the device's pooled streams. The next call allocates what
+/// it needs again.
+///
+/// Those streams keep their buffers so that a steady state of similar images allocates nothing; when
+/// a pooled stream goes back to the pool it already gives up every buffer over 256 MiB and keeps at
+/// most 512 MiB, so one huge image does not hold gigabytes for the life of the process. This call
+/// frees the rest, e.g. before handing the device to other work. Buffers that calls running now
+/// hold stay theirs (they return to their streams when those calls end); streams the caller holds
+/// keep theirs until dropped or until [`GpuStream::release_cached_memory`]. Safe at any time, from any
+/// thread. Like any call, it loads the device first if no call has ([`crate::Error::BackendUnavailable`]
+/// without one).
+///
+/// ```no_run
+/// # fn main() -> clatch::Result<()> {
+/// use clatch::{Backend, Extractor, ExtractorConfig, GrayView};
+/// let extractor = Extractor::new(Backend::Cuda { device: 0 }, ExtractorConfig::default())?;
+/// let huge = vec![0u8; 20_000 * 20_000];
+/// extractor.detect_and_describe(&GrayView::new(&huge, 20_000, 20_000, 20_000)?)?;
+/// clatch::cuda::release_cached_memory(0)?;
+/// # Ok(()) }
+/// ```
+pub fn release_cached_memory(ordinal: usize) -> Result<()> {
+    arena::release_cached_memory(ordinal)
 }
 
 pub(crate) fn ensure_available(ordinal: usize) -> Result<()> {

@@ -34,7 +34,8 @@ use crate::pyramid::Pyramid;
 ///
 /// A stream keeps the device buffers (and pinned host buffers) of the calls queued on it after they
 /// finish, and hands them to the next calls, growing them when a call needs more: a steady state of
-/// images of similar size allocates nothing. They are freed with the stream (its last clone).
+/// images of similar size allocates nothing. They are freed with the stream (its last clone), or on
+/// request ([`GpuStream::release_cached_memory`]).
 #[derive(Debug, Clone)]
 pub struct GpuStream {
     dev: Arc<GpuDevice>,
@@ -108,6 +109,15 @@ impl GpuStream {
     /// Blocks until everything queued so far has run.
     pub fn synchronize(&self) -> Result<()> {
         self.lane().synchronize_all()
+    }
+
+    /// Frees the buffers this stream keeps between calls (device memory and page-locked host
+    /// memory); the next call on it allocates what it needs again. Buffers of results still pending
+    /// stay theirs (they come back to the stream when the results are read or dropped). Waits for
+    /// the stream. Safe at any time, from any thread; see also [`super::release_cached_memory`] for
+    /// the streams of the library's own calls.
+    pub fn release_cached_memory(&self) -> Result<()> {
+        self.lane().release_cached_memory()
     }
 
     /// An event recorded now: complete once everything queued so far has run.

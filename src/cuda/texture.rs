@@ -183,6 +183,8 @@ impl DeviceImage {
             .map_err(driver_error("event record"))?;
         copy.wait(&free)
             .map_err(driver_error("image upload: ordering the copy stream"))?;
+        #[cfg(feature = "internals")]
+        hooks::BANDS.set(hooks::BANDS.get() + bands);
         let mut arrivals = Vec::with_capacity(bands);
         let mut y0 = 0;
         let mut queued = Ok(());
@@ -449,5 +451,19 @@ impl DeviceImage {
     /// Height in pixels.
     pub fn height(&self) -> usize {
         self.height
+    }
+}
+
+/// Test hooks of the uploads (the `internals` feature only): not part of the API.
+#[cfg(feature = "internals")]
+pub mod hooks {
+    thread_local! {
+        pub(super) static BANDS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    }
+
+    /// How many bands this thread's image uploads have queued on copy streams so far: images of more
+    /// than one band only ([`super::DeviceImage::upload`]), so a test can check that the banded path ran.
+    pub fn band_arrivals() -> usize {
+        BANDS.get()
     }
 }

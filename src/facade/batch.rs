@@ -5,7 +5,7 @@ use std::collections::VecDeque;
 use super::Extractor;
 use super::in_flight::{IN_FLIGHT_PER_STREAM, STREAMS, streams};
 use crate::backend::Backend;
-use crate::cuda::{ImageLife, PendingFeatures};
+use crate::cuda::{GpuStream, ImageLife, PendingFeatures};
 use crate::error::{Error, Result};
 use crate::features::Features;
 use crate::gray_view::{AsGrayView, GrayView};
@@ -145,8 +145,11 @@ impl Extractor {
 
     /// The GPU side of [`Extractor::detect_and_describe_stream`] (and of the batch): images queued
     /// on the pool's streams in turn, at most `STREAMS * IN_FLIGHT_PER_STREAM` in flight, each kept
-    /// with its pending result until that is read. Images are uploaded as [`ImageLife::Work`]: every
-    /// path out of here, errors included, waits for the streams before an image is released.
+    /// with its pending result until that is read. Images are uploaded as [`ImageLife::Work`]: the
+    /// copy engine may read an image in page-locked memory until its work has run, so every image
+    /// whose work may still be queued is held by [`InFlight`], which waits for the streams before
+    /// releasing it on every way out of here: errors, and panics of `each`, of the iterator or of
+    /// `gray_view` alike.
     fn stream_on_gpu<T, E>(
         &self,
         device: usize,
@@ -158,52 +161,68 @@ impl Extractor {
         E: From<Error>,
     {
         let streams = streams(device)?;
-        let settle = |e: Error| -> Error {
-            for stream in &streams {
-                // The error being returned is the one that matters.
-                let _ = stream.synchronize();
-            }
-            e
-        };
         let window = STREAMS * IN_FLIGHT_PER_STREAM;
-        let mut queued: VecDeque<(usize, T, PendingFeatures)> = VecDeque::with_capacity(window);
-        let run = || -> std::result::Result<usize, E> {
-            let mut next = 0;
-            let mut finish_oldest =
-                |queued: &mut VecDeque<(usize, T, PendingFeatures)>| -> std::result::Result<(), E> {
-                    let (i, item, pending) = queued.pop_front().expect("an image is queued");
-                    // On an error the image is released only after the streams have been waited for.
-                    let features = pending.wait().map_err(settle)?;
-                    each(i, item, features)
-                };
-            for item in images {
-                if queued.len() >= window {
-                    finish_oldest(&mut queued)?;
-                }
-                let item = item?;
-                let pending = match item.gray_view() {
-                    Ok(view) => self
-                        .queue_features(&streams[next % STREAMS], &view, ImageLife::Work)
-                        .map_err(settle)?,
-                    Err(e) => return Err(e.into()),
-                };
-                queued.push_back((next, item, pending));
-                next += 1;
-            }
-            while !queued.is_empty() {
-                finish_oldest(&mut queued)?;
-            }
-            Ok(next)
+        let mut flight = InFlight {
+            streams: &streams,
+            queued: VecDeque::with_capacity(window),
+            held: None,
         };
-        let result = run();
-        if result.is_err() {
-            // Images still queued may be read by their uploads: wait before they drop.
-            for stream in &streams {
+        let mut next = 0;
+        for item in images {
+            if flight.queued.len() >= window {
+                flight.finish_oldest(&mut each)?;
+            }
+            // Held before anything is queued with it, so that it outlives its upload even if queuing
+            // fails or panics half-way.
+            let item = flight.held.insert(item?);
+            let view = item.gray_view()?;
+            let pending =
+                self.queue_features(&flight.streams[next % STREAMS], &view, ImageLife::Work)?;
+            let item = flight.held.take().expect("held above");
+            flight.queued.push_back((next, item, pending));
+            next += 1;
+        }
+        while !flight.queued.is_empty() {
+            flight.finish_oldest(&mut each)?;
+        }
+        Ok(next)
+    }
+}
+
+/// The images of [`Extractor::stream_on_gpu`] whose work may still be queued: each queued image with
+/// its pending result, and `held`, the one being queued or whose result is being read. Dropped with
+/// any of them still here (an error or a panic on the way out), it waits for every stream first, so
+/// that no copy still reads an image it releases.
+struct InFlight<'s, T> {
+    streams: &'s [GpuStream],
+    queued: VecDeque<(usize, T, PendingFeatures)>,
+    held: Option<T>,
+}
+
+impl<T> InFlight<'_, T> {
+    /// Reads the oldest image's result and hands both to `each`. The image stays held until its result
+    /// is read (after which its work has run).
+    fn finish_oldest<E: From<Error>>(
+        &mut self,
+        each: &mut impl FnMut(usize, T, Features) -> std::result::Result<(), E>,
+    ) -> std::result::Result<(), E> {
+        let (i, item, pending) = self.queued.pop_front().expect("an image is queued");
+        self.held = Some(item);
+        let features = pending.wait()?;
+        let item = self.held.take().expect("held above");
+        each(i, item, features)
+    }
+}
+
+impl<T> Drop for InFlight<'_, T> {
+    fn drop(&mut self) {
+        // Runs before the fields drop, i.e. before any image is released.
+        if !self.queued.is_empty() || self.held.is_some() {
+            for stream in self.streams {
+                // An error (or the panic) on the way out is the one that matters.
                 let _ = stream.synchronize();
             }
         }
-        drop(queued);
-        result
     }
 }
 

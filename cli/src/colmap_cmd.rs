@@ -426,12 +426,7 @@ fn print_extraction_report(
         times.extract,
         report::per_second(photos.len(), times.extract.wall, "images")
     );
-    println!(
-        "  decode      {} summed over {} decoding thread(s); extraction waited {} for it",
-        report::ms(times.decoding.produce),
-        times.decoding.threads,
-        report::ms(times.decoding.waited)
-    );
+    println!("  decode      {}", report::decoding(&times.decoding));
     println!(
         "  match       {} ({})",
         times.matching,

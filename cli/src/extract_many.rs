@@ -13,7 +13,7 @@ use crate::extract::{write_descriptors_npy, write_keypoints_csv, write_keypoints
 use crate::input::{check_detectable, load_gray};
 use crate::output::{Staged, check_distinct, check_writable};
 use crate::progress::Progress;
-use crate::report::{ms, per_second};
+use crate::report::{self, ms, per_second};
 use clatch::prefetch::extract_decoded;
 
 /// A decoded image waiting for extraction.
@@ -123,13 +123,7 @@ pub fn main(args: &ExtractArgs, extractor: &Extractor) -> Result<(), CliError> {
         ms(wall),
         per_second(n, wall, "images")
     );
-    println!(
-        "  {:<12}{} summed over {} decoding thread(s); extraction waited {} for it",
-        "decode",
-        ms(decoding.produce),
-        decoding.threads,
-        ms(decoding.waited)
-    );
+    println!("  {:<12}{}", "decode", report::decoding(&decoding));
     println!("  wrote       {} x 3 files in {}", n, dir.display());
     Ok(())
 }

@@ -102,6 +102,17 @@ pub fn per_second(count: usize, wall: Duration, what: &str) -> String {
     }
 }
 
+/// The decoders' side of an extraction, e.g. `12.40 ms summed over 2 decoding thread(s); extraction
+/// waited 1.05 ms for it`.
+pub fn decoding(decoding: &clatch::prefetch::Prefetched) -> String {
+    format!(
+        "{} summed over {} decoding thread(s); extraction waited {} for it",
+        ms(decoding.produce),
+        decoding.threads,
+        ms(decoding.waited)
+    )
+}
+
 /// The matcher settings in words, e.g. `ratio 0.8, cross-check`.
 pub fn describe_matching(config: &MatchConfig) -> String {
     let mut parts = Vec::new();

@@ -40,8 +40,8 @@ from typing import Any, Callable, Deque, Dict, Iterator, List, Mapping, Optional
 import numpy as np
 
 from ._clatch import Extractor, Matcher
-from ._exceptions import ClatchError, ClusterError, InvalidInputError
-from .colmap import MatchFolderResult, PathArg, Photo, Progress, _Plan, extract_photos, match_block
+from ._exceptions import ClatchError, ClusterError
+from .colmap import MatchFolderResult, PathArg, Photo, Progress, _invalid, _Plan, extract_photos, match_block
 
 __all__ = ["match_folder"]
 
@@ -258,9 +258,7 @@ def _blocks(pairs: Sequence[Tuple[int, int]], block_size: int) -> List[List[int]
 
 def _positive(name: str, value: Any) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        error = InvalidInputError(f"{name} must be a positive integer, got {value!r}")
-        error.kind = "InvalidConfig"
-        raise error
+        raise _invalid("InvalidConfig", f"{name} must be a positive integer, got {value!r}")
     return int(value)
 
 

@@ -54,8 +54,10 @@ if [ "$part" = sanitize ]; then
 fi
 if [ "$part" = bench ]; then
     step bench_gpu_collection 330 "$B/bench_gpu_collection"
+    # COLLECTION_PAIRS= (empty) times every pair; split into words on purpose.
+    # shellcheck disable=SC2086
     step "peers.py --collection" 240 python3 tools/peers.py --skip-matching --collection \
-        ${COLLECTION_PAIRS-"--collection-pairs 100000"} --out "$OUT/peers_collection.json"
+        ${COLLECTION_PAIRS---collection-pairs 100000} --out "$OUT/peers_collection.json"
 fi
 grep -E "exhaustive|64k x 64k|sets x|PyTorch" "$LOG" | tail -12
 printf '%s\n' "${summary[@]}" | tee "$OUT/summary.txt"

@@ -36,7 +36,7 @@ if [ "$part" = tests ]; then
              cuda_describe_opencv cuda_match cuda_pool clatch_unit backend; do
         echo "== $t" >> "$OUT/suite.txt"
         start=$(date +%s)
-        timeout 240 "$B/$t" >> "$OUT/suite.txt" 2>&1; rc=$?
+        timeout "${TEST_LIMIT:-240}" "$B/$t" >> "$OUT/suite.txt" 2>&1; rc=$?
         summary+=("$t rc=$rc $(( $(date +%s) - start ))s: $(grep -E '^test result' "$OUT/suite.txt" | tail -1)")
     done
     grep -E "allocations|growth sites|streamed|page-locked|on one stream|in bands|released|panics" "$OUT/suite.txt" | head -30

@@ -39,16 +39,18 @@
 #define CLATCH_TENSOR_TILE 64 /* gallery descriptors per shared-memory stage */
 #define CLATCH_TENSOR_STAGES 3 /* cp.async pipeline depth */
 #define CLATCH_EXPAND_THREADS 256 /* clatch_expand_signs */
+#define CLATCH_GATHER_THREADS 256 /* clatch_gather_rows: one thread per descriptor word */
 
 /* Detection (kernels/detect.cu). */
-#define CLATCH_DETECT_TILE_X 32    /* clatch_detect_nms: one thread per pixel of a 32x8 tile */
-#define CLATCH_DETECT_TILE_Y 8
+#define CLATCH_DETECT_TILE_X 32    /* clatch_detect_nms: one thread per pixel of a 32x16 tile */
+#define CLATCH_DETECT_TILE_Y 16
 #define CLATCH_DETECT_ROW_ALIGN 128 /* row pitch of the kept map, in bytes (one warp reads 128 per step) */
 #define CLATCH_DETECT_WARPS 8      /* warps per block of clatch_detect_scatter / clatch_detect_orient */
 #define CLATCH_SCAN_THREADS 256    /* clatch_scan_reduce / clatch_scan_apply */
 #define CLATCH_SCAN_CHUNK 4096     /* counts per block of the scan (16 per thread) */
 #define CLATCH_SCAN_TOP_THREADS 1024 /* clatch_scan_partials: one block */
-#define CLATCH_SUBPIXEL_THREADS 128  /* clatch_subpixel: one thread per keypoint */
+#define CLATCH_SUBPIXEL_THREADS 128  /* clatch_subpixel: threads per block */
+#define CLATCH_SUBPIXEL_LANES 8      /* clatch_subpixel: lanes per keypoint (5 score a circle each) */
 #define CLATCH_SUBPIXEL_FRAC_BITS 16 /* sub-pixel offsets are in 1/65536 pixel */
 
 /* Smoothing before description (kernels/describe.cu, clatch_smooth_binomial3/5). */

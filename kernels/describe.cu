@@ -303,3 +303,18 @@ extern "C" __global__ void __launch_bounds__(CLATCH_DESCRIBE_WARPS * 32)
         }
     }
 }
+
+// Descriptor rows put in another order: dst row r = src row source_row[r], for r < rows (rows of
+// `words` words). A pyramid's descriptors come out level by level; src/cuda/pyramid.rs gathers them
+// into the reported keypoint order straight into a device-resident collection (no host round trip),
+// the order crate::pyramid::assemble gives on the host. A copy: no bit is computed here.
+extern "C" __global__ void __launch_bounds__(CLATCH_GATHER_THREADS)
+    clatch_gather_rows(const u64* __restrict__ src, const int* __restrict__ source_row, int rows, int words,
+                       u64* __restrict__ dst) {
+    const long long total = (long long)rows * words;
+    for (long long i = (long long)blockIdx.x * blockDim.x + threadIdx.x; i < total;
+         i += (long long)gridDim.x * blockDim.x) {
+        const long long r = i / words, w = i - r * words;
+        dst[i] = src[(long long)source_row[r] * words + w];
+    }
+}

@@ -1,10 +1,10 @@
 // FAST-9 detection on the GPU. Reproduces src/detect/cpu.rs exactly (docs/numerics.md, section 3),
 // ties included, with no host round trip between the stages (all launched on one stream):
 //
-// 1. clatch_detect_nms: one thread per pixel of a 32x8 tile. The block loads the tile plus a 4-pixel
-//    border through the texture into shared memory, scores the tile plus a 1-pixel border (FAST-9; 0
-//    outside the margin and for non-corners), and applies the 3x3 suppression with the raster-order rule
-//    to its own pixels. It writes the kept map (the score of each survivor, 0 elsewhere; rows
+// 1. clatch_detect_nms: one thread per pixel of a 32x16 tile (CLATCH_DETECT_TILE_X/Y). The block
+//    loads the tile plus a 4-pixel border through the texture into shared memory, scores the tile
+//    plus a 1-pixel border (FAST-9; 0 outside the margin and for non-corners), and applies the 3x3
+//    suppression with the raster-order rule to its own pixels. It writes the kept map (the score of each survivor, 0 elsewhere; rows
 //    CLATCH_DETECT_ROW_ALIGN-aligned) and counts survivors per (score, row) with atomicAdd: counts are
 //    order-independent, so the atomics cannot change a result. A launch may cover a band of tile rows
 //    (`first_tile_row`, the grid's height): the host launches one band per uploaded band of the image
@@ -412,19 +412,30 @@ __device__ __forceinline__ int parabola_offset(int l, int c, int r) {
 
 // offsets[2k], offsets[2k + 1] = the sub-pixel offset (dx, dy) of keypoint k < n (whole position on
 // `image`), as crate::detect::cpu::subpixel_offset: 0 for both when a neighbour's circle would leave
-// the image.
+// the image. CLATCH_SUBPIXEL_LANES lanes of one warp per keypoint: lanes 0..4 score the centre and
+// its left, right, upper and lower neighbours side by side (one thread scoring all five waited on
+// five rounds of texture reads in turn), lane 0 combines them. Same scores, same integer arithmetic.
 extern "C" __global__ void __launch_bounds__(CLATCH_SUBPIXEL_THREADS)
 clatch_subpixel(cudaTextureObject_t image, int width, int height,
                 const clatch_keypoint* __restrict__ keypoints, u32 n, int* __restrict__ offsets) {
-    const u32 k = blockIdx.x * blockDim.x + threadIdx.x;
-    if (k >= n) return;
-    const int x = (int)keypoints[k].x, y = (int)keypoints[k].y;
-    int dx = 0, dy = 0;
-    if (x >= 4 && y >= 4 && x + 4 < width && y + 4 < height) {
-        const int c = full_fast_score(image, x, y);
-        dx = parabola_offset(full_fast_score(image, x - 1, y), c, full_fast_score(image, x + 1, y));
-        dy = parabola_offset(full_fast_score(image, x, y - 1), c, full_fast_score(image, x, y + 1));
-    }
-    offsets[2 * (size_t)k] = dx;
-    offsets[2 * (size_t)k + 1] = dy;
+    const u32 thread = blockIdx.x * blockDim.x + threadIdx.x;
+    const u32 k = thread / CLATCH_SUBPIXEL_LANES;
+    const int lane = (int)(thread % CLATCH_SUBPIXEL_LANES);
+    // Every lane reaches the shuffles below: a keypoint past n only scores nothing.
+    const bool real = k < n;
+    const int x = real ? (int)keypoints[k].x : 0, y = real ? (int)keypoints[k].y : 0;
+    const bool inside = real && x >= 4 && y >= 4 && x + 4 < width && y + 4 < height;
+    // Lane j scores (x, y) + step[j]: centre, left, right, up, down.
+    const int step_x[5] = {0, -1, 1, 0, 0}, step_y[5] = {0, 0, 0, -1, 1};
+    int score = 0;
+    if (inside && lane < 5) score = full_fast_score(image, x + step_x[lane], y + step_y[lane]);
+    const int base = (int)(threadIdx.x % 32u) & ~(CLATCH_SUBPIXEL_LANES - 1);
+    const int c = __shfl_sync(0xffffffffu, score, base);
+    const int l = __shfl_sync(0xffffffffu, score, base + 1);
+    const int r = __shfl_sync(0xffffffffu, score, base + 2);
+    const int u = __shfl_sync(0xffffffffu, score, base + 3);
+    const int d = __shfl_sync(0xffffffffu, score, base + 4);
+    if (!real || lane != 0) return;
+    offsets[2 * (size_t)k] = inside ? parabola_offset(l, c, r) : 0;
+    offsets[2 * (size_t)k + 1] = inside ? parabola_offset(u, c, d) : 0;
 }

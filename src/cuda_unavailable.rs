@@ -86,6 +86,18 @@ impl PendingFeatures {
     pub fn wait(self) -> Result<Features> {
         match self.never {}
     }
+
+    pub(crate) fn width(&self) -> DescriptorWidth {
+        match self.never {}
+    }
+
+    pub(crate) fn stream(&self) -> &GpuStream {
+        match self.never {}
+    }
+
+    pub(crate) fn into_collection(self, _: &mut DeviceCollection) -> Result<Vec<KeyPoint>> {
+        match self.never {}
+    }
 }
 
 /// Matches being computed on a stream (none in this build).

@@ -40,6 +40,7 @@ fn trials() -> Vec<Trial> {
             "collection_two_threads_and_reentrant_callbacks",
             gpu::concurrent_and_reentrant,
         ),
+        Trial::test("collection_add_pending_equals_the_cpu", gpu::add_pending),
     ]
 }
 
@@ -634,6 +635,115 @@ mod gpu {
         println!(
             "one collection from two threads and from its own callbacks: {compared} matches, 0 differences"
         );
+        Ok(())
+    }
+
+    /// Features handed from extraction to a collection on the device (`add_pending`: no host copy of
+    /// the descriptors) equal the CPU's extraction bit for bit (read back from the device), and every
+    /// pair of such sets matches as the CPU matches the CPU's features; with the default pyramid (its
+    /// rows gathered into the reported order) and the single-scale preset, several images in flight
+    /// on two streams, an image without keypoints, a host-added set in between, a CPU collection
+    /// taking the same pending results, and a width mismatch refused with nothing added.
+    pub fn add_pending() -> Result<(), Failed> {
+        use clatch::cuda::GpuStream;
+        use clatch::cuda::hooks::read_set;
+        use clatch::{Error, Extractor, ExtractorConfig, GrayView};
+
+        let sizes: Vec<(usize, usize)> = scale::pick(
+            vec![(640, 480), (1280, 720), (333, 257), (800, 600)],
+            vec![(320, 240), (333, 257)],
+        );
+        let mut images: Vec<(Vec<u8>, usize, usize)> = sizes
+            .iter()
+            .enumerate()
+            .map(|(i, &(w, h))| Ok((clatch::synthetic::rectangles(w, h, 40 + i as u64)?, w, h)))
+            .collect::<Result<_, clatch::Error>>()?;
+        // A blank image: no keypoints, an empty set.
+        images.insert(1, (vec![128; 300 * 200], 300, 200));
+        fn view((p, w, h): &(Vec<u8>, usize, usize)) -> clatch::Result<GrayView<'_>> {
+            GrayView::new(p, *w, *h, *w)
+        }
+        let streams = [GpuStream::new(0)?, GpuStream::new(0)?];
+        let config = MatchConfig::default();
+        let (gpu_matcher, cpu_matcher) = (matcher(GPU, &config)?, matcher(Backend::Cpu, &config)?);
+        let mut differences = 0usize;
+        for extractor_config in [ExtractorConfig::default(), ExtractorConfig::single_scale()] {
+            let gpu = Extractor::new(GPU, extractor_config.clone())?;
+            let cpu = Extractor::new(Backend::Cpu, extractor_config.clone())?;
+            let width = extractor_config.descriptor.width;
+            let mut on_device = DescriptorCollection::new(&gpu_matcher, width)?;
+            let mut on_host = DescriptorCollection::new(&cpu_matcher, width)?;
+            let mut host_taken = DescriptorCollection::new(&cpu_matcher, width)?;
+            let wanted = images
+                .iter()
+                .map(|i| cpu.detect_and_describe(&view(i)?))
+                .collect::<Result<Vec<_>, clatch::Error>>()?;
+            // Everything queued first (two streams, several images in flight), then taken in order.
+            let pending = images
+                .iter()
+                .enumerate()
+                .map(|(i, image)| gpu.detect_and_describe_async(&streams[i % 2], &view(image)?))
+                .collect::<Result<Vec<_>, clatch::Error>>()?;
+            for (i, (p, want)) in pending.into_iter().zip(&wanted).enumerate() {
+                if i == 2 {
+                    // A set added from the host between device-added ones.
+                    on_device.add(&[&wanted[0].descriptors])?;
+                    on_host.add(&[&wanted[0].descriptors])?;
+                }
+                let (id, keypoints) = on_device.add_pending(p)?;
+                on_host.add(&[&want.descriptors])?;
+                if id != on_host.len() - 1 || keypoints != want.keypoints {
+                    differences += 1;
+                    eprintln!(
+                        "image {i}: id {id}, {} keypoints, {} wanted",
+                        keypoints.len(),
+                        want.keypoints.len()
+                    );
+                }
+                if read_set(&on_device, id)? != want.descriptors {
+                    differences += 1;
+                    eprintln!("image {i}: descriptors on the device differ from the CPU's");
+                }
+                // The same pending result taken by a CPU collection (it waits and keeps the copy).
+                let again = gpu.detect_and_describe_async(&streams[0], &view(&images[i])?)?;
+                let (_, keypoints) = host_taken.add_pending(again)?;
+                if keypoints != want.keypoints {
+                    differences += 1;
+                }
+            }
+            let (mut device_pairs, mut host_pairs) = (Vec::new(), Vec::new());
+            on_device.match_all_pairs(|_, m| device_pairs.push(m))?;
+            on_host.match_all_pairs(|_, m| host_pairs.push(m))?;
+            let kept: usize = host_pairs.iter().map(Vec::len).sum();
+            differences += device_pairs
+                .iter()
+                .zip(&host_pairs)
+                .filter(|(a, b)| a != b)
+                .count();
+            differences += device_pairs.len().abs_diff(host_pairs.len());
+            println!(
+                "add_pending, {} levels: {} sets, {} pairs, {kept} matches kept",
+                extractor_config.pyramid.map_or(1, |p| p.levels),
+                on_device.len(),
+                host_pairs.len()
+            );
+            if kept == 0 {
+                return Err(
+                    "the images gave no matches: the comparison would prove nothing".into(),
+                );
+            }
+            // A width mismatch is refused before anything is added.
+            let narrow = DescriptorWidth::from_bits(256)?;
+            let mut other = DescriptorCollection::new(&gpu_matcher, narrow)?;
+            let refused =
+                other.add_pending(gpu.detect_and_describe_async(&streams[1], &view(&images[0])?)?);
+            if !matches!(refused, Err(Error::DescriptorWidthMismatch { .. })) || !other.is_empty() {
+                return Err(format!("width mismatch: {refused:?}, {} sets", other.len()).into());
+            }
+        }
+        if differences > 0 {
+            return Err(format!("{differences} differences").into());
+        }
         Ok(())
     }
 }

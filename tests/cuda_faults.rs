@@ -349,8 +349,46 @@ mod gpu {
                             .detect_and_describe_async(&stream, &large.view())?
                             .wait()?;
                         if again != expected {
+                            // What differs, and whether it lasts: two more calls, the second after
+                            // waiting for the stream (a race would pass there; a stale buffer not).
+                            let third = gpu
+                                .detect_and_describe_async(&stream, &large.view())?
+                                .wait()?;
+                            stream.synchronize()?;
+                            let fourth = gpu
+                                .detect_and_describe_async(&stream, &large.view())?
+                                .wait()?;
+                            let first_keypoint = again
+                                .keypoints
+                                .iter()
+                                .zip(&expected.keypoints)
+                                .position(|(a, b)| a != b);
+                            // Which rows differ, by pyramid level (octave): a level's quad texture,
+                            // its keypoints or its output rows.
+                            let words = expected.descriptors.width().words();
+                            let rows = again.descriptors.as_words().chunks(words);
+                            let mut levels = std::collections::BTreeMap::new();
+                            for (i, (a, b)) in rows
+                                .zip(expected.descriptors.as_words().chunks(words))
+                                .enumerate()
+                            {
+                                if a != b {
+                                    *levels.entry(expected.keypoints[i].octave).or_insert(0) += 1;
+                                }
+                            }
                             return Err(format!(
-                                "{name}: after the failure at {operation}, the stream's answer differs from the CPU's"
+                                "{name}: after the failure at {operation} (growth allocation {n}), the \
+                                 stream's answer differs from the CPU's: {} keypoints against {}, first \
+                                 different keypoint {first_keypoint:?} ({:?} against {:?}), descriptors \
+                                 equal: {} (rows differing by level: {levels:?}); the next call \
+                                 equal: {}, after a synchronize: {}",
+                                again.keypoints.len(),
+                                expected.keypoints.len(),
+                                first_keypoint.map(|i| again.keypoints[i]),
+                                first_keypoint.map(|i| expected.keypoints[i]),
+                                again.descriptors == expected.descriptors,
+                                third == expected,
+                                fourth == expected,
                             )
                             .into());
                         }

@@ -11,20 +11,7 @@ mv "$OUT/summary.txt" "$OUT/summary_tests.txt"
 B=.gpu/bin
 mkdir -p .gpu/variants && { [ -f .gpu/variants.tar.xz ] && tar -xJf .gpu/variants.tar.xz -C .gpu/variants; }
 IMG=.gpu/img/herzjesu0_5616x3744.png
-ncu_sum() {
-  python3 - <<'PY'
-import csv, collections
-rows=[r for r in csv.reader(open('/tmp/ncu.csv')) if len(r)>10]
-h=rows[0]; ki=h.index('Kernel Name'); vi=h.index('Metric Value'); ui=h.index('Metric Unit')
-scale={'ns':1e-6,'nsecond':1e-6,'us':1e-3,'usecond':1e-3,'ms':1.0,'msecond':1.0}
-tot=0; per=collections.Counter(); n=collections.Counter()
-for r in rows[1:]:
-    v=float(r[vi].replace(',',''))*scale[r[ui]]
-    tot+=v; k=r[ki].split('(')[0]; per[k]+=v; n[k]+=1
-print(f"kernels {sum(n.values())}  device time {tot:.3f} ms")
-for k,v in per.most_common(): print(f"  {k:40s} x{n[k]:3d} {v:.3f} ms")
-PY
-}
+ncu_sum() { python3 tools/ncu_sum.py /tmp/ncu.csv; }
 {
 for run in "$B/clatch|--threshold 10 --max-keypoints 20000" \
            "$B/clatch|--max-keypoints 20000" \

@@ -20,7 +20,7 @@ mod plan;
 
 use std::sync::{Arc, Mutex};
 
-use cudarc::driver::{CudaSlice, CudaStream};
+use cudarc::driver::{CudaSlice, CudaStream, CudaViewMut};
 
 use super::device::{GpuDevice, driver_error};
 use super::header::{CLATCH_MATCH_ROW_PAD, CLATCH_PAIRS_ROW_ALIGN};
@@ -105,6 +105,8 @@ pub(crate) struct DeviceCollection {
     /// side by side; a buffer dropped while a run holds it is freed with the run's last clone, queued
     /// on the collection's one stream after every launch that read it.
     signs: Mutex<Option<Arc<CudaSlice<u8>>>>,
+    /// Scratch of grouped runs kept between them (see [`grouped::SlotCache`]).
+    slots: grouped::SlotCache,
 }
 
 impl std::fmt::Debug for DeviceCollection {
@@ -132,6 +134,7 @@ impl DeviceCollection {
             places: Vec::new(),
             end_row: 0,
             signs: Mutex::new(None),
+            slots: grouped::SlotCache::default(),
         })
     }
 
@@ -167,6 +170,55 @@ impl DeviceCollection {
                 .map_err(driver_error("uploading collection descriptors"))?;
         }
         self.places.extend(places);
+        self.end_row = end;
+        *self.signs.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
+        Ok(())
+    }
+
+    /// Adds a set of `rows` rows that work queued on `writer` (another stream of this device) puts in
+    /// place: `fill(target)` queues that work on `writer`, `target` being the set's rows in this
+    /// collection's buffer. The descriptors never cross the bus. Ordering, by events both ways:
+    /// `writer` first waits for this collection's stream (the buffer may just have been allocated or
+    /// grown there), and this collection's stream then waits for `writer`, so every later match, growth
+    /// or free queued here runs after the rows are written.
+    pub(crate) fn append_rows(
+        &mut self,
+        writer: &Arc<CudaStream>,
+        rows: usize,
+        fill: impl FnOnce(&mut CudaViewMut<'_, u64>) -> Result<()>,
+    ) -> Result<()> {
+        let words = self.width.words();
+        let first = self.end_row;
+        let end = (first + rows).next_multiple_of(ROW_ALIGN);
+        if end + ROW_PAD > self.capacity_rows {
+            self.grow((end + ROW_PAD).max(2 * self.capacity_rows))?;
+        }
+        let ready = self
+            .stream
+            .record_event(None)
+            .map_err(driver_error("event record"))?;
+        writer
+            .wait(&ready)
+            .map_err(driver_error("ordering a collection's writer"))?;
+        let mut target = self.rows.slice_mut(first * words..(first + rows) * words);
+        let filled = fill(&mut target);
+        // The set's rows are this collection's from here, whatever `fill` did: this stream waits for
+        // the writer before anything else touches the buffer.
+        let written = writer
+            .record_event(None)
+            .map_err(driver_error("event record"))?;
+        self.stream
+            .wait(&written)
+            .map_err(driver_error("ordering a collection's writer"))?;
+        if let Err(e) = filled {
+            // Rows past the last set must stay zero (the next set's alignment gap may lie there).
+            let _ = self.stream.memset_zeros(&mut target);
+            return Err(e);
+        }
+        self.places.push(Place {
+            first_row: first,
+            rows,
+        });
         self.end_row = end;
         *self.signs.get_mut().unwrap_or_else(|p| p.into_inner()) = None;
         Ok(())
@@ -309,6 +361,7 @@ impl DeviceCollection {
             words,
             config,
             tensor: None,
+            slots: &self.slots,
         };
         if family == MatchKernel::Popcount {
             return run.all(places, budget, each);

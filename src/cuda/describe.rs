@@ -8,7 +8,7 @@ use cudarc::driver::{
 
 use super::arena::{Lane, Leased, PinnedScratch, Scratch, settled};
 use super::device::{GpuDevice, driver_error};
-use super::header::CLATCH_DESCRIBE_WARPS;
+use super::header::{CLATCH_DESCRIBE_WARPS, CLATCH_GATHER_THREADS};
 use super::texture::{DeviceImage, ImageLife};
 use crate::describe::{Described, DescriptorConfig, SamplingFrame, SkipReason, Skipped};
 use crate::descriptor::DescriptorSet;
@@ -215,6 +215,54 @@ pub(crate) fn launch_describe(
     // kernel indexes (capacity keypoints, one count, 2880 rotations, 512 triplets, 64 weights,
     // capacity * words outputs).
     unsafe { launch.launch(config) }.map_err(driver_error(kernel))?;
+    Ok(())
+}
+
+/// Queues `clatch_gather_rows` on `stream`: row `r` of `dst` (`rows` rows of `words` words) becomes
+/// row `source[r]` of `src`. Every source index must lie in `src` (the caller's invariant).
+pub(crate) fn gather_rows(
+    dev: &GpuDevice,
+    stream: &Arc<CudaStream>,
+    (src, source): (&CudaView<'_, u64>, &CudaView<'_, i32>),
+    (rows, words): (usize, usize),
+    dst: &mut CudaViewMut<'_, u64>,
+) -> Result<()> {
+    super::invariant(
+        source.len() >= rows && src.len() >= rows * words && dst.len() >= rows * words,
+        "gather rows",
+        || {
+            format!(
+                "{rows} rows of {words} words from {} words by {} indices into {} words",
+                src.len(),
+                source.len(),
+                dst.len()
+            )
+        },
+    )?;
+    if rows == 0 {
+        return Ok(());
+    }
+    let (rows_arg, words_arg) = (rows as i32, words as i32);
+    let threads = CLATCH_GATHER_THREADS as usize;
+    let blocks = (rows * words)
+        .div_ceil(threads)
+        .min(dev.multiprocessors * BLOCKS_PER_SM) as u32;
+    let mut launch = stream.launch_builder(dev.kernel("clatch_gather_rows"));
+    launch
+        .arg(src)
+        .arg(source)
+        .arg(&rows_arg)
+        .arg(&words_arg)
+        .arg(dst);
+    let config = LaunchConfig {
+        grid_dim: (blocks, 1, 1),
+        block_dim: (CLATCH_GATHER_THREADS, 1, 1),
+        shared_mem_bytes: 0,
+    };
+    // SAFETY: the argument list matches clatch_gather_rows' signature; `dst` holds rows * words words
+    // and `source` rows indices (checked above), each index a row of `src` (the caller's invariant:
+    // a permutation of the rows it described).
+    unsafe { launch.launch(config) }.map_err(driver_error("clatch_gather_rows"))?;
     Ok(())
 }
 

@@ -21,7 +21,8 @@ use super::arena::{Lane, Leased, Scratch, settled};
 use super::device::{GpuDevice, driver_error};
 use super::header::{
     CLATCH_DETECT_ROW_ALIGN, CLATCH_DETECT_TILE_X, CLATCH_DETECT_TILE_Y, CLATCH_DETECT_WARPS,
-    CLATCH_SCAN_CHUNK, CLATCH_SCAN_THREADS, CLATCH_SCAN_TOP_THREADS, CLATCH_SUBPIXEL_THREADS,
+    CLATCH_SCAN_CHUNK, CLATCH_SCAN_THREADS, CLATCH_SCAN_TOP_THREADS, CLATCH_SUBPIXEL_LANES,
+    CLATCH_SUBPIXEL_THREADS,
 };
 use super::texture::{DeviceImage, ImageLife};
 use crate::detect::DetectorConfig;
@@ -400,13 +401,15 @@ pub(crate) fn launch_subpixel(
         .arg(&n)
         .arg(offsets);
     let threads = CLATCH_SUBPIXEL_THREADS as usize;
+    let lanes = CLATCH_SUBPIXEL_LANES as usize;
     let config = LaunchConfig {
-        grid_dim: (count.div_ceil(threads) as u32, 1, 1),
+        grid_dim: ((count * lanes).div_ceil(threads) as u32, 1, 1),
         block_dim: (threads as u32, 1, 1),
         shared_mem_bytes: 0,
     };
-    // SAFETY: arguments match the kernel's signature; threads past `count` return; keypoint k < count
-    // is read and offsets 2k, 2k + 1 written, within both buffers (checked above).
+    // SAFETY: arguments match the kernel's signature; `lanes` threads per keypoint (a divisor of the
+    // warp and the block); only keypoints k < count are read and only offsets 2k, 2k + 1 of them
+    // written, within both buffers (checked above).
     unsafe { launch.launch(config) }.map_err(driver_error("launching clatch_subpixel"))?;
     Ok(())
 }

@@ -38,6 +38,7 @@ const KERNELS: &[KernelFile] = &[
             "clatch_build_quads",
             "clatch_smooth_binomial3",
             "clatch_smooth_binomial5",
+            "clatch_gather_rows",
         ],
         needs_tensor_cores: false,
     },

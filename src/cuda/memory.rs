@@ -292,16 +292,16 @@ pub(crate) fn is_pinned(stream: &Arc<CudaStream>, bytes: &[u8]) -> bool {
     }
     [first as *const u8, last as *const u8].iter().all(|&p| {
         let mut kind: u32 = 0;
+        let mut attribute = sys::CUpointer_attribute::CU_POINTER_ATTRIBUTE_MEMORY_TYPE;
+        let mut data = [(&mut kind as *mut u32).cast::<std::ffi::c_void>()];
         // SAFETY: asks the driver about an address (never dereferenced); `kind` receives one
-        // CUmemorytype value. Memory the driver does not know is an error, i.e. "not pinned".
-        let known = unsafe {
-            sys::cuPointerGetAttribute(
-                (&mut kind as *mut u32).cast(),
-                sys::CUpointer_attribute::CU_POINTER_ATTRIBUTE_MEMORY_TYPE,
-                p as sys::CUdeviceptr,
-            )
+        // CUmemorytype value. The plural call answers memory the driver does not know with type 0
+        // and success, where cuPointerGetAttribute returns an error that compute-sanitizer's memcheck
+        // reports for every pageable image.
+        let answered = unsafe {
+            sys::cuPointerGetAttributes(1, &mut attribute, data.as_mut_ptr(), p as sys::CUdeviceptr)
         };
-        known == sys::cudaError_enum::CUDA_SUCCESS
+        answered == sys::cudaError_enum::CUDA_SUCCESS
             && kind == sys::CUmemorytype::CU_MEMORYTYPE_HOST as u32
     })
 }

@@ -11,8 +11,9 @@
 
 use cudarc::driver::CudaView;
 
-use super::arena::{Lane, Leased, Scratch, settled};
-use super::describe::{launch_describe, upload_counts, weights};
+use super::arena::{Lane, Leased, PinnedScratch, Scratch, settled};
+use super::collection::DeviceCollection;
+use super::describe::{gather_rows, launch_describe, upload_counts, weights};
 use super::detect::{DeviceKeypoints, detect_on_device, download_counts, launch_subpixel};
 use super::device::GpuDevice;
 use super::spans::Span;
@@ -134,6 +135,14 @@ impl QueuedPyramid {
         self.found.iter().map(|f| f.capacity).sum()
     }
 
+    /// The most keypoints a selection holds: [`Self::bound`], or the budget when smaller (it always is
+    /// with [`DetectorConfig::grid`], whose candidates are every survivor: up to a quarter of each
+    /// level's pixels). What the selection's buffers (descriptors, offsets) are sized by, so that
+    /// they stay those of the budget, not hundreds of megabytes a photo.
+    fn selection_bound(&self) -> usize {
+        self.bound().min(self.config.max_keypoints)
+    }
+
     /// Reads every level's keypoints back (waits for the stream) and keeps the strongest over all.
     fn select(&self) -> Result<Vec<LevelKeypoint>> {
         let found: Vec<&DeviceKeypoints> = self.found.iter().collect();
@@ -205,7 +214,7 @@ impl QueuedPyramid {
         }
         let mut offsets = self
             .lane
-            .scratch::<i32>(2 * self.bound(), "sub-pixel offsets")?;
+            .scratch::<i32>(2 * self.selection_bound(), "sub-pixel offsets")?;
         for (l, level) in self.levels.iter().enumerate() {
             let (at, n) = selection.ranges[l];
             if n == 0 {
@@ -222,12 +231,16 @@ impl QueuedPyramid {
     pub(crate) fn keypoints(self, dev: &GpuDevice) -> Result<Vec<KeyPoint>> {
         let mut selected = self.select()?;
         if self.config.subpixel != Subpixel::None {
-            let selection =
-                Selection::upload(&self.lane, &selected, self.levels.len(), self.bound())?;
+            let selection = Selection::upload(
+                &self.lane,
+                &selected,
+                self.levels.len(),
+                self.selection_bound(),
+            )?;
             if let Some(offsets) = self.queue_offsets(dev, &selection)? {
                 let mut host = self
                     .lane
-                    .pinned::<i32>(2 * self.bound(), "offset read-back buffer")?;
+                    .pinned::<i32>(2 * self.selection_bound(), "offset read-back buffer")?;
                 host.queue_download(0, &offsets.whole().slice(..2 * selection.total))?;
                 apply_offsets(&mut selected, &selection, host.wait(2 * selection.total)?);
             }
@@ -235,23 +248,20 @@ impl QueuedPyramid {
         Ok(self.report(&selected))
     }
 
-    /// Describes the selected keypoints on their levels and reads everything back (waits for the
-    /// stream once more).
-    pub(crate) fn features(
-        mut self,
+    /// Queues the description of `selected` on every level, then their sub-pixel offsets: where both
+    /// ends, [`QueuedPyramid::features`] (to the host) and [`QueuedPyramid::features_into`] (into a
+    /// device collection), start. Nothing is waited for.
+    fn describe(
+        &mut self,
         dev: &GpuDevice,
         descriptor: &DescriptorConfig,
-    ) -> Result<Features> {
-        let mut selected = self.select()?;
+        selected: Vec<LevelKeypoint>,
+    ) -> Result<Described> {
         let lane = self.lane.clone();
-        let width = descriptor.width;
-        let words = width.words();
+        let words = descriptor.width.words();
         let weights = weights(dev, descriptor)?;
-        let bound = self.bound();
-        // The device works from here to the read-backs without waiting for the host.
-        let span = Span::open(&lane);
+        let bound = self.selection_bound();
         let selection = Selection::upload(&lane, &selected, self.levels.len(), bound)?;
-        let total = selection.total;
         let mut out = lane.scratch::<u64>(bound * words, "pyramid descriptors")?;
         for (l, level) in self.levels.iter_mut().enumerate() {
             // Every level's quad texture, even one without selected keypoints: the buffers a call
@@ -272,23 +282,60 @@ impl QueuedPyramid {
                     &selection.counts.whole().slice(l..l + 1),
                 ),
                 &weights,
-                width.bits() as i32,
+                descriptor.width.bits() as i32,
                 &mut out.whole_mut().slice_mut(at * words..(at + n) * words),
             )?;
         }
         // Orientation and descriptor stay those of the whole pixel; only the position moves.
         let offsets = self.queue_offsets(dev, &selection)?;
-        let mut host_words = lane.pinned::<u64>(bound * words, "descriptor read-back buffer")?;
-        host_words.queue_download(0, &out.whole().slice(..total * words))?;
-        let mut host_offsets = match &offsets {
-            Some(offsets) => {
-                let mut host = lane.pinned::<i32>(2 * bound, "offset read-back buffer")?;
-                host.queue_download(0, &offsets.whole().slice(..2 * total))?;
-                Some(host)
-            }
-            None => None,
+        Ok(Described {
+            selected,
+            selection,
+            out,
+            offsets,
+        })
+    }
+
+    /// Queues the read-back of `offsets` (when refining) through a pinned buffer of the lane.
+    fn queue_offset_download(&self, described: &Described) -> Result<Option<PinnedScratch<i32>>> {
+        let Some(offsets) = &described.offsets else {
+            return Ok(None);
         };
+        let total = described.selection.total;
+        let mut host = self
+            .lane
+            .pinned::<i32>(2 * self.selection_bound(), "offset read-back buffer")?;
+        host.queue_download(0, &offsets.whole().slice(..2 * total))?;
+        Ok(Some(host))
+    }
+
+    /// Describes the selected keypoints on their levels and reads everything back (waits for the
+    /// stream once more).
+    pub(crate) fn features(
+        mut self,
+        dev: &GpuDevice,
+        descriptor: &DescriptorConfig,
+    ) -> Result<Features> {
+        let selected = self.select()?;
+        let lane = self.lane.clone();
+        let width = descriptor.width;
+        let words = width.words();
+        // The device works from here to the read-backs without waiting for the host.
+        let span = Span::open(&lane);
+        let described = self.describe(dev, descriptor, selected)?;
+        let total = described.selection.total;
+        let mut host_words = lane.pinned::<u64>(
+            self.selection_bound() * words,
+            "descriptor read-back buffer",
+        )?;
+        host_words.queue_download(0, &described.out.whole().slice(..total * words))?;
+        let mut host_offsets = self.queue_offset_download(&described)?;
         drop(span);
+        let Described {
+            mut selected,
+            selection,
+            ..
+        } = described;
         // One wait: the offsets were queued last, so waiting for them waits for everything.
         if let Some(host) = &mut host_offsets {
             apply_offsets(&mut selected, &selection, host.wait(2 * total)?);
@@ -313,6 +360,64 @@ impl QueuedPyramid {
             pyramid::assemble(&selected, &per_level, width)?,
         ))
     }
+
+    /// Describes the selected keypoints on their levels and puts the descriptors, in the reported
+    /// keypoint order ([`pyramid::assemble`]'s), into `collection` as its next set without a host
+    /// copy: `clatch_gather_rows` writes them from this stream straight into the collection's buffer,
+    /// ordered against the collection's stream by events. Returns the keypoints (waits for the
+    /// stream once more when refining positions, to read the offsets back).
+    pub(crate) fn features_into(
+        mut self,
+        dev: &GpuDevice,
+        descriptor: &DescriptorConfig,
+        collection: &mut DeviceCollection,
+    ) -> Result<Vec<KeyPoint>> {
+        let selected = self.select()?;
+        let lane = self.lane.clone();
+        let words = descriptor.width.words();
+        let span = Span::open(&lane);
+        let described = self.describe(dev, descriptor, selected)?;
+        let total = described.selection.total;
+        // Row r of the set is the next row of its keypoint's level, as `assemble` takes them.
+        let mut next: Vec<usize> = described.selection.ranges.iter().map(|r| r.0).collect();
+        let mut staged =
+            lane.pinned::<i32>(self.selection_bound().max(1), "row order staging buffer")?;
+        for (slot, k) in staged.host()?.iter_mut().zip(&described.selected) {
+            *slot = next[k.level] as i32;
+            next[k.level] += 1;
+        }
+        let mut order = lane.scratch::<i32>(self.selection_bound().max(1), "row order upload")?;
+        staged.queue_upload(0, &mut order.whole_mut().slice_mut(..total))?;
+        collection.append_rows(&lane, total, |target| {
+            gather_rows(
+                dev,
+                &lane,
+                (&described.out.whole().slice(..total * words), &order.view()),
+                (total, words),
+                target,
+            )
+        })?;
+        let mut host_offsets = self.queue_offset_download(&described)?;
+        drop(span);
+        let Described {
+            mut selected,
+            selection,
+            ..
+        } = described;
+        if let Some(host) = &mut host_offsets {
+            apply_offsets(&mut selected, &selection, host.wait(2 * total)?);
+        }
+        Ok(self.report(&selected))
+    }
+}
+
+/// The selected keypoints of a queued pyramid, their description and sub-pixel offsets queued.
+struct Described {
+    selected: Vec<LevelKeypoint>,
+    selection: Selection,
+    /// The descriptors in selection order, level after level (`selection.ranges`).
+    out: Scratch<u64>,
+    offsets: Option<Scratch<i32>>,
 }
 
 /// Gives each level's offsets (`flat`: `[dx, dy]` per keypoint of `selection`, level after level) to

@@ -12,6 +12,7 @@ use std::sync::Arc;
 use cudarc::driver::CudaEvent;
 
 use super::arena::{Lane, Scratch};
+use super::collection::DeviceCollection;
 use super::describe::{launch_describe, weights};
 use super::detect::{DeviceKeypoints, detect_on_device, download_counts};
 use super::device::{GpuDevice, driver_error};
@@ -202,6 +203,52 @@ impl PendingFeatures {
             host_keypoints.wait(count)?.to_vec(),
             DescriptorSet::from_words(width, words)?,
         ))
+    }
+}
+
+impl PendingFeatures {
+    /// The width of the descriptors being computed.
+    pub(crate) fn width(&self) -> DescriptorWidth {
+        match &self.work {
+            Work::Single { width, .. } => *width,
+            Work::Pyramid { descriptor, .. } => descriptor.width,
+        }
+    }
+
+    /// The stream the features are computed on.
+    pub(crate) fn stream(&self) -> &GpuStream {
+        &self.stream
+    }
+
+    /// Finishes the features on the device and puts the descriptors into `collection` as its next set
+    /// (same device and width, checked by the caller) without a host copy; returns the keypoints, which
+    /// are read back. See [`DeviceCollection::append_rows`] for how the two streams are ordered.
+    pub(crate) fn into_collection(
+        self,
+        collection: &mut DeviceCollection,
+    ) -> Result<Vec<KeyPoint>> {
+        let lane = self.stream.lane();
+        let (keypoints, descriptors, width) = match self.work {
+            Work::Pyramid { queued, descriptor } => {
+                return queued.features_into(&self.stream.dev, &descriptor, collection);
+            }
+            Work::Single {
+                keypoints,
+                descriptors,
+                width,
+                ..
+            } => (keypoints, descriptors, width),
+        };
+        let count = download_counts(lane, &[&keypoints])?[0];
+        let words = count * width.words();
+        let mut host_keypoints =
+            lane.pinned::<KeyPoint>(keypoints.capacity, "keypoint read-back buffer")?;
+        host_keypoints.queue_download(0, &keypoints.records().slice(..count))?;
+        collection.append_rows(lane, count, |target| {
+            lane.memcpy_dtod(&descriptors.whole().slice(..words), target)
+                .map_err(driver_error("descriptors into a collection"))
+        })?;
+        Ok(host_keypoints.wait(count)?.to_vec())
     }
 }
 

@@ -9,6 +9,7 @@ use crate::backend::Backend;
 use crate::cuda;
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::error::{Error, Result};
+use crate::keypoint::KeyPoint;
 use crate::matching::{self, Match, MatchConfig};
 use crate::parallel::*;
 
@@ -129,6 +130,67 @@ impl DescriptorCollection {
         Ok(first..self.sizes.len())
     }
 
+    /// Adds the features `pending` is computing ([`crate::Extractor::detect_and_describe_async`]) as
+    /// the next set and returns its id with the keypoints. On a CUDA collection of the same device
+    /// the descriptors go from the extraction's buffers into the collection's on the device, ordered
+    /// by stream events, and never cross the bus; only the keypoints are read back (the host needs
+    /// their positions). A CPU collection waits for the features and keeps the copy. The set equals
+    /// the one `pending.wait()` would give, so every match does too.
+    ///
+    /// Errors: [`Error::DescriptorWidthMismatch`] when the extraction's width is not the
+    /// collection's, [`Error::InvalidConfig`] when it runs on another device; nothing is added then.
+    ///
+    /// ```no_run
+    /// use clatch::cuda::GpuStream;
+    /// use clatch::{Backend, DescriptorCollection, DescriptorWidth, Extractor, ExtractorConfig};
+    /// use clatch::{GrayView, MatchConfig, Matcher};
+    ///
+    /// let gpu = Backend::Cuda { device: 0 };
+    /// let extractor = Extractor::new(gpu, ExtractorConfig::default())?;
+    /// let matcher = Matcher::new(gpu, MatchConfig::default())?;
+    /// let mut collection = DescriptorCollection::new(&matcher, DescriptorWidth::FULL)?;
+    /// let stream = GpuStream::new(0)?;
+    /// let frames: Vec<Vec<u8>> = vec![vec![0; 640 * 480]; 2];
+    /// for frame in &frames {
+    ///     let view = GrayView::new(frame, 640, 480, 640)?;
+    ///     let pending = extractor.detect_and_describe_async(&stream, &view)?;
+    ///     let (id, keypoints) = collection.add_pending(pending)?;
+    ///     println!("set {id}: {} keypoints", keypoints.len());
+    /// }
+    /// collection.match_all_pairs(|pair, matches| println!("pair {pair}: {} matches", matches.len()))?;
+    /// # Ok::<(), clatch::Error>(())
+    /// ```
+    pub fn add_pending(
+        &mut self,
+        pending: cuda::PendingFeatures,
+    ) -> Result<(usize, Vec<KeyPoint>)> {
+        let width = pending.width();
+        if width != self.width {
+            return Err(Error::DescriptorWidthMismatch {
+                query_bits: width.bits(),
+                train_bits: self.width.bits(),
+            });
+        }
+        let (keypoints, rows) = match &mut self.store {
+            Store::Host(held) => {
+                let features = pending.wait()?;
+                let rows = features.descriptors.len();
+                held.push(features.descriptors);
+                (features.keypoints, rows)
+            }
+            Store::Device(device) => {
+                if let Backend::Cuda { device: ordinal } = self.matcher.backend() {
+                    pending.stream().check_device(ordinal)?;
+                }
+                let keypoints = pending.into_collection(device)?;
+                let rows = keypoints.len();
+                (keypoints, rows)
+            }
+        };
+        self.sizes.push(rows);
+        Ok((self.sizes.len() - 1, keypoints))
+    }
+
     /// Matches every `(a, b)` of `pairs` (held set `a` the queries, `b` the gallery; any order,
     /// repeats allowed) and calls `each(i, matches)` for each `pairs[i]`, in increasing `i`. Every id is
     /// checked before any work ([`Error::PairOutOfRange`]).
@@ -186,6 +248,15 @@ impl DescriptorCollection {
                 Ok(())
             }
             Store::Device(device) => device.search(query, ids, config, &mut each),
+        }
+    }
+
+    /// The device collection behind a CUDA collection (for the `internals` hooks).
+    #[cfg(all(feature = "cuda", feature = "internals"))]
+    pub(crate) fn device_store(&self) -> Option<&cuda::DeviceCollection> {
+        match &self.store {
+            Store::Device(device) => Some(device),
+            Store::Host(_) => None,
         }
     }
 

@@ -12,7 +12,7 @@
 
 use std::collections::VecDeque;
 use std::mem::ManuallyDrop;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use cudarc::driver::{
     CudaEvent, CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PinnedHostSlice, PushKernelArg,
@@ -57,6 +57,14 @@ struct Capacity {
 }
 
 impl Capacity {
+    /// Whether buffers of this capacity hold those of `other`.
+    fn covers(&self, other: &Self) -> bool {
+        self.pairs >= other.pairs
+            && self.tasks >= other.tasks
+            && self.query_rows >= other.query_rows
+            && self.train_rows >= other.train_rows
+    }
+
     fn of(blocks: &[Block]) -> Self {
         blocks.iter().fold(Self::default(), |c, b| Self {
             pairs: c.pairs.max(b.device.len()),
@@ -126,6 +134,42 @@ impl Drop for Slot {
         }
         // Otherwise the wait failed (the context is broken, and a DMA may still be pending): the
         // page-locked memory is leaked rather than freed under it.
+    }
+}
+
+/// Slots kept by a collection between its runs: a run takes those whose capacity covers its largest
+/// block and gives them back when it has handed every block on, so a steady state of runs (a pool
+/// worker's blocks, a gallery's searches) allocates no device or page-locked memory. A run that
+/// finds none (the first, a larger one, or one started from another's callback) makes its own.
+#[derive(Default)]
+pub(super) struct SlotCache(Mutex<Vec<Slot>>);
+
+impl SlotCache {
+    /// Most slots kept: a run uses two.
+    const KEPT: usize = 2;
+
+    fn take(&self, needed: Capacity) -> Option<Slot> {
+        let mut kept = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        let i = kept.iter().position(|s| s.capacity.covers(&needed))?;
+        Some(kept.swap_remove(i))
+    }
+
+    /// Keeps `slot` (no copy pending on it: its block was handed on), the largest ones first.
+    fn give(&self, slot: Slot) {
+        if slot.in_flight {
+            return;
+        }
+        let mut kept = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        kept.push(slot);
+        kept.sort_by_key(|s| std::cmp::Reverse(s.capacity.query_rows));
+        kept.truncate(Self::KEPT);
+    }
+}
+
+impl std::fmt::Debug for SlotCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let kept = self.0.lock().map_or(0, |k| k.len());
+        f.debug_struct("SlotCache").field("kept", &kept).finish()
     }
 }
 
@@ -340,6 +384,8 @@ pub(super) struct Run<'a> {
     pub(super) config: &'a MatchConfig,
     /// The tensor-core kernels run instead of the popcount ones when set.
     pub(super) tensor: Option<SignRows<'a>>,
+    /// Where the run's slots come from and go back to.
+    pub(super) slots: &'a SlotCache,
 }
 
 impl Run<'_> {
@@ -417,13 +463,19 @@ impl Run<'_> {
             let s = b % 2;
             let slot = match &mut slots[s] {
                 Some(slot) => slot,
-                empty => empty.insert(Slot::new(self.dev, self.stream, capacity)?),
+                empty => empty.insert(match self.slots.take(capacity) {
+                    Some(kept) => kept,
+                    None => Slot::new(self.dev, self.stream, capacity)?,
+                }),
             };
             slot.queue(self, block)?;
             queued.push_back((b, Some(s)));
         }
         while let Some((oldest, slot)) = queued.pop_front() {
             hand_on(&blocks[oldest], slot, &mut slots, each)?;
+        }
+        for slot in slots.into_iter().flatten() {
+            self.slots.give(slot);
         }
         Ok(())
     }

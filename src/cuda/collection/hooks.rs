@@ -108,3 +108,25 @@ impl HeldCollection {
             .search_within(query, &ids, config, (budget, kernel), each)
     }
 }
+
+/// Set `id` of a CUDA `collection`, read back from the device (blocking): lets the tests compare what
+/// [`crate::DescriptorCollection::add_pending`] put there with the host's features bit for bit.
+/// [`Error::InvalidConfig`] for a CPU collection, an error past the last set.
+pub fn read_set(collection: &crate::DescriptorCollection, id: usize) -> Result<DescriptorSet> {
+    let held = collection.device_store().ok_or(Error::InvalidConfig {
+        field: "collection",
+        value: "cpu".into(),
+        reason: "only a CUDA collection holds sets on the device",
+    })?;
+    let place = held.place(id)?;
+    let words = held.width.words();
+    let rows = held
+        .stream
+        .clone_dtoh(
+            &held
+                .rows
+                .slice(place.first_row * words..(place.first_row + place.rows) * words),
+        )
+        .map_err(driver_error("reading a collection's set back"))?;
+    DescriptorSet::from_words(held.width, rows)
+}

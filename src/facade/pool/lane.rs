@@ -3,8 +3,9 @@
 //!
 //! A lane prepares each set a block reads once, keeps it for the whole block, and drops it when the
 //! next block no longer reads it. On the CPU a prepared set is the host set itself (`HostCpu`). A CUDA
-//! worker takes whole blocks instead ([`match_blocks_grouped`]): each block's sets go into a
-//! `DescriptorCollection` (uploaded once for the block) and its pairs are matched many per launch, as
+//! worker takes whole blocks instead ([`match_blocks_grouped`]): its sets live in one
+//! `DescriptorCollection` for the whole run (each uploaded the first time a block reads it, resident
+//! for every later block, up to a bound) and each block's pairs are matched many per launch, as
 //! one-device `Matcher::match_pairs` does with all of its sets.
 
 use std::collections::HashMap;
@@ -147,9 +148,15 @@ pub(super) fn match_on(
     }
 }
 
+/// Descriptor rows a CUDA worker keeps resident across blocks (2^24 rows: 1 GiB at 512 bits) before it
+/// starts its collection afresh: sets stay on the device for every later block that reads them, and
+/// memory stays bounded for any collection.
+const RESIDENT_ROWS: usize = 1 << 24;
+
 /// [`match_blocks`] for a CUDA worker: each claimed block matched whole on `matcher`'s device, its
-/// sets in a `DescriptorCollection` of their own and its matchable pairs in one grouped run (the
-/// others get no matches).
+/// matchable pairs in one grouped run (the others get no matches), over a `DescriptorCollection`
+/// the worker keeps for the whole run: a set is uploaded the first time a block reads it and stays
+/// resident for later blocks (up to [`RESIDENT_ROWS`], then the collection starts afresh).
 fn match_blocks_grouped(
     matcher: &Matcher,
     collection: &Collection,
@@ -163,27 +170,55 @@ fn match_blocks_grouped(
         ..
     } = collection;
     let mut finished = Vec::new();
+    let mut on_device: Option<DescriptorCollection> = None;
+    // Set index -> id in `on_device`, and the rows it holds.
+    let mut ids: HashMap<usize, usize> = HashMap::new();
+    let mut rows = 0usize;
     while let Some(b) = queue.claim() {
         let block = &blocks[b];
-        let resident = |s: usize| block.sets.binary_search(&s).map_err(|_| not_resident(s));
         let mut listed = Vec::new();
         for &p in &block.pairs {
             let (a, t) = pairs[p];
             if matcher.matchable(sets, (a, t)) {
-                listed.push((p, (resident(a)?, resident(t)?)));
+                listed.push((p, (a, t)));
             } else {
                 done(p);
                 finished.push((p, Vec::new()));
             }
         }
-        let Some(&(first, _)) = listed.first() else {
+        let Some(&(_, (first, _))) = listed.first() else {
             continue;
         };
-        let held: Vec<&DescriptorSet> = block.sets.iter().map(|&s| sets[s]).collect();
-        let mut on_device = DescriptorCollection::new(matcher, sets[pairs[first].0].width())?;
-        on_device.add(&held)?;
-        let local: Vec<(usize, usize)> = listed.iter().map(|&(_, pair)| pair).collect();
-        on_device.match_pairs(&local, |i, matches| {
+        let absent = |ids: &HashMap<usize, usize>| -> Vec<usize> {
+            block
+                .sets
+                .iter()
+                .copied()
+                .filter(|s| !ids.contains_key(s))
+                .collect()
+        };
+        let new_rows: usize = absent(&ids).iter().map(|&s| sets[s].len()).sum();
+        if on_device.is_none() || rows + new_rows > RESIDENT_ROWS {
+            on_device = Some(DescriptorCollection::new(matcher, sets[first].width())?);
+            ids.clear();
+            rows = 0;
+        }
+        let held = on_device.as_mut().expect("made above");
+        let adding = absent(&ids);
+        // Only when something is new: adding drops the tensor path's expanded rows.
+        if !adding.is_empty() {
+            let added = held.add(&adding.iter().map(|&s| sets[s]).collect::<Vec<_>>())?;
+            for (&s, id) in adding.iter().zip(added) {
+                ids.insert(s, id);
+                rows += sets[s].len();
+            }
+        }
+        let id = |s: usize| ids.get(&s).copied().ok_or_else(|| not_resident(s));
+        let local = listed
+            .iter()
+            .map(|&(_, (a, t))| Ok((id(a)?, id(t)?)))
+            .collect::<Result<Vec<_>>>()?;
+        held.match_pairs(&local, |i, matches| {
             let p = listed[i].0;
             done(p);
             finished.push((p, matches));

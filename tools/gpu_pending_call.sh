@@ -222,6 +222,38 @@ final)
         echo "$1 $2 $(cat "$log.rc"): $(grep -E '^test result' "$log" | tail -1 | cut -c1-70) $(grep -E 'ERROR SUMMARY|RACECHECK SUMMARY' "$log" | tail -1)" >> "$OUT/summary_all.txt"
     done
     ;;
+recheck)
+    # After the stream's results were read several at a time (src/facade/batch.rs): the suites of the
+    # stream, batch and pool paths, then clatch colmap --no-colmap and clatch extract of both folders,
+    # CPU against GPU, second of two runs, outputs compared byte for byte. Carries part-recheck.tar.xz
+    # and .gpu/folders.
+    for t in cuda_extract_stream cuda_async cuda_pool cuda_pyramid; do
+        echo "== $t" >> "$OUT/suite.txt"
+        timeout 120 .gpu/bin/$t >> "$OUT/suite.txt" 2>&1
+        echo "$t rc=$?: $(grep -E '^test result' "$OUT/suite.txt" | tail -1)" >> "$OUT/summary_all.txt"
+    done
+    for folder in herzjesu sceaux; do
+        for be in cpu cuda; do
+            for round in warm timed; do
+                rm -rf /tmp/ws_$be /tmp/db_$be.db /tmp/f_$be
+                start_ns=$(date +%s%N)
+                timeout 100 .gpu/bin/clatch colmap --images .gpu/folders/$folder --database /tmp/db_$be.db \
+                    --workspace /tmp/ws_$be --no-colmap --force --backend $be > /tmp/colmap_$be.txt 2>&1; rc=$?
+                wall=$(( ($(date +%s%N) - start_ns) / 1000000 ))
+            done
+            { echo "== colmap --no-colmap $folder --backend $be rc=$rc whole process ${wall}ms"; cat /tmp/colmap_$be.txt; } >> "$OUT/folders.txt"
+            echo "colmap $folder $be rc=$rc whole process ${wall}ms: $(grep -E '^  (extract|decode|match) ' /tmp/colmap_$be.txt | sed 's/  */ /g' | tr '\n' ';')" >> "$OUT/summary_all.txt"
+            start_ns=$(date +%s%N)
+            timeout 100 .gpu/bin/clatch extract .gpu/folders/$folder/* -o /tmp/f_$be --backend $be > /tmp/extract_$be.txt 2>&1; rc=$?
+            wall=$(( ($(date +%s%N) - start_ns) / 1000000 ))
+            { echo "== extract $folder --backend $be rc=$rc whole process ${wall}ms"; cat /tmp/extract_$be.txt; } >> "$OUT/folders.txt"
+            echo "extract $folder $be rc=$rc whole process ${wall}ms: $(grep -E '^  extract ' /tmp/extract_$be.txt | sed 's/  */ /g')" >> "$OUT/summary_all.txt"
+        done
+        cmp -s /tmp/db_cpu.db /tmp/db_cuda.db && r=identical || r=DIFFER
+        diff -rq /tmp/f_cpu /tmp/f_cuda > /dev/null && r2=identical || r2=DIFFER
+        echo "$folder: colmap databases cpu vs cuda $r; extract files $r2" >> "$OUT/summary_all.txt"
+    done
+    ;;
 esac
 echo "call took $(( $(date +%s) - start )) s" >> "$OUT/summary_all.txt"
 cat "$OUT/summary_all.txt"

@@ -179,7 +179,7 @@ impl Extractor {
             let pending =
                 self.queue_features(&flight.streams[next % STREAMS], &view, ImageLife::Work)?;
             let item = flight.held.take().expect("held above");
-            flight.queued.push_back((next, item, pending));
+            flight.queued.push_back((next, item, Some(pending)));
             next += 1;
         }
         while !flight.queued.is_empty() {
@@ -190,27 +190,43 @@ impl Extractor {
 }
 
 /// The images of [`Extractor::stream_on_gpu`] whose work may still be queued: each queued image with
-/// its pending result, and `held`, the one being queued or whose result is being read. Dropped with
-/// any of them still here (an error or a panic on the way out), it waits for every stream first, so
-/// that no copy still reads an image it releases.
+/// its pending result (taken while it is being read), and `held`, the one being queued or whose result
+/// is being handed on. Dropped with any of them still here (an error or a panic on the way out), it
+/// waits for every stream first, so that no copy still reads an image it releases.
 struct InFlight<'s, T> {
     streams: &'s [GpuStream],
-    queued: VecDeque<(usize, T, PendingFeatures)>,
+    queued: VecDeque<(usize, T, Option<PendingFeatures>)>,
     held: Option<T>,
 }
 
 impl<T> InFlight<'_, T> {
-    /// Reads the oldest image's result and hands both to `each`. The image stays held until its result
+    /// Reads the results of the oldest images, one per stream, side by side, and hands each with its
+    /// image to `each` in input order. Images go round the streams in turn, so the oldest
+    /// `streams.len()` are on different streams; reading a result has a host share (a pyramid's
+    /// selection over its levels, then the description queued on the selection) that now runs for
+    /// several images at once instead of one after another. Each image stays held until its result
     /// is read (after which its work has run).
     fn finish_oldest<E: From<Error>>(
         &mut self,
         each: &mut impl FnMut(usize, T, Features) -> std::result::Result<(), E>,
     ) -> std::result::Result<(), E> {
-        let (i, item, pending) = self.queued.pop_front().expect("an image is queued");
-        self.held = Some(item);
-        let features = pending.wait()?;
-        let item = self.held.take().expect("held above");
-        each(i, item, features)
+        let n = self.queued.len().min(self.streams.len());
+        let pending: Vec<PendingFeatures> = self
+            .queued
+            .iter_mut()
+            .take(n)
+            .filter_map(|queued| queued.2.take())
+            .collect();
+        let results: Vec<Result<Features>> =
+            pending.into_par_iter().map(PendingFeatures::wait).collect();
+        for result in results {
+            let (i, item, _) = self.queued.pop_front().expect("an image is queued");
+            self.held = Some(item);
+            let features = result?;
+            let item = self.held.take().expect("held above");
+            each(i, item, features)?;
+        }
+        Ok(())
     }
 }
 

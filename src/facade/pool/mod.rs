@@ -26,9 +26,10 @@ use lane::Collection;
 /// `(a, b)` with `a / tile` and `b / tile` the block's two tile indices, so a worker on a block reads
 /// at most `2 * tile` sets, and holds each of them ready for its device (resident) for the whole
 /// block instead of preparing it again for every pair. On the CPU a set needs no preparing; a CUDA
-/// worker uploads the block's sets once into a [`crate::DescriptorCollection`] of its own and
-/// matches the block's pairs many per launch, as one-device [`Matcher::match_pairs`] does with all
-/// of its sets.
+/// worker keeps one [`crate::DescriptorCollection`] for the whole run, uploads each set the first
+/// time a block reads it (later blocks find it resident, up to 2^24 descriptors, after which the
+/// collection starts afresh) and matches each block's pairs many per launch, as one-device
+/// [`Matcher::match_pairs`] does with all of its sets.
 ///
 /// Every result is computed by one device exactly as the single-device call computes it, so which
 /// worker took it, and how many workers there are, change nothing: results are bit-identical and in

@@ -1,11 +1,12 @@
-//! Draws BENCHMARKS.md's chart: throughput against problem size for clatch and its peers, from the
-//! `panel,series,x,y` CSV that `tools/collect.py` writes from one benchmark run.
+//! Draws BENCHMARKS.md's charts: figures against problem size for clatch and its peers, from a
+//! `panel,series,x,y` CSV (`tools/collect.py` writes one from a benchmark run).
 //!
 //! ```sh
 //! cargo run --release --example bench_chart -- docs/bench/RUN/figures.csv docs/bench/RUN/throughput.png
 //! ```
 //!
-//! Two log-log panels: matching (G pairs/s against N for N x N, k = 2, 512 bits) and extraction
+//! Log-log panels side by side. Lines `#panel,NAME,TITLE,X LABEL,Y LABEL` name the panels and their
+//! order; without them, two: matching (G pairs/s against N for N x N, k = 2, 512 bits) and extraction
 //! (M descriptors/s against keypoints). Drawn with plotters' bitmap backend and the embedded DejaVu
 //! font, so no system library is needed.
 
@@ -18,11 +19,59 @@ use plotters::style::FontStyle;
 
 type Series = BTreeMap<String, Vec<(f64, f64)>>;
 
-/// Rows of the CSV by panel, then series, in file order.
-fn read(path: &str) -> Result<BTreeMap<String, Series>, Box<dyn Error>> {
+/// A panel: its name in the CSV, title and axis labels.
+struct Panel {
+    name: String,
+    title: String,
+    x_label: String,
+    y_label: String,
+}
+
+/// The panels of BENCHMARKS.md's first chart, for a CSV that names none.
+fn default_panels() -> Vec<Panel> {
+    let panel = |name: &str, title: &str, x: &str, y: &str| Panel {
+        name: name.into(),
+        title: title.into(),
+        x_label: x.into(),
+        y_label: y.into(),
+    };
+    vec![
+        panel(
+            "matching",
+            "Hamming kNN, k = 2, 512 bits, N x N",
+            "N",
+            "G pairs/s",
+        ),
+        panel(
+            "extraction",
+            "Descriptor extraction, 512 bits",
+            "keypoints",
+            "M descriptors/s",
+        ),
+    ]
+}
+
+/// Rows of the CSV by panel, then series, in file order, and the panels its `#panel` lines name.
+fn read(path: &str) -> Result<(BTreeMap<String, Series>, Vec<Panel>), Box<dyn Error>> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
     let mut panels: BTreeMap<String, Series> = BTreeMap::new();
+    let mut named = Vec::new();
     for (number, line) in text.lines().enumerate().skip(1) {
+        if let Some(declared) = line.strip_prefix("#panel,") {
+            let [name, title, x_label, y_label] = declared.split(',').collect::<Vec<_>>()[..]
+            else {
+                return Err(
+                    format!("{path}:{}: expected #panel,NAME,TITLE,X,Y", number + 1).into(),
+                );
+            };
+            named.push(Panel {
+                name: name.into(),
+                title: title.into(),
+                x_label: x_label.into(),
+                y_label: y_label.into(),
+            });
+            continue;
+        }
         let fields: Vec<&str> = line.split(',').collect();
         let [panel, series, x, y] = fields[..] else {
             return Err(format!("{path}:{}: expected panel,series,x,y", number + 1).into());
@@ -38,7 +87,7 @@ fn read(path: &str) -> Result<BTreeMap<String, Series>, Box<dyn Error>> {
             .or_default()
             .push((parse(x)?, parse(y)?));
     }
-    Ok(panels)
+    Ok((panels, named))
 }
 
 /// A log range with some head room around the values.
@@ -111,26 +160,26 @@ fn main() -> Result<(), Box<dyn Error>> {
     };
     plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
         .map_err(|_| "the embedded DejaVu Sans font did not load")?;
-    let panels = read(input)?;
+    let (series, named) = read(input)?;
+    let panels = if named.is_empty() {
+        default_panels()
+    } else {
+        named
+    };
     let empty = Series::new();
-    let (width, height) = (1280u32, 560u32);
+    let (width, height) = (640 * panels.len() as u32, 560u32);
     let mut pixels = vec![0u8; (width * height * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut pixels, (width, height)).into_drawing_area();
         root.fill(&WHITE)?;
-        let (left, right) = root.split_horizontally(640);
-        panel(
-            &left,
-            "Hamming kNN, k = 2, 512 bits, N x N",
-            ("N", "G pairs/s"),
-            panels.get("matching").unwrap_or(&empty),
-        )?;
-        panel(
-            &right,
-            "Descriptor extraction, 512 bits",
-            ("keypoints", "M descriptors/s"),
-            panels.get("extraction").unwrap_or(&empty),
-        )?;
+        for (area, p) in root.split_evenly((1, panels.len())).iter().zip(&panels) {
+            panel(
+                area,
+                &p.title,
+                (&p.x_label, &p.y_label),
+                series.get(&p.name).unwrap_or(&empty),
+            )?;
+        }
         root.present()?;
     }
     image::save_buffer(

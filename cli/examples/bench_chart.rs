@@ -18,6 +18,8 @@ use plotters::prelude::*;
 use plotters::style::FontStyle;
 
 type Series = BTreeMap<String, Vec<(f64, f64)>>;
+/// Series by panel name.
+type Panels = BTreeMap<String, Series>;
 
 /// A panel: its name in the CSV, title and axis labels.
 struct Panel {
@@ -52,9 +54,9 @@ fn default_panels() -> Vec<Panel> {
 }
 
 /// Rows of the CSV by panel, then series, in file order, and the panels its `#panel` lines name.
-fn read(path: &str) -> Result<(BTreeMap<String, Series>, Vec<Panel>), Box<dyn Error>> {
+fn read(path: &str) -> Result<(Panels, Vec<Panel>), Box<dyn Error>> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
-    let mut panels: BTreeMap<String, Series> = BTreeMap::new();
+    let mut panels = Panels::new();
     let mut named = Vec::new();
     for (number, line) in text.lines().enumerate().skip(1) {
         if let Some(declared) = line.strip_prefix("#panel,") {

@@ -54,12 +54,22 @@ mod sequential {
     }
 
     pub(crate) trait IntoParallelIterator {
-        fn into_par_iter(self) -> Self;
+        type Iter: Iterator;
+        fn into_par_iter(self) -> Self::Iter;
     }
 
     impl IntoParallelIterator for Range<usize> {
+        type Iter = Self;
         fn into_par_iter(self) -> Self {
             self
+        }
+    }
+
+    // Used by the CUDA backend's image streams (`cuda` without `cpu`).
+    impl<T> IntoParallelIterator for Vec<T> {
+        type Iter = std::vec::IntoIter<T>;
+        fn into_par_iter(self) -> Self::Iter {
+            self.into_iter()
         }
     }
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# tools/PENDING_GPU.md's seven calls folded into four device calls (2026-12-02: 30 minutes of device
+# tools/PENDING_GPU.md's seven calls folded into five device calls (2026-12-02: 30 minutes of device
 # time, a fresh start costs one to two of them). Prepare here: bash tools/pack_gpu_suite.sh, then cut
 # .gpu/suite.tar.xz into parts that fit a call's 64 MiB (.gpu/part-*.tar.xz, each unpacked into
 # .gpu/bin; the whole suite with the JPEG folders is over it), and copy the folders with
@@ -26,6 +26,9 @@
 #   bash tools/gpu_pending_call.sh final  (carry a part with every test binary and clatch, and
 #       .gpu/img_src/0000.jpg) main as it lands: ncu, CPU = GPU on the photo, every GPU suite, then the
 #       sanitizers on the binaries whose host code changed. About 4 minutes.
+#   bash tools/gpu_pending_call.sh recheck  (carry a part with clatch and the stream, batch, pool and
+#       pyramid suites, and .gpu/folders) those suites, then clatch colmap --no-colmap and clatch
+#       extract of both folders, CPU against GPU, outputs compared. About 30 seconds.
 #
 # Every part's summary lines go to $OUT/summary_all.txt (printed last); the parts' own logs stay in $OUT
 # (at most 8 files come back).

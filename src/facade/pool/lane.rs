@@ -189,20 +189,22 @@ fn match_blocks_grouped(
         let Some(&(_, (first, _))) = listed.first() else {
             continue;
         };
-        let mut adding: Vec<usize> = block
-            .sets
-            .iter()
-            .copied()
-            .filter(|s| !ids.contains_key(s))
-            .collect();
-        let new_rows: usize = adding.iter().map(|&s| sets[s].len()).sum();
+        let absent = |ids: &HashMap<usize, usize>| -> Vec<usize> {
+            block
+                .sets
+                .iter()
+                .copied()
+                .filter(|s| !ids.contains_key(s))
+                .collect()
+        };
+        let new_rows: usize = absent(&ids).iter().map(|&s| sets[s].len()).sum();
         if on_device.is_none() || rows + new_rows > RESIDENT_ROWS {
             on_device = Some(DescriptorCollection::new(matcher, sets[first].width())?);
             ids.clear();
             rows = 0;
-            adding = block.sets.clone();
         }
         let held = on_device.as_mut().expect("made above");
+        let adding = absent(&ids);
         // Only when something is new: adding drops the tensor path's expanded rows.
         if !adding.is_empty() {
             let added = held.add(&adding.iter().map(|&s| sets[s]).collect::<Vec<_>>())?;

@@ -11,7 +11,7 @@
 
 use cudarc::driver::CudaView;
 
-use super::arena::{Lane, Leased, Scratch, settled};
+use super::arena::{Lane, Leased, PinnedScratch, Scratch, settled};
 use super::collection::DeviceCollection;
 use super::describe::{gather_rows, launch_describe, upload_counts, weights};
 use super::detect::{DeviceKeypoints, detect_on_device, download_counts, launch_subpixel};
@@ -296,35 +296,17 @@ impl QueuedPyramid {
         })
     }
 
-    /// Queues the read-back of the offsets (when refining positions), closes `span` and waits for
-    /// them: the selection with every keypoint's offset applied. Everything queued before them has run
-    /// once they are back; without refinement nothing is waited for.
-    fn settle_offsets(
-        &self,
-        described: Described,
-        span: Span<'_>,
-    ) -> Result<(Vec<LevelKeypoint>, Selection)> {
-        let Described {
-            mut selected,
-            selection,
-            offsets,
-            ..
-        } = described;
-        let mut host_offsets = match &offsets {
-            Some(offsets) => {
-                let mut host = self
-                    .lane
-                    .pinned::<i32>(2 * self.selection_bound(), "offset read-back buffer")?;
-                host.queue_download(0, &offsets.whole().slice(..2 * selection.total))?;
-                Some(host)
-            }
-            None => None,
+    /// Queues the read-back of `offsets` (when refining) through a pinned buffer of the lane.
+    fn queue_offset_download(&self, described: &Described) -> Result<Option<PinnedScratch<i32>>> {
+        let Some(offsets) = &described.offsets else {
+            return Ok(None);
         };
-        drop(span);
-        if let Some(host) = &mut host_offsets {
-            apply_offsets(&mut selected, &selection, host.wait(2 * selection.total)?);
-        }
-        Ok((selected, selection))
+        let total = described.selection.total;
+        let mut host = self
+            .lane
+            .pinned::<i32>(2 * self.selection_bound(), "offset read-back buffer")?;
+        host.queue_download(0, &offsets.whole().slice(..2 * total))?;
+        Ok(Some(host))
     }
 
     /// Describes the selected keypoints on their levels and reads everything back (waits for the
@@ -347,8 +329,17 @@ impl QueuedPyramid {
             "descriptor read-back buffer",
         )?;
         host_words.queue_download(0, &described.out.whole().slice(..total * words))?;
-        // The offsets are queued last: waiting for them waits for the descriptors too.
-        let (selected, selection) = self.settle_offsets(described, span)?;
+        let mut host_offsets = self.queue_offset_download(&described)?;
+        drop(span);
+        let Described {
+            mut selected,
+            selection,
+            ..
+        } = described;
+        // One wait: the offsets were queued last, so waiting for them waits for everything.
+        if let Some(host) = &mut host_offsets {
+            apply_offsets(&mut selected, &selection, host.wait(2 * total)?);
+        }
         let all_words = host_words.wait(total * words)?;
         let per_level = selection
             .ranges
@@ -406,7 +397,16 @@ impl QueuedPyramid {
                 target,
             )
         })?;
-        let (selected, _) = self.settle_offsets(described, span)?;
+        let mut host_offsets = self.queue_offset_download(&described)?;
+        drop(span);
+        let Described {
+            mut selected,
+            selection,
+            ..
+        } = described;
+        if let Some(host) = &mut host_offsets {
+            apply_offsets(&mut selected, &selection, host.wait(2 * total)?);
+        }
         Ok(self.report(&selected))
     }
 }

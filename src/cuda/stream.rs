@@ -168,42 +168,6 @@ enum Work {
     },
 }
 
-impl Work {
-    /// A single-scale result's keypoints, descriptors and width; or the queued pyramid with its
-    /// descriptor settings. (Its `Err` is no error, only the other kind of result, taken apart once
-    /// by the caller: its size costs nothing.)
-    #[allow(clippy::type_complexity, clippy::result_large_err)]
-    fn split(
-        self,
-    ) -> std::result::Result<
-        (DeviceKeypoints, Scratch<u64>, DescriptorWidth),
-        (QueuedPyramid, DescriptorConfig),
-    > {
-        match self {
-            Work::Pyramid { queued, descriptor } => Err((queued, descriptor)),
-            Work::Single {
-                keypoints,
-                descriptors,
-                width,
-                ..
-            } => Ok((keypoints, descriptors, width)),
-        }
-    }
-}
-
-/// Reads a single-scale result's keypoint count back (waits for the stream) and queues the copy of
-/// its keypoints into a pinned buffer, sized by the capacity, not the count: images of one size reuse
-/// it whatever they show.
-fn queue_keypoint_download(
-    lane: &Lane,
-    keypoints: &DeviceKeypoints,
-) -> Result<(usize, super::arena::PinnedScratch<KeyPoint>)> {
-    let count = download_counts(lane, &[keypoints])?[0];
-    let mut host = lane.pinned::<KeyPoint>(keypoints.capacity, "keypoint read-back buffer")?;
-    host.queue_download(0, &keypoints.records().slice(..count))?;
-    Ok((count, host))
-}
-
 impl PendingFeatures {
     /// True once the device has finished what was queued (with a pyramid: the levels' detection).
     pub fn is_ready(&self) -> bool {
@@ -213,16 +177,25 @@ impl PendingFeatures {
     /// Waits for the device and copies the features back (through the stream's pinned buffers).
     pub fn wait(self) -> Result<Features> {
         let lane = self.stream.lane();
-        let (keypoints, descriptors, width) = match self.work.split() {
-            Ok(single) => single,
-            Err((queued, descriptor)) => return queued.features(&self.stream.dev, &descriptor),
+        let (keypoints, descriptors, width) = match self.work {
+            Work::Pyramid { queued, descriptor } => {
+                return queued.features(&self.stream.dev, &descriptor);
+            }
+            Work::Single {
+                keypoints,
+                descriptors,
+                width,
+                ..
+            } => (keypoints, descriptors, width),
         };
-        let (count, mut host_keypoints) = queue_keypoint_download(lane, &keypoints)?;
+        let count = download_counts(lane, &[&keypoints])?[0];
         let words = count * width.words();
-        let mut host_words = lane.pinned::<u64>(
-            keypoints.capacity * width.words(),
-            "descriptor read-back buffer",
-        )?;
+        // Sized by the capacity, not the count: images of one size reuse them whatever they show.
+        let capacity = keypoints.capacity;
+        let mut host_keypoints = lane.pinned::<KeyPoint>(capacity, "keypoint read-back buffer")?;
+        host_keypoints.queue_download(0, &keypoints.records().slice(..count))?;
+        let mut host_words =
+            lane.pinned::<u64>(capacity * width.words(), "descriptor read-back buffer")?;
         host_words.queue_download(0, &descriptors.whole().slice(..words))?;
         // The descriptors were queued last: waiting for them waits for both.
         let words = host_words.wait(words)?.to_vec();
@@ -255,14 +228,22 @@ impl PendingFeatures {
         collection: &mut DeviceCollection,
     ) -> Result<Vec<KeyPoint>> {
         let lane = self.stream.lane();
-        let (keypoints, descriptors, width) = match self.work.split() {
-            Ok(single) => single,
-            Err((queued, descriptor)) => {
+        let (keypoints, descriptors, width) = match self.work {
+            Work::Pyramid { queued, descriptor } => {
                 return queued.features_into(&self.stream.dev, &descriptor, collection);
             }
+            Work::Single {
+                keypoints,
+                descriptors,
+                width,
+                ..
+            } => (keypoints, descriptors, width),
         };
-        let (count, mut host_keypoints) = queue_keypoint_download(lane, &keypoints)?;
+        let count = download_counts(lane, &[&keypoints])?[0];
         let words = count * width.words();
+        let mut host_keypoints =
+            lane.pinned::<KeyPoint>(keypoints.capacity, "keypoint read-back buffer")?;
+        host_keypoints.queue_download(0, &keypoints.records().slice(..count))?;
         collection.append_rows(lane, count, |target| {
             lane.memcpy_dtod(&descriptors.whole().slice(..words), target)
                 .map_err(driver_error("descriptors into a collection"))

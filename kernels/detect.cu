@@ -21,6 +21,7 @@
 // 4. clatch_detect_orient: one warp per output keypoint, n = min(*total, capacity): integer moments over
 //    the radius-15 disc (lane = dx, loop over dy), a shuffle reduction, then the bin by exact quadrant
 //    turns and a binary search over the host's 720 half-bin directions with 64-bit cross products.
+//    The pyramid skips it and orients only what its selection kept (clatch_orient_selected).
 //
 // clatch_subpixel (after selection, for the kept keypoints of a level): one thread per keypoint, the
 // parabola through the FAST scores of the keypoint and its 4 neighbours (Subpixel::Score), as
@@ -344,39 +345,63 @@ __device__ __forceinline__ int direction_bin(i64 dx, i64 dy, const i64* __restri
     return (quadrant * QUADRANT_BINS + lo) % CLATCH_ANGLE_BINS;
 }
 
+// The orientation bin of the keypoint at whole position (x, y) of `image`, in lane 0 (every lane of
+// the warp calls it, for the shuffles; the other lanes get an unspecified value).
+__device__ __forceinline__ int orientation_bin(cudaTextureObject_t image, int x, int y,
+                                               const i64* __restrict__ bounds) {
+    const unsigned full = 0xffffffffu;
+    const int lane = threadIdx.x & 31;
+    const int dx = lane - RADIUS;  // lane 31 reads nothing
+    // |m10|, |m01| <= 15 * 255 * 709 < 2^22: 32-bit sums are exact.
+    int m10 = 0, m01 = 0;
+    if (lane < 2 * RADIUS + 1) {
+        for (int dy = -RADIUS; dy <= RADIUS; ++dy) {
+            if (dx * dx + dy * dy <= RADIUS * RADIUS) {
+                const int v =
+                    tex2D<unsigned char>(image, (float)(x + dx) + 0.5f, (float)(y + dy) + 0.5f);
+                m10 += dx * v;
+                m01 += dy * v;
+            }
+        }
+    }
+#pragma unroll
+    for (int o = 16; o > 0; o >>= 1) {
+        m10 += __shfl_xor_sync(full, m10, o);
+        m01 += __shfl_xor_sync(full, m01, o);
+    }
+    return lane == 0 ? direction_bin(m10, m01, bounds) : 0;
+}
+
+// One warp per keypoint k < n of `out` (grid-stride): its angle, and with `bins` its bin too.
+__device__ __forceinline__ void orient_keypoints(cudaTextureObject_t image, u32 n,
+                                                 const i64* __restrict__ bounds,
+                                                 clatch_keypoint* __restrict__ out,
+                                                 int* __restrict__ bins) {
+    const int lane = threadIdx.x & 31;
+    const u32 stride = gridDim.x * CLATCH_DETECT_WARPS;
+    for (u32 k = blockIdx.x * CLATCH_DETECT_WARPS + (threadIdx.x >> 5); k < n; k += stride) {
+        const int bin = orientation_bin(image, (int)out[k].x, (int)out[k].y, bounds);
+        if (lane == 0) {
+            out[k].angle = (float)bin / (float)CLATCH_BINS_PER_DEGREE;
+            if (bins != nullptr) bins[k] = bin;
+        }
+    }
+}
+
 extern "C" __global__ void __launch_bounds__(CLATCH_DETECT_WARPS * 32)
 clatch_detect_orient(cudaTextureObject_t image, const u32* __restrict__ total, u32 capacity,
                      const i64* __restrict__ bounds,  // QUADRANT_BINS (x, y), 2.30 fixed point
                      clatch_keypoint* __restrict__ out) {
-    const unsigned full = 0xffffffffu;
-    const int lane = threadIdx.x & 31;
-    const u32 n = min(*total, capacity);
-    const u32 stride = gridDim.x * CLATCH_DETECT_WARPS;
-    const int dx = lane - RADIUS;  // lane 31 reads nothing
-    for (u32 k = blockIdx.x * CLATCH_DETECT_WARPS + (threadIdx.x >> 5); k < n; k += stride) {
-        const int x = (int)out[k].x, y = (int)out[k].y;
-        // |m10|, |m01| <= 15 * 255 * 709 < 2^22: 32-bit sums are exact.
-        int m10 = 0, m01 = 0;
-        if (lane < 2 * RADIUS + 1) {
-            for (int dy = -RADIUS; dy <= RADIUS; ++dy) {
-                if (dx * dx + dy * dy <= RADIUS * RADIUS) {
-                    const int v = tex2D<unsigned char>(image, (float)(x + dx) + 0.5f,
-                                                       (float)(y + dy) + 0.5f);
-                    m10 += dx * v;
-                    m01 += dy * v;
-                }
-            }
-        }
-#pragma unroll
-        for (int o = 16; o > 0; o >>= 1) {
-            m10 += __shfl_xor_sync(full, m10, o);
-            m01 += __shfl_xor_sync(full, m01, o);
-        }
-        if (lane == 0) {
-            const int bin = direction_bin(m10, m01, bounds);
-            out[k].angle = (float)bin / (float)CLATCH_BINS_PER_DEGREE;
-        }
-    }
+    orient_keypoints(image, min(*total, capacity), bounds, out, nullptr);
+}
+
+// The pyramid orients only the keypoints its selection kept (as src/pyramid/cpu.rs): the n keypoints
+// of one level's selection get their angle (for the describe kernel) and, in `bins`, their bin (the
+// host reads those back instead of the records).
+extern "C" __global__ void __launch_bounds__(CLATCH_DETECT_WARPS * 32)
+clatch_orient_selected(cudaTextureObject_t image, u32 n, const i64* __restrict__ bounds,
+                       clatch_keypoint* __restrict__ keypoints, int* __restrict__ bins) {
+    orient_keypoints(image, n, bounds, keypoints, bins);
 }
 
 // Texel (x, y) of `image` (inside the image: callers check).

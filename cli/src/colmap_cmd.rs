@@ -21,6 +21,8 @@ use crate::{report, settings};
 /// Wall and CPU time of each stage.
 #[derive(Default)]
 struct Times {
+    /// Creating the extractor: on the GPU, the device's context and kernels.
+    start: StageTime,
     extract: StageTime,
     /// The decoders' side of `extract`.
     decoding: Prefetched,
@@ -56,7 +58,9 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let mut times = Times::default();
 
     // Detect and describe every photo.
+    let watch = Stopwatch::start();
     let extractor = Extractor::new(settings.backend, extraction_config(&settings, args))?;
+    times.start = watch.stop();
     let progress = Progress::counter(plan.folder.paths.len() as u64, "extracting features");
     let watch = Stopwatch::start();
     let (extracted, decoding) = clatch::colmap::extract_photos(
@@ -411,6 +415,7 @@ fn print_extraction_report(
         args.images.display()
     );
     println!("  backend     {backend}");
+    println!("  start       {} (the backend's set-up)", times.start);
     println!(
         "  keypoints   {keypoints} ({:.0} per image)",
         keypoints as f64 / photos.len() as f64

@@ -86,10 +86,13 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
     } else {
         settings.extractor
     };
+    let started = std::time::Instant::now();
     let extractor = Extractor::new(settings.backend, config)?;
+    // On the GPU: the device's context and kernels.
+    let start = started.elapsed();
     let image = match args.images.as_slice() {
         [one] => one,
-        _ => return crate::extract_many::main(args, &extractor),
+        _ => return crate::extract_many::main(args, &extractor, start),
     };
     let [csv, json, npy_path] = output_paths(&args.output)?;
     check_distinct(
@@ -144,6 +147,7 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
             l.sigma()
         );
     }
+    println!("  {:<12}{:>12} (the backend's set-up)", "start", ms(start));
     println!("  {:<12}{n}", "keypoints");
     println!("  {:<12}{:>12}", "detect", ms(extracted.detect));
     println!("  {:<12}{:>12}", "describe", ms(extracted.describe));

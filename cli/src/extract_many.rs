@@ -40,8 +40,13 @@ fn outputs_in(dir: &Path, image: &Path) -> Result<[PathBuf; 3], CliError> {
         .map(|suffix| crate::extract::with_suffix(&prefix, suffix)))
 }
 
-/// Runs `clatch extract` on several images with `extractor`; `-o` names the output folder.
-pub fn main(args: &ExtractArgs, extractor: &Extractor) -> Result<(), CliError> {
+/// Runs `clatch extract` on several images with `extractor` (created in `set_up`); `-o` names the
+/// output folder.
+pub fn main(
+    args: &ExtractArgs,
+    extractor: &Extractor,
+    set_up: std::time::Duration,
+) -> Result<(), CliError> {
     if args.opencv.opencv_latch {
         return Err(CliError::OptionConflict {
             options: "--opencv-latch with several images".into(),
@@ -112,6 +117,7 @@ pub fn main(args: &ExtractArgs, extractor: &Extractor) -> Result<(), CliError> {
     println!("clatch extract");
     println!("  images      {n}");
     println!("  {:<12}{}", "backend", extractor.backend());
+    println!("  {:<12}{} (the backend's set-up)", "start", ms(set_up));
     println!(
         "  {:<12}{keypoints} ({:.0} per image)",
         "keypoints",

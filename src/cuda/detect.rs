@@ -363,6 +363,73 @@ pub(crate) fn detect_on_device(
     Ok(job.output)
 }
 
+/// [`detect_on_device`] without the orientation (every `angle` 0), as
+/// [`crate::detect::cpu::detect_unoriented`]: for the pyramid, which orients only the keypoints its
+/// selection keeps ([`launch_orient_selected`]).
+pub(crate) fn detect_unoriented_on_device(
+    dev: &GpuDevice,
+    lane: &Lane,
+    image: &DeviceImage,
+    config: &DetectorConfig,
+) -> Result<DeviceKeypoints> {
+    let mut job = DetectJob::new(lane, image.width(), image.height(), config)?;
+    job.launch_stages(dev, lane, image, Stage::Scatter)?;
+    Ok(job.output)
+}
+
+/// Queues `kernels/detect.cu`'s `clatch_orient_selected` on `stream`: the orientation of the `count`
+/// keypoints of `keypoints` (whole positions on `image`), reproducing
+/// [`crate::detect::cpu::orientation`] for each: written into their `angle` (which the describe
+/// kernel reads) and, as the bin of [`crate::angle::bin_degrees`], into `bins` (for the host).
+pub(crate) fn launch_orient_selected(
+    dev: &GpuDevice,
+    stream: &Arc<CudaStream>,
+    image: &DeviceImage,
+    keypoints: &mut CudaViewMut<'_, KeyPoint>,
+    count: usize,
+    bins: &mut CudaViewMut<'_, i32>,
+) -> Result<()> {
+    super::invariant(
+        count <= keypoints.len() && count <= bins.len(),
+        "orientation",
+        || {
+            format!(
+                "{count} keypoints for buffers of {} keypoints and {} bins",
+                keypoints.len(),
+                bins.len()
+            )
+        },
+    )?;
+    if count == 0 {
+        return Ok(());
+    }
+    image.arrived(stream)?;
+    let texture = image.texture();
+    let n = count as u32;
+    let warps = CLATCH_DETECT_WARPS as usize;
+    let blocks = count
+        .div_ceil(warps)
+        .clamp(1, dev.multiprocessors * ORIENT_BLOCKS_PER_SM);
+    let mut launch = stream.launch_builder(dev.kernel("clatch_orient_selected"));
+    launch
+        .arg(&texture)
+        .arg(&n)
+        .arg(&dev.boundaries)
+        .arg(keypoints)
+        .arg(bins);
+    let config = LaunchConfig {
+        grid_dim: (blocks as u32, 1, 1),
+        block_dim: ((warps * 32) as u32, 1, 1),
+        shared_mem_bytes: 0,
+    };
+    // SAFETY: arguments match the kernel's signature; one warp per keypoint k < count (grid-stride),
+    // which reads and writes record k and writes bin k, within both buffers (checked above); the
+    // boundary table holds 720 (x, y) pairs; the orientation disc stays inside the image (detection's
+    // margin is at least the disc's radius plus one).
+    unsafe { launch.launch(config) }.map_err(driver_error("launching clatch_orient_selected"))?;
+    Ok(())
+}
+
 /// Queues `kernels/detect.cu`'s `clatch_subpixel` on `stream`: the sub-pixel offsets of the `count`
 /// keypoints in `keypoints` (whole positions on `image`) into `offsets` (`[dx, dy]` per keypoint, in
 /// 1/65536 pixel), reproducing [`crate::detect::cpu::subpixel_offset`] for each, bit for bit.

@@ -60,6 +60,7 @@ const KERNELS: &[KernelFile] = &[
             "clatch_scan_apply",
             "clatch_detect_scatter",
             "clatch_detect_orient",
+            "clatch_orient_selected",
             "clatch_subpixel",
         ],
         needs_tensor_cores: false,

@@ -3,18 +3,24 @@
 //!
 //! Everything is queued on one stream, every buffer from its arena ([`super::arena`]). The global
 //! top-N over the levels ([`crate::pyramid::select`]) runs on the host: the levels' counts, then their
-//! keypoints, are read back through pinned buffers (two waits for the stream), the selection of every
-//! level is uploaded at once for description and, with [`crate::Subpixel::Score`], for
-//! `clatch_subpixel` (`kernels/detect.cu`), whose offsets are read back with the descriptors (a third
-//! wait) and mapped to level 0 on the host ([`crate::pyramid::report`]). So the asynchronous extractor
-//! queues the levels and their detection at once and does the rest in `wait`.
+//! (unoriented) keypoints, are read back through pinned buffers (two waits for the stream), the
+//! selection of every level is uploaded at once and oriented (`clatch_orient_selected`: only what is
+//! kept, as [`crate::pyramid::cpu`]), then described and, with [`crate::Subpixel::Score`], refined by
+//! `clatch_subpixel` (`kernels/detect.cu`); the orientation bins and offsets are read back with the
+//! descriptors (a third wait) and mapped to level 0 on the host ([`crate::pyramid::report`]). So the
+//! asynchronous extractor queues the levels and their detection at once and does the rest in `wait`.
 
 use cudarc::driver::CudaView;
+
+use cudarc::driver::CudaViewMut;
 
 use super::arena::{Lane, Leased, PinnedScratch, Scratch, settled};
 use super::collection::DeviceCollection;
 use super::describe::{gather_rows, launch_describe, upload_counts, weights};
-use super::detect::{DeviceKeypoints, detect_on_device, download_counts, launch_subpixel};
+use super::detect::{
+    DeviceKeypoints, detect_unoriented_on_device, download_counts, launch_orient_selected,
+    launch_subpixel,
+};
 use super::device::GpuDevice;
 use super::spans::Span;
 use super::texture::{DeviceImage, ImageLife};
@@ -55,13 +61,19 @@ pub(crate) fn queue(
     // suppression), then each level is built from the one before and detected. The order of launches
     // on the stream changes no result.
     let mut levels = vec![DeviceImage::upload(dev, lane, image, life)?];
-    let mut found = vec![detect_on_device(dev, lane, &levels[0], &candidates)?];
+    // Unoriented: only the selection's keypoints are oriented ([`QueuedPyramid::queue_orientation`]).
+    let mut found = vec![detect_unoriented_on_device(
+        dev,
+        lane,
+        &levels[0],
+        &candidates,
+    )?];
     for &size in &plan.sizes[1..] {
         let next = levels
             .last()
             .expect("level 0 is there")
             .downscale(dev, lane, plan.step, size)?;
-        found.push(detect_on_device(dev, lane, &next, &candidates)?);
+        found.push(detect_unoriented_on_device(dev, lane, &next, &candidates)?);
         levels.push(next);
     }
     Ok(QueuedPyramid {
@@ -125,6 +137,12 @@ impl Selection {
         let (at, n) = self.ranges[l];
         self.keypoints.whole().slice(at..at + n)
     }
+
+    /// Level `l`'s keypoints on the device, mutable.
+    fn of_level_mut(&mut self, l: usize) -> CudaViewMut<'_, KeyPoint> {
+        let (at, n) = self.ranges[l];
+        self.keypoints.whole_mut().slice_mut(at..at + n)
+    }
 }
 
 impl QueuedPyramid {
@@ -148,9 +166,13 @@ impl QueuedPyramid {
         let found: Vec<&DeviceKeypoints> = self.found.iter().collect();
         let counts = download_counts(&self.lane, &found)?;
         let total = counts.iter().sum();
+        // Sized by what was found, not by `bound()`: with a grid every survivor is a candidate and the
+        // bound is a quarter of the pixels (about 100 MB of page-locked memory for a 6-megapixel
+        // photo, whose allocation cost more than the photo's detection). The arena rounds the size up,
+        // so photos of similar content reuse the buffer.
         let mut host = self
             .lane
-            .pinned::<KeyPoint>(self.bound(), "keypoint read-back buffer")?;
+            .pinned::<KeyPoint>(total, "keypoint read-back buffer")?;
         let mut at = 0;
         for (f, &n) in self.found.iter().zip(&counts) {
             host.queue_download(at, &f.records().slice(..n))?;
@@ -226,25 +248,80 @@ impl QueuedPyramid {
         Ok(Some(offsets))
     }
 
-    /// The selected keypoints in level-0 coordinates, refined by [`DetectorConfig::subpixel`] (waits
-    /// for the stream).
-    pub(crate) fn keypoints(self, dev: &GpuDevice) -> Result<Vec<KeyPoint>> {
-        let mut selected = self.select()?;
-        if self.config.subpixel != Subpixel::None {
-            let selection = Selection::upload(
+    /// Queues the orientation of every level's selected keypoints (`clatch_orient_selected` through
+    /// [`launch_orient_selected`], reproducing [`crate::detect::cpu::orientation`], which
+    /// [`crate::pyramid::cpu`] applies after selection): into the selection's records, for the describe
+    /// kernel, and as bins, in selection order, for the host.
+    fn queue_orientation(
+        &self,
+        dev: &GpuDevice,
+        selection: &mut Selection,
+    ) -> Result<Scratch<i32>> {
+        let mut bins = self
+            .lane
+            .scratch::<i32>(self.selection_bound(), "orientation bins")?;
+        for (l, level) in self.levels.iter().enumerate() {
+            let (at, n) = selection.ranges[l];
+            if n == 0 {
+                continue;
+            }
+            let mut out = bins.whole_mut().slice_mut(at..at + n);
+            launch_orient_selected(
+                dev,
                 &self.lane,
-                &selected,
-                self.levels.len(),
-                self.selection_bound(),
+                level,
+                &mut selection.of_level_mut(l),
+                n,
+                &mut out,
             )?;
-            if let Some(offsets) = self.queue_offsets(dev, &selection)? {
+        }
+        Ok(bins)
+    }
+
+    /// Queues the read-back of the orientation bins and, when refining, the offsets, through pinned
+    /// buffers of the lane (the offsets last: waiting for them waits for everything before).
+    fn queue_readback(
+        &self,
+        selection: &Selection,
+        bins: &Scratch<i32>,
+        offsets: Option<&Scratch<i32>>,
+    ) -> Result<ReadBack> {
+        let total = selection.total;
+        let bound = self.selection_bound();
+        let mut host_bins = self
+            .lane
+            .pinned::<i32>(bound, "orientation read-back buffer")?;
+        host_bins.queue_download(0, &bins.whole().slice(..total))?;
+        let host_offsets = match offsets {
+            Some(offsets) => {
                 let mut host = self
                     .lane
-                    .pinned::<i32>(2 * self.selection_bound(), "offset read-back buffer")?;
-                host.queue_download(0, &offsets.whole().slice(..2 * selection.total))?;
-                apply_offsets(&mut selected, &selection, host.wait(2 * selection.total)?);
+                    .pinned::<i32>(2 * bound, "offset read-back buffer")?;
+                host.queue_download(0, &offsets.whole().slice(..2 * total))?;
+                Some(host)
             }
-        }
+            None => None,
+        };
+        Ok(ReadBack {
+            bins: host_bins,
+            offsets: host_offsets,
+        })
+    }
+
+    /// The selected keypoints in level-0 coordinates, oriented and refined by
+    /// [`DetectorConfig::subpixel`] (waits for the stream).
+    pub(crate) fn keypoints(self, dev: &GpuDevice) -> Result<Vec<KeyPoint>> {
+        let mut selected = self.select()?;
+        let mut selection = Selection::upload(
+            &self.lane,
+            &selected,
+            self.levels.len(),
+            self.selection_bound(),
+        )?;
+        let bins = self.queue_orientation(dev, &mut selection)?;
+        let offsets = self.queue_offsets(dev, &selection)?;
+        self.queue_readback(&selection, &bins, offsets.as_ref())?
+            .apply(&mut selected, &selection)?;
         Ok(self.report(&selected))
     }
 
@@ -261,7 +338,9 @@ impl QueuedPyramid {
         let words = descriptor.width.words();
         let weights = weights(dev, descriptor)?;
         let bound = self.selection_bound();
-        let selection = Selection::upload(&lane, &selected, self.levels.len(), bound)?;
+        let mut selection = Selection::upload(&lane, &selected, self.levels.len(), bound)?;
+        // Oriented before they are described (same stream).
+        let bins = self.queue_orientation(dev, &mut selection)?;
         let mut out = lane.scratch::<u64>(bound * words, "pyramid descriptors")?;
         for (l, level) in self.levels.iter_mut().enumerate() {
             // Every level's quad texture, even one without selected keypoints: the buffers a call
@@ -292,21 +371,18 @@ impl QueuedPyramid {
             selected,
             selection,
             out,
+            bins,
             offsets,
         })
     }
 
-    /// Queues the read-back of `offsets` (when refining) through a pinned buffer of the lane.
-    fn queue_offset_download(&self, described: &Described) -> Result<Option<PinnedScratch<i32>>> {
-        let Some(offsets) = &described.offsets else {
-            return Ok(None);
-        };
-        let total = described.selection.total;
-        let mut host = self
-            .lane
-            .pinned::<i32>(2 * self.selection_bound(), "offset read-back buffer")?;
-        host.queue_download(0, &offsets.whole().slice(..2 * total))?;
-        Ok(Some(host))
+    /// [`Self::queue_readback`] of what `described` computed.
+    fn queue_described_readback(&self, described: &Described) -> Result<ReadBack> {
+        self.queue_readback(
+            &described.selection,
+            &described.bins,
+            described.offsets.as_ref(),
+        )
     }
 
     /// Describes the selected keypoints on their levels and reads everything back (waits for the
@@ -329,17 +405,15 @@ impl QueuedPyramid {
             "descriptor read-back buffer",
         )?;
         host_words.queue_download(0, &described.out.whole().slice(..total * words))?;
-        let mut host_offsets = self.queue_offset_download(&described)?;
+        let readback = self.queue_described_readback(&described)?;
         drop(span);
         let Described {
             mut selected,
             selection,
             ..
         } = described;
-        // One wait: the offsets were queued last, so waiting for them waits for everything.
-        if let Some(host) = &mut host_offsets {
-            apply_offsets(&mut selected, &selection, host.wait(2 * total)?);
-        }
+        // One wait: the bins and offsets were queued last, so waiting for them waits for everything.
+        readback.apply(&mut selected, &selection)?;
         let all_words = host_words.wait(total * words)?;
         let per_level = selection
             .ranges
@@ -397,16 +471,14 @@ impl QueuedPyramid {
                 target,
             )
         })?;
-        let mut host_offsets = self.queue_offset_download(&described)?;
+        let readback = self.queue_described_readback(&described)?;
         drop(span);
         let Described {
             mut selected,
             selection,
             ..
         } = described;
-        if let Some(host) = &mut host_offsets {
-            apply_offsets(&mut selected, &selection, host.wait(2 * total)?);
-        }
+        readback.apply(&mut selected, &selection)?;
         Ok(self.report(&selected))
     }
 }
@@ -417,16 +489,47 @@ struct Described {
     selection: Selection,
     /// The descriptors in selection order, level after level (`selection.ranges`).
     out: Scratch<u64>,
+    /// The orientation bins, in the same order.
+    bins: Scratch<i32>,
     offsets: Option<Scratch<i32>>,
 }
 
-/// Gives each level's offsets (`flat`: `[dx, dy]` per keypoint of `selection`, level after level) to
+/// The orientation bins and (when refining) sub-pixel offsets of a selection, being copied back.
+struct ReadBack {
+    bins: PinnedScratch<i32>,
+    offsets: Option<PinnedScratch<i32>>,
+}
+
+impl ReadBack {
+    /// Waits for the copies and gives each selected keypoint its angle and offset.
+    fn apply(mut self, selected: &mut [LevelKeypoint], selection: &Selection) -> Result<()> {
+        let total = selection.total;
+        // The offsets were queued last: waiting for them first waits for both.
+        if let Some(host) = &mut self.offsets {
+            per_selected(selected, selection, host.wait(2 * total)?, 2, |k, pair| {
+                k.offset = [pair[0], pair[1]];
+            });
+        }
+        per_selected(selected, selection, self.bins.wait(total)?, 1, |k, bin| {
+            k.keypoint.angle = crate::angle::bin_degrees(bin[0] as usize);
+        });
+        Ok(())
+    }
+}
+
+/// Hands each level's values (`flat`: `per` values per keypoint of `selection`, level after level) to
 /// that level's selected keypoints, in selection order (the order they were uploaded in).
-fn apply_offsets(selected: &mut [LevelKeypoint], selection: &Selection, flat: &[i32]) {
+fn per_selected(
+    selected: &mut [LevelKeypoint],
+    selection: &Selection,
+    flat: &[i32],
+    per: usize,
+    mut set: impl FnMut(&mut LevelKeypoint, &[i32]),
+) {
     for (l, &(at, n)) in selection.ranges.iter().enumerate() {
         let of_level = selected.iter_mut().filter(|k| k.level == l);
-        for (k, pair) in of_level.zip(flat[2 * at..2 * (at + n)].chunks_exact(2)) {
-            k.offset = [pair[0], pair[1]];
+        for (k, values) in of_level.zip(flat[per * at..per * (at + n)].chunks_exact(per)) {
+            set(k, values);
         }
     }
 }

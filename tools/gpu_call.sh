@@ -1,0 +1,187 @@
+#!/usr/bin/env bash
+# Device calls, one function per kind of work (tools/gpu_pending_call.sh is the record of the calls of
+# 2026-12-02's second session; new calls go here). Prepare here:
+#   bash tools/gpu_pack.sh            (test binaries, clatch, benches: .gpu/part-main.tar.xz)
+#   bash tools/pack_gpu_extract.sh --folders-only   (.gpu/folders: Herz-Jesu and Sceaux JPEGs)
+# then run on the device, under its 600 s limit:
+#   bash tools/gpu_call.sh check   carry [.gpu/part-main.tar.xz, .gpu/folders, .gpu/img_src]
+#       ncu device time of the default extraction of a 5616x3744 photo at 20k keypoints (issue 9), each
+#       build in .gpu/bin and .gpu/old twice, alternating; CPU = GPU on that photo; the grid's cost per
+#       photo; both folders CPU against GPU (colmap --no-colmap, extract, outputs compared); the
+#       backend's start-up alone; every GPU suite; then the sanitizers side by side, bounded by what
+#       is left of the call: memcheck, initcheck and synccheck of every binary whose paths changed,
+#       racecheck trial by trial of the binaries a whole-binary run never finished.
+#   bash tools/gpu_call.sh soak    carry [.gpu/part-main.tar.xz]
+#       the 10-minute soak alone (its memory samples must not see other processes).
+# Summaries go to $OUT/summary_all.txt (printed last); logs stay in $OUT (at most 8 files come back).
+cd "$(dirname "$0")/.."
+export OUT=${OUT:-/tmp/out}
+mkdir -p "$OUT" .gpu/bin
+start=$(date +%s)
+left() { echo $(( ${CALL_SECONDS:-585} - ($(date +%s) - start) )); }
+say() { echo "$*" >> "$OUT/summary_all.txt"; }
+for tarball in .gpu/part-*.tar.xz; do
+    [ -f "$tarball" ] && tar -xJf "$tarball" -C .gpu/bin
+done
+# An older build to compare with, beside the new one.
+[ -d .gpu/bin/old ] && rm -rf .gpu/old && mv .gpu/bin/old .gpu/old
+B=.gpu/bin
+IMG=.gpu/img/herzjesu0_5616x3744.png
+
+# The 21-megapixel photo of issue 9's bound, made on the device from a Herz-Jesu JPEG.
+make_photo() {
+    [ -f $IMG ] && return
+    mkdir -p .gpu/img
+    python3 -c "import cv2; im = cv2.imread('.gpu/img_src/0000.jpg', cv2.IMREAD_GRAYSCALE); cv2.imwrite('$IMG', cv2.resize(im, (5616, 3744), interpolation=cv2.INTER_CUBIC))"
+}
+
+# ncu_extract BINARY LABEL: summed kernel time of the default extraction at 20k keypoints.
+ncu_extract() {
+    timeout 100 ncu --clock-control none --cache-control none --metrics gpu__time_duration.sum --csv \
+        "$1" extract --backend cuda $IMG --threshold 10 --max-keypoints 20000 -o /tmp/n > /tmp/ncu.csv 2>&1
+    { echo "== ncu $2"; grep -E "keypoints  " /tmp/ncu.csv | head -1; python3 tools/ncu_sum.py /tmp/ncu.csv; } >> "$OUT/ncu.txt" 2>&1
+    say "ncu $2: $(python3 tools/ncu_sum.py /tmp/ncu.csv 2>&1 | head -1)"
+}
+
+# same_files LABEL A B: whether two outputs are byte for byte the same.
+same_files() {
+    if diff -rq "$2" "$3" > /dev/null 2>&1; then say "$1: identical"; else say "$1: DIFFER"; fi
+}
+
+# photo_identity: clatch extract of the photo on both backends, files compared.
+photo_identity() {
+    for be in cpu cuda; do $B/clatch extract --backend $be $IMG -o /tmp/c_$be > /dev/null 2>&1; done
+    for f in keypoints.csv descriptors.npy; do same_files "photo, cpu vs cuda $f" /tmp/c_cpu.$f /tmp/c_cuda.$f; done
+}
+
+# timed LOG COMMAND...: runs it twice (the first warms the page cache and the driver), logs the second
+# with its whole-process wall time; sets $rc and $wall.
+timed() {
+    local log=$1; shift
+    for round in warm timed; do
+        local t0=$(date +%s%N)
+        timeout 100 "$@" > "$log" 2>&1; rc=$?
+        wall=$(( ($(date +%s%N) - t0) / 1000000 ))
+    done
+}
+
+# folders NAME...: clatch colmap --no-colmap and clatch extract of each folder, CPU against GPU.
+folders() {
+    for folder in "$@"; do
+        for be in cpu cuda; do
+            rm -rf /tmp/ws_$be /tmp/db_$be.db
+            timed /tmp/colmap_$be.txt $B/clatch colmap --images .gpu/folders/$folder --database /tmp/db_$be.db \
+                --workspace /tmp/ws_$be --no-colmap --force --backend $be
+            { echo "== colmap --no-colmap $folder --backend $be rc=$rc whole process ${wall}ms"; cat /tmp/colmap_$be.txt; } >> "$OUT/folders.txt"
+            say "colmap $folder $be rc=$rc whole process ${wall}ms: $(grep -E '^  (start|extract|decode|match|write) ' /tmp/colmap_$be.txt | sed 's/  */ /g' | tr '\n' ';')"
+            rm -rf /tmp/f_$be
+            timed /tmp/extract_$be.txt $B/clatch extract .gpu/folders/$folder/* -o /tmp/f_$be --backend $be
+            { echo "== extract $folder --backend $be rc=$rc whole process ${wall}ms"; cat /tmp/extract_$be.txt; } >> "$OUT/folders.txt"
+            say "extract $folder $be rc=$rc whole process ${wall}ms: $(grep -E '^  (start|extract) ' /tmp/extract_$be.txt | sed 's/  */ /g' | tr '\n' ';')"
+        done
+        same_files "$folder colmap databases cpu vs cuda" /tmp/db_cpu.db /tmp/db_cuda.db
+        same_files "$folder extract files cpu vs cuda" /tmp/f_cpu /tmp/f_cuda
+    done
+}
+
+# grid_cost BINARY LABEL: 8 copies of one Herz-Jesu JPEG in one process, each backend, with and
+# without clatch colmap's 8x8 grid.
+grid_cost() {
+    mkdir -p /tmp/imgs && for i in 1 2 3 4 5 6 7 8; do cp .gpu/img_src/0000.jpg /tmp/imgs/$i.jpg; done
+    for be in cpu cuda; do
+        for grid in "" "--grid 8 --max-keypoints 8192"; do
+            rm -rf /tmp/g && mkdir -p /tmp/g
+            timed /tmp/g.txt "$1" extract --backend $be /tmp/imgs/*.jpg $grid -o /tmp/g
+            say "$2 extract 8 x 0000.jpg --backend $be $grid: whole process ${wall}ms;$(grep -E '^  (start|extract) ' /tmp/g.txt | sed 's/  */ /g' | tr '\n' ';')"
+        done
+    done
+}
+
+# suites NAME...: each test binary whole, plainly.
+suites() {
+    for t in "$@"; do
+        echo "== $t" >> "$OUT/suite.txt"
+        local t0=$(date +%s)
+        timeout 120 $B/$t >> "$OUT/suite.txt" 2>&1; local code=$?
+        say "$t rc=$code $(( $(date +%s) - t0 ))s: $(grep -E '^test result' "$OUT/suite.txt" | tail -1)"
+    done
+}
+
+# sanitize PARALLEL JOB...: each JOB "tool binary [trial]" under compute-sanitizer with
+# CLATCH_TEST_SCALE=sanitizer, PARALLEL at a time, every one bounded by what is left of the call.
+sanitize() {
+    local parallel=$1; shift
+    local bound=$(( $(left) - 15 ))
+    say "##### sanitizers, $parallel at a time, each bounded by the call's end ($bound s from now)"
+    local deadline=$(( $(date +%s) + bound ))
+    printf '%s\n' "$@" | xargs -P "$parallel" -I{} bash -c '
+        set -- {}
+        name=$1_$2${3:+_$3}
+        rest=$(( '"$deadline"' - $(date +%s) ))
+        [ $rest -gt 5 ] || { echo "rc=skipped" > /tmp/s_$name.rc; exit 0; }
+        trial=(); [ -n "$3" ] && trial=(--exact "$3")
+        CLATCH_TEST_SCALE=sanitizer timeout $rest compute-sanitizer --tool $1 --print-limit 1000 \
+            '"$B"'/$2 "${trial[@]}" > /tmp/s_$name.txt 2>&1
+        echo "rc=$?" > /tmp/s_$name.rc'
+    for job in "$@"; do
+        set -- $job
+        local name=$1_$2${3:+_$3} log=/tmp/s_$1_$2${3:+_$3}.txt
+        { echo "== $job (CLATCH_TEST_SCALE=sanitizer) $(cat /tmp/s_$name.rc 2>/dev/null)"
+          grep -E '^test result|SUMMARY|growth sites|second pass' "$log" 2>/dev/null | tail -6
+          sed -n '/^failures:/,/^test result/p' "$log" 2>/dev/null | head -30
+          grep -E 'Program hit|Invalid|Race|Uninitialized|Barrier' "$log" 2>/dev/null | sed 's/.*due to//' | sort | uniq -c | head -8; } >> "$OUT/sanitize.txt"
+        say "$job $(cat /tmp/s_$name.rc 2>/dev/null): $(grep -E '^test result' "$log" 2>/dev/null | tail -1 | cut -c1-60) $(grep -E 'ERROR SUMMARY|RACECHECK SUMMARY' "$log" 2>/dev/null | tail -1)"
+    done
+}
+
+# trials BINARY: its trial names.
+trials() { $B/$1 --list 2>/dev/null | sed -n 's/: test$//p'; }
+
+case "${1:-check}" in
+check)
+    nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1
+    make_photo
+    for round in 1 2; do
+        [ -x .gpu/old/clatch ] && ncu_extract .gpu/old/clatch "old (fb8ab9b) round $round"
+        ncu_extract $B/clatch "main round $round"
+    done
+    photo_identity
+    grid_cost $B/clatch main
+    [ -x .gpu/old/clatch ] && grid_cost .gpu/old/clatch old
+    folders herzjesu sceaux
+    # The backend's set-up alone: one tiny image.
+    python3 -c "import cv2, numpy; cv2.imwrite('/tmp/tiny.png', (numpy.arange(200*200) % 251).astype('uint8').reshape(200, 200))"
+    for be in cpu cuda; do
+        timed /tmp/tiny_$be.txt $B/clatch extract --backend $be /tmp/tiny.png -o /tmp/tiny_$be
+        say "tiny image $be: whole process ${wall}ms; $(grep -E '^  start' /tmp/tiny_$be.txt | sed 's/  */ /g')"
+    done
+    # The failing trial first, plainly and under synccheck, with its diagnosis.
+    CLATCH_TEST_SCALE=sanitizer timeout 120 compute-sanitizer --tool synccheck $B/cuda_faults --exact arena_growth_fails_cleanly > /tmp/arena.txt 2>&1
+    { echo "== synccheck arena_growth_fails_cleanly rc=$?"; grep -E 'differs|growth sites|^test result|SUMMARY' /tmp/arena.txt; } >> "$OUT/sanitize.txt"
+    say "synccheck arena_growth: $(grep -E '^test result' /tmp/arena.txt | cut -c1-40) $(grep -oE 'of the [0-9]+ wrong rows.*bits' /tmp/arena.txt | head -1)"
+    suites cuda_pyramid cuda_detect cuda_extract_stream cuda_collection cuda_faults cuda_async cuda_pool \
+        cuda_describe cuda_describe_opencv cuda_match clatch_unit backend
+    CLATCH_FORCE_PTX=1 timeout 60 $B/cuda_pyramid >> "$OUT/suite.txt" 2>&1
+    say "cuda_pyramid (PTX JIT) rc=$?: $(grep -E '^test result' "$OUT/suite.txt" | tail -1)"
+    jobs=()
+    for tool in memcheck initcheck synccheck; do
+        for t in cuda_pyramid cuda_detect cuda_extract_stream cuda_faults cuda_collection cuda_async cuda_pool; do
+            jobs+=("$tool $t")
+        done
+    done
+    for t in cuda_pyramid cuda_detect; do jobs+=("racecheck $t"); done
+    for t in cuda_collection cuda_extract_stream cuda_faults; do
+        for trial in $(trials $t); do jobs+=("racecheck $t $trial"); done
+    done
+    sanitize 12 "${jobs[@]}"
+    ;;
+soak)
+    nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1
+    seconds=$(( $(left) - 25 ))
+    CLATCH_SOAK_SECONDS=$seconds timeout $(( seconds + 20 )) $B/cuda_soak --nocapture > "$OUT/soak.txt" 2>&1
+    say "cuda_soak ${seconds} s rc=$?: $(grep -E '^test result' "$OUT/soak.txt")"
+    grep -E 'extractions|free device memory|fell|did not come back|differ' "$OUT/soak.txt" >> "$OUT/summary_all.txt"
+    ;;
+esac
+say "call took $(( $(date +%s) - start )) s"
+cat "$OUT/summary_all.txt"

@@ -49,8 +49,7 @@
 #define CLATCH_SCAN_THREADS 256    /* clatch_scan_reduce / clatch_scan_apply */
 #define CLATCH_SCAN_CHUNK 4096     /* counts per block of the scan (16 per thread) */
 #define CLATCH_SCAN_TOP_THREADS 1024 /* clatch_scan_partials: one block */
-#define CLATCH_SUBPIXEL_THREADS 128  /* clatch_subpixel: threads per block */
-#define CLATCH_SUBPIXEL_LANES 8      /* clatch_subpixel: lanes per keypoint (5 score a circle each) */
+#define CLATCH_MAX_LEVELS 32         /* most pyramid levels (clatch::pyramid::MAX_LEVELS) */
 #define CLATCH_SUBPIXEL_FRAC_BITS 16 /* sub-pixel offsets are in 1/65536 pixel */
 
 /* Smoothing before description (kernels/describe.cu, clatch_smooth_binomial3/5). */
@@ -112,5 +111,16 @@ typedef struct clatch_pair_task {
     unsigned int pair;
     unsigned int query_block;
 } clatch_pair_task;
+
+/* The levels of a pyramid's selection, for one launch over all of them (clatch_orient_refine): level
+ * l's texture and size, and its keypoints, records [starts[l], starts[l + 1]) of the launch's buffer
+ * (starts[count] keypoints in all). */
+typedef struct clatch_levels {
+    unsigned long long textures[CLATCH_MAX_LEVELS];
+    int widths[CLATCH_MAX_LEVELS];
+    int heights[CLATCH_MAX_LEVELS];
+    unsigned int starts[CLATCH_MAX_LEVELS + 1];
+    int count;
+} clatch_levels;
 
 #endif /* CLATCH_H */

@@ -21,11 +21,11 @@
 // 4. clatch_detect_orient: one warp per output keypoint, n = min(*total, capacity): integer moments over
 //    the radius-15 disc (lane = dx, loop over dy), a shuffle reduction, then the bin by exact quadrant
 //    turns and a binary search over the host's 720 half-bin directions with 64-bit cross products.
-//    The pyramid skips it and orients only what its selection kept (clatch_orient_selected).
+//    The pyramid skips it and orients only what its selection kept (clatch_orient_refine).
 //
-// clatch_subpixel (after selection, for the kept keypoints of a level): one thread per keypoint, the
-// parabola through the FAST scores of the keypoint and its 4 neighbours (Subpixel::Score), as
-// src/detect/cpu.rs::subpixel_offset.
+// clatch_orient_refine (after a pyramid's selection, for the kept keypoints of every level at once): one
+// warp per keypoint, its orientation as step 4 and, with Subpixel::Score, the parabola through the FAST
+// scores of the keypoint and its 4 neighbours, as src/detect/cpu.rs::subpixel_offset.
 #include "clatch.h"
 
 typedef long long i64;
@@ -395,15 +395,6 @@ clatch_detect_orient(cudaTextureObject_t image, const u32* __restrict__ total, u
     orient_keypoints(image, min(*total, capacity), bounds, out, nullptr);
 }
 
-// The pyramid orients only the keypoints its selection kept (as src/pyramid/cpu.rs): the n keypoints
-// of one level's selection get their angle (for the describe kernel) and, in `bins`, their bin (the
-// host reads those back instead of the records).
-extern "C" __global__ void __launch_bounds__(CLATCH_DETECT_WARPS * 32)
-clatch_orient_selected(cudaTextureObject_t image, u32 n, const i64* __restrict__ bounds,
-                       clatch_keypoint* __restrict__ keypoints, int* __restrict__ bins) {
-    orient_keypoints(image, n, bounds, keypoints, bins);
-}
-
 // Texel (x, y) of `image` (inside the image: callers check).
 __device__ __forceinline__ int texel(cudaTextureObject_t image, int x, int y) {
     return tex2D<unsigned char>(image, (float)x + 0.5f, (float)y + 0.5f);
@@ -435,32 +426,48 @@ __device__ __forceinline__ int parabola_offset(int l, int c, int r) {
     return numerator < 0 ? -magnitude : magnitude;
 }
 
-// offsets[2k], offsets[2k + 1] = the sub-pixel offset (dx, dy) of keypoint k < n (whole position on
-// `image`), as crate::detect::cpu::subpixel_offset: 0 for both when a neighbour's circle would leave
-// the image. CLATCH_SUBPIXEL_LANES lanes of one warp per keypoint: lanes 0..4 score the centre and
-// its left, right, upper and lower neighbours side by side (one thread scoring all five waited on
-// five rounds of texture reads in turn), lane 0 combines them. Same scores, same integer arithmetic.
-extern "C" __global__ void __launch_bounds__(CLATCH_SUBPIXEL_THREADS)
-clatch_subpixel(cudaTextureObject_t image, int width, int height,
-                const clatch_keypoint* __restrict__ keypoints, u32 n, int* __restrict__ offsets) {
-    const u32 thread = blockIdx.x * blockDim.x + threadIdx.x;
-    const u32 k = thread / CLATCH_SUBPIXEL_LANES;
-    const int lane = (int)(thread % CLATCH_SUBPIXEL_LANES);
-    // Every lane reaches the shuffles below: a keypoint past n only scores nothing.
-    const bool real = k < n;
-    const int x = real ? (int)keypoints[k].x : 0, y = real ? (int)keypoints[k].y : 0;
-    const bool inside = real && x >= 4 && y >= 4 && x + 4 < width && y + 4 < height;
-    // Lane j scores (x, y) + step[j]: centre, left, right, up, down.
-    const int step_x[5] = {0, -1, 1, 0, 0}, step_y[5] = {0, 0, 0, -1, 1};
-    int score = 0;
-    if (inside && lane < 5) score = full_fast_score(image, x + step_x[lane], y + step_y[lane]);
-    const int base = (int)(threadIdx.x % 32u) & ~(CLATCH_SUBPIXEL_LANES - 1);
-    const int c = __shfl_sync(0xffffffffu, score, base);
-    const int l = __shfl_sync(0xffffffffu, score, base + 1);
-    const int r = __shfl_sync(0xffffffffu, score, base + 2);
-    const int u = __shfl_sync(0xffffffffu, score, base + 3);
-    const int d = __shfl_sync(0xffffffffu, score, base + 4);
-    if (!real || lane != 0) return;
-    offsets[2 * (size_t)k] = inside ? parabola_offset(l, c, r) : 0;
-    offsets[2 * (size_t)k + 1] = inside ? parabola_offset(u, c, d) : 0;
+// Every selected keypoint of every level of a pyramid in one launch: the pyramid orients and refines
+// only what its selection kept, as src/pyramid/cpu.rs. One warp per keypoint k < levels.starts[count]
+// (grid-stride), on its level. Its angle goes into its record (the describe kernel reads it) and its
+// bin into bins[k] (for the host), as crate::detect::cpu::orientation. With `offsets` (else null), lanes
+// 0..4 then score the keypoint and its left, right, upper and lower neighbours side by side and lane 0
+// writes offsets[2k], offsets[2k + 1], the sub-pixel offset (dx, dy) as
+// crate::detect::cpu::subpixel_offset: 0 for both when a neighbour's circle would leave the image.
+extern "C" __global__ void __launch_bounds__(CLATCH_DETECT_WARPS * 32)
+clatch_orient_refine(const __grid_constant__ clatch_levels levels,
+                     const i64* __restrict__ bounds,  // QUADRANT_BINS (x, y), 2.30 fixed point
+                     clatch_keypoint* __restrict__ keypoints, int* __restrict__ bins,
+                     int* __restrict__ offsets) {
+    const unsigned full = 0xffffffffu;
+    const int lane = threadIdx.x & 31;
+    const u32 n = levels.starts[levels.count];
+    const u32 stride = gridDim.x * CLATCH_DETECT_WARPS;
+    for (u32 k = blockIdx.x * CLATCH_DETECT_WARPS + (threadIdx.x >> 5); k < n; k += stride) {
+        // The keypoint's level: the last whose first record is at or before k (empty levels skipped).
+        int l = 0;
+        while (l + 1 < levels.count && levels.starts[l + 1] <= k) ++l;
+        const cudaTextureObject_t image = levels.textures[l];
+        const int x = (int)keypoints[k].x, y = (int)keypoints[k].y;
+        const int bin = orientation_bin(image, x, y, bounds);
+        if (lane == 0) {
+            keypoints[k].angle = (float)bin / (float)CLATCH_BINS_PER_DEGREE;
+            bins[k] = bin;
+        }
+        if (offsets == nullptr) continue;
+        const int width = levels.widths[l], height = levels.heights[l];
+        const bool inside = x >= 4 && y >= 4 && x + 4 < width && y + 4 < height;
+        // Lane j scores (x, y) + step[j]: centre, left, right, up, down.
+        const int step_x[5] = {0, -1, 1, 0, 0}, step_y[5] = {0, 0, 0, -1, 1};
+        int score = 0;
+        if (inside && lane < 5) score = full_fast_score(image, x + step_x[lane], y + step_y[lane]);
+        const int c = __shfl_sync(full, score, 0);
+        const int left = __shfl_sync(full, score, 1);
+        const int right = __shfl_sync(full, score, 2);
+        const int up = __shfl_sync(full, score, 3);
+        const int down = __shfl_sync(full, score, 4);
+        if (lane == 0) {
+            offsets[2 * (size_t)k] = inside ? parabola_offset(left, c, right) : 0;
+            offsets[2 * (size_t)k + 1] = inside ? parabola_offset(up, c, down) : 0;
+        }
+    }
 }

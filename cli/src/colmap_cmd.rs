@@ -48,19 +48,22 @@ struct Plan {
 /// Runs `clatch colmap`.
 pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let refinement = args.subpixel.refinement(args.subpixel_radius);
+    // The backend is set up here (on the GPU: the device's context and kernels).
+    let watch = Stopwatch::start();
     let settings = settings(
         &args.backend,
         &args.detect,
         Some(refinement.detector_subpixel()),
         Some(&args.matching),
     )?;
+    let set_up = watch.stop();
     let plan = preflight(args)?;
     let mut times = Times::default();
 
     // Detect and describe every photo.
     let watch = Stopwatch::start();
     let extractor = Extractor::new(settings.backend, extraction_config(&settings, args))?;
-    times.start = watch.stop();
+    times.start = set_up.plus(watch.stop());
     let progress = Progress::counter(plan.folder.paths.len() as u64, "extracting features");
     let watch = Stopwatch::start();
     let (extracted, decoding) = clatch::colmap::extract_photos(

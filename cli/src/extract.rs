@@ -76,6 +76,9 @@ pub fn output_paths(prefix: &Path) -> Result<[PathBuf; 3], CliError> {
 
 /// Runs `clatch extract`.
 pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
+    // The backend is set up here and in `Extractor::new` (on the GPU: the device's context and
+    // kernels).
+    let started = std::time::Instant::now();
     let settings = settings(&args.backend, &args.detect, args.subpixel.library(), None)?;
     // OpenCV-compatible LATCH describes full-resolution keypoints: single scale unless --pyramid
     // is asked for, which extract_opencv then refuses.
@@ -86,9 +89,7 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
     } else {
         settings.extractor
     };
-    let started = std::time::Instant::now();
     let extractor = Extractor::new(settings.backend, config)?;
-    // On the GPU: the device's context and kernels.
     let start = started.elapsed();
     let image = match args.images.as_slice() {
         [one] => one,

@@ -14,15 +14,16 @@
 use std::sync::Arc;
 
 use cudarc::driver::{
-    CudaEvent, CudaStream, CudaView, CudaViewMut, LaunchConfig, PushKernelArg, ValidAsZeroBits,
+    CudaEvent, CudaStream, CudaView, CudaViewMut, DeviceRepr, LaunchConfig, PushKernelArg,
+    ValidAsZeroBits,
 };
 
 use super::arena::{Lane, Leased, Scratch, settled};
 use super::device::{GpuDevice, driver_error};
 use super::header::{
     CLATCH_DETECT_ROW_ALIGN, CLATCH_DETECT_TILE_X, CLATCH_DETECT_TILE_Y, CLATCH_DETECT_WARPS,
-    CLATCH_SCAN_CHUNK, CLATCH_SCAN_THREADS, CLATCH_SCAN_TOP_THREADS, CLATCH_SUBPIXEL_LANES,
-    CLATCH_SUBPIXEL_THREADS,
+    CLATCH_MAX_LEVELS, CLATCH_SCAN_CHUNK, CLATCH_SCAN_THREADS, CLATCH_SCAN_TOP_THREADS,
+    clatch_levels,
 };
 use super::texture::{DeviceImage, ImageLife};
 use crate::detect::DetectorConfig;
@@ -365,7 +366,7 @@ pub(crate) fn detect_on_device(
 
 /// [`detect_on_device`] without the orientation (every `angle` 0), as
 /// [`crate::detect::cpu::detect_unoriented`]: for the pyramid, which orients only the keypoints its
-/// selection keeps ([`launch_orient_selected`]).
+/// selection keeps ([`launch_orient_refine`]).
 pub(crate) fn detect_unoriented_on_device(
     dev: &GpuDevice,
     lane: &Lane,
@@ -377,107 +378,90 @@ pub(crate) fn detect_unoriented_on_device(
     Ok(job.output)
 }
 
-/// Queues `kernels/detect.cu`'s `clatch_orient_selected` on `stream`: the orientation of the `count`
-/// keypoints of `keypoints` (whole positions on `image`), reproducing
-/// [`crate::detect::cpu::orientation`] for each: written into their `angle` (which the describe
-/// kernel reads) and, as the bin of [`crate::angle::bin_degrees`], into `bins` (for the host).
-pub(crate) fn launch_orient_selected(
+// SAFETY: clatch_levels is bindgen's #[repr(C)] copy of the C struct (u64, i32 and u32 arrays and an
+// i32: 648 bytes, no padding), passed by value as a kernel parameter.
+unsafe impl DeviceRepr for clatch_levels {}
+
+/// Queues `kernels/detect.cu`'s `clatch_orient_refine` on `stream`: for the keypoints of `levels`
+/// (each level's image and how many of `keypoints`, one level after the other, are on it; whole
+/// positions on their level), the orientation, reproducing [`crate::detect::cpu::orientation`]
+/// (written into their `angle`, which the describe kernel reads, and as the bin of
+/// [`crate::angle::bin_degrees`] into `bins`, for the host), and with `offsets` the sub-pixel offset
+/// `[dx, dy]` (1/65536 pixel) of each, reproducing [`crate::detect::cpu::subpixel_offset`]. One launch
+/// for every level.
+pub(crate) fn launch_orient_refine(
     dev: &GpuDevice,
     stream: &Arc<CudaStream>,
-    image: &DeviceImage,
+    levels: &[(&DeviceImage, usize)],
     keypoints: &mut CudaViewMut<'_, KeyPoint>,
-    count: usize,
     bins: &mut CudaViewMut<'_, i32>,
+    offsets: Option<&mut CudaViewMut<'_, i32>>,
 ) -> Result<()> {
+    let total: usize = levels.iter().map(|&(_, n)| n).sum();
+    let offsets_len = offsets.as_ref().map_or(usize::MAX, |o| o.len());
     super::invariant(
-        count <= keypoints.len() && count <= bins.len(),
+        levels.len() <= CLATCH_MAX_LEVELS as usize
+            && total <= keypoints.len()
+            && total <= bins.len()
+            && total.saturating_mul(2) <= offsets_len
+            && total <= u32::MAX as usize,
         "orientation",
         || {
             format!(
-                "{count} keypoints for buffers of {} keypoints and {} bins",
+                "{} levels, {total} keypoints for buffers of {} keypoints and {} bins",
+                levels.len(),
                 keypoints.len(),
                 bins.len()
             )
         },
     )?;
-    if count == 0 {
+    if total == 0 {
         return Ok(());
     }
-    image.arrived(stream)?;
-    let texture = image.texture();
-    let n = count as u32;
+    let mut table = clatch_levels {
+        textures: [0; CLATCH_MAX_LEVELS as usize],
+        widths: [0; CLATCH_MAX_LEVELS as usize],
+        heights: [0; CLATCH_MAX_LEVELS as usize],
+        starts: [0; CLATCH_MAX_LEVELS as usize + 1],
+        count: levels.len() as i32,
+    };
+    let mut at = 0;
+    for (l, &(image, n)) in levels.iter().enumerate() {
+        image.arrived(stream)?;
+        table.textures[l] = image.texture();
+        table.widths[l] = image.width() as i32;
+        table.heights[l] = image.height() as i32;
+        table.starts[l] = at as u32;
+        at += n;
+        table.starts[l + 1] = at as u32;
+    }
     let warps = CLATCH_DETECT_WARPS as usize;
-    let blocks = count
+    let blocks = total
         .div_ceil(warps)
         .clamp(1, dev.multiprocessors * ORIENT_BLOCKS_PER_SM);
-    let mut launch = stream.launch_builder(dev.kernel("clatch_orient_selected"));
+    let no_offsets: u64 = 0;
+    let mut launch = stream.launch_builder(dev.kernel("clatch_orient_refine"));
     launch
-        .arg(&texture)
-        .arg(&n)
+        .arg(&table)
         .arg(&dev.boundaries)
         .arg(keypoints)
         .arg(bins);
+    match offsets {
+        Some(offsets) => launch.arg(offsets),
+        // A null pointer: the kernel then only orients.
+        None => launch.arg(&no_offsets),
+    };
     let config = LaunchConfig {
         grid_dim: (blocks as u32, 1, 1),
         block_dim: ((warps * 32) as u32, 1, 1),
         shared_mem_bytes: 0,
     };
-    // SAFETY: arguments match the kernel's signature; one warp per keypoint k < count (grid-stride),
-    // which reads and writes record k and writes bin k, within both buffers (checked above); the
-    // boundary table holds 720 (x, y) pairs; the orientation disc stays inside the image (detection's
-    // margin is at least the disc's radius plus one).
-    unsafe { launch.launch(config) }.map_err(driver_error("launching clatch_orient_selected"))?;
-    Ok(())
-}
-
-/// Queues `kernels/detect.cu`'s `clatch_subpixel` on `stream`: the sub-pixel offsets of the `count`
-/// keypoints in `keypoints` (whole positions on `image`) into `offsets` (`[dx, dy]` per keypoint, in
-/// 1/65536 pixel), reproducing [`crate::detect::cpu::subpixel_offset`] for each, bit for bit.
-pub(crate) fn launch_subpixel(
-    dev: &GpuDevice,
-    stream: &Arc<CudaStream>,
-    image: &DeviceImage,
-    keypoints: &CudaView<'_, KeyPoint>,
-    count: usize,
-    offsets: &mut CudaViewMut<'_, i32>,
-) -> Result<()> {
-    super::invariant(
-        count <= keypoints.len() && 2 * count <= offsets.len(),
-        "sub-pixel refinement",
-        || {
-            format!(
-                "{count} keypoints for buffers of {} keypoints and {} offsets",
-                keypoints.len(),
-                offsets.len()
-            )
-        },
-    )?;
-    if count == 0 {
-        return Ok(());
-    }
-    image.arrived(stream)?;
-    let texture = image.texture();
-    let (width, height) = (image.width() as i32, image.height() as i32);
-    let n = count as u32;
-    let mut launch = stream.launch_builder(dev.kernel("clatch_subpixel"));
-    launch
-        .arg(&texture)
-        .arg(&width)
-        .arg(&height)
-        .arg(keypoints)
-        .arg(&n)
-        .arg(offsets);
-    let threads = CLATCH_SUBPIXEL_THREADS as usize;
-    let lanes = CLATCH_SUBPIXEL_LANES as usize;
-    let config = LaunchConfig {
-        grid_dim: ((count * lanes).div_ceil(threads) as u32, 1, 1),
-        block_dim: (threads as u32, 1, 1),
-        shared_mem_bytes: 0,
-    };
-    // SAFETY: arguments match the kernel's signature; `lanes` threads per keypoint (a divisor of the
-    // warp and the block); only keypoints k < count are read and only offsets 2k, 2k + 1 of them
-    // written, within both buffers (checked above).
-    unsafe { launch.launch(config) }.map_err(driver_error("launching clatch_subpixel"))?;
+    // SAFETY: arguments match the kernel's signature (the table by value, then four pointers, the
+    // last null when not refining); one warp per keypoint k < total (grid-stride) reads and writes
+    // record k and writes bin k and offsets 2k, 2k + 1, all within their buffers (checked above); the
+    // boundary table holds 720 (x, y) pairs; every texture in the table is a level's, alive until
+    // the caller's images drop, after the stream's work (their owner's contract).
+    unsafe { launch.launch(config) }.map_err(driver_error("launching clatch_orient_refine"))?;
     Ok(())
 }
 

@@ -138,6 +138,10 @@ mod tests {
         assert_eq!(CLATCH_ORIENTATION_RADIUS as i32, detect::ORIENTATION_RADIUS);
         assert_eq!(CLATCH_FAST_ARC as usize, detect::FAST_ARC);
         assert_eq!(CLATCH_SUBPIXEL_FRAC_BITS, detect::SUBPIXEL_FRAC_BITS);
+        assert_eq!(CLATCH_MAX_LEVELS as usize, crate::pyramid::MAX_LEVELS);
+        // Passed by value as a kernel parameter: no padding the C side would lay out differently.
+        assert_eq!(size_of::<clatch_levels>(), 32 * 8 + 2 * 32 * 4 + 33 * 4 + 4);
+        assert_eq!(offset_of!(clatch_levels, starts), 32 * 8 + 2 * 32 * 4);
         assert_eq!(
             CLATCH_PYRAMID_STEP_FRAC_BITS,
             crate::pyramid::STEP_FRAC_BITS

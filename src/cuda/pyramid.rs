@@ -4,22 +4,19 @@
 //! Everything is queued on one stream, every buffer from its arena ([`super::arena`]). The global
 //! top-N over the levels ([`crate::pyramid::select`]) runs on the host: the levels' counts, then their
 //! (unoriented) keypoints, are read back through pinned buffers (two waits for the stream), the
-//! selection of every level is uploaded at once and oriented (`clatch_orient_selected`: only what is
-//! kept, as [`crate::pyramid::cpu`]), then described and, with [`crate::Subpixel::Score`], refined by
-//! `clatch_subpixel` (`kernels/detect.cu`); the orientation bins and offsets are read back with the
+//! selection of every level is uploaded at once, oriented and, with [`crate::Subpixel::Score`], refined
+//! (`clatch_orient_refine`, `kernels/detect.cu`: one launch for every level, and only what is kept, as
+//! [`crate::pyramid::cpu`]), then described; the orientation bins and offsets are read back with the
 //! descriptors (a third wait) and mapped to level 0 on the host ([`crate::pyramid::report`]). So the
 //! asynchronous extractor queues the levels and their detection at once and does the rest in `wait`.
 
 use cudarc::driver::CudaView;
 
-use cudarc::driver::CudaViewMut;
-
 use super::arena::{Lane, Leased, PinnedScratch, Scratch, settled};
 use super::collection::DeviceCollection;
 use super::describe::{gather_rows, launch_describe, upload_counts, weights};
 use super::detect::{
-    DeviceKeypoints, detect_unoriented_on_device, download_counts, launch_orient_selected,
-    launch_subpixel,
+    DeviceKeypoints, detect_unoriented_on_device, download_counts, launch_orient_refine,
 };
 use super::device::GpuDevice;
 use super::spans::Span;
@@ -32,6 +29,10 @@ use crate::features::Features;
 use crate::gray_view::GrayView;
 use crate::keypoint::KeyPoint;
 use crate::pyramid::{self, LevelKeypoint, Plan, Pyramid};
+
+/// The most candidates (records) whose read-back buffer is sized by the pyramid's bound (6 MiB); a
+/// larger bound (a grid's: every survivor) sizes it by the count found.
+const READ_BACK_BY_BOUND: usize = 1 << 18;
 
 /// A pyramid queued on a stream: levels built and every level's detection launched, nothing read back.
 #[derive(Debug)]
@@ -61,7 +62,7 @@ pub(crate) fn queue(
     // suppression), then each level is built from the one before and detected. The order of launches
     // on the stream changes no result.
     let mut levels = vec![DeviceImage::upload(dev, lane, image, life)?];
-    // Unoriented: only the selection's keypoints are oriented ([`QueuedPyramid::queue_orientation`]).
+    // Unoriented: only the selection's keypoints are oriented ([`QueuedPyramid::queue_orient_refine`]).
     let mut found = vec![detect_unoriented_on_device(
         dev,
         lane,
@@ -137,12 +138,6 @@ impl Selection {
         let (at, n) = self.ranges[l];
         self.keypoints.whole().slice(at..at + n)
     }
-
-    /// Level `l`'s keypoints on the device, mutable.
-    fn of_level_mut(&mut self, l: usize) -> CudaViewMut<'_, KeyPoint> {
-        let (at, n) = self.ranges[l];
-        self.keypoints.whole_mut().slice_mut(at..at + n)
-    }
 }
 
 impl QueuedPyramid {
@@ -166,13 +161,19 @@ impl QueuedPyramid {
         let found: Vec<&DeviceKeypoints> = self.found.iter().collect();
         let counts = download_counts(&self.lane, &found)?;
         let total = counts.iter().sum();
-        // Sized by what was found, not by `bound()`: with a grid every survivor is a candidate and the
-        // bound is a quarter of the pixels (about 100 MB of page-locked memory for a 6-megapixel
-        // photo, whose allocation cost more than the photo's detection). The arena rounds the size up,
-        // so photos of similar content reuse the buffer.
+        // Sized by `bound()`, so that images of one size and configuration reuse it whatever they
+        // show, unless that is large: with a grid every survivor is a candidate and the bound is a
+        // quarter of the pixels (about 100 MB of page-locked memory for a 6-megapixel photo, whose
+        // allocation cost more than the photo's detection). Then by what was found: the arena rounds
+        // the size up, so photos of similar content reuse it.
+        let capacity = if self.bound() <= READ_BACK_BY_BOUND {
+            self.bound()
+        } else {
+            total
+        };
         let mut host = self
             .lane
-            .pinned::<KeyPoint>(total, "keypoint read-back buffer")?;
+            .pinned::<KeyPoint>(capacity, "keypoint read-back buffer")?;
         let mut at = 0;
         for (f, &n) in self.found.iter().zip(&counts) {
             host.queue_download(at, &f.records().slice(..n))?;
@@ -222,60 +223,43 @@ impl QueuedPyramid {
             .collect()
     }
 
-    /// Queues the sub-pixel offsets of every level's selected keypoints when
-    /// [`DetectorConfig::subpixel`] refines positions: `clatch_subpixel` through [`launch_subpixel`],
-    /// which reproduces [`crate::detect::cpu::subpixel_offset`], as [`crate::pyramid::cpu`] applies it
-    /// after selection. `[dx, dy]` per keypoint, in selection order.
-    fn queue_offsets(
-        &self,
-        dev: &GpuDevice,
-        selection: &Selection,
-    ) -> Result<Option<Scratch<i32>>> {
-        if self.config.subpixel == Subpixel::None || selection.total == 0 {
-            return Ok(None);
-        }
-        let mut offsets = self
-            .lane
-            .scratch::<i32>(2 * self.selection_bound(), "sub-pixel offsets")?;
-        for (l, level) in self.levels.iter().enumerate() {
-            let (at, n) = selection.ranges[l];
-            if n == 0 {
-                continue;
-            }
-            let mut out = offsets.whole_mut().slice_mut(2 * at..2 * (at + n));
-            launch_subpixel(dev, &self.lane, level, &selection.of_level(l), n, &mut out)?;
-        }
-        Ok(Some(offsets))
-    }
-
-    /// Queues the orientation of every level's selected keypoints (`clatch_orient_selected` through
-    /// [`launch_orient_selected`], reproducing [`crate::detect::cpu::orientation`], which
-    /// [`crate::pyramid::cpu`] applies after selection): into the selection's records, for the describe
-    /// kernel, and as bins, in selection order, for the host.
-    fn queue_orientation(
+    /// Queues, in one launch for every level (`clatch_orient_refine` through
+    /// [`launch_orient_refine`]), the orientation of every level's selected keypoints, reproducing
+    /// [`crate::detect::cpu::orientation`], which [`crate::pyramid::cpu`] applies after selection:
+    /// into the selection's records, for the describe kernel, and as bins, in selection order, for the
+    /// host; and when [`DetectorConfig::subpixel`] refines positions, their sub-pixel offsets,
+    /// reproducing [`crate::detect::cpu::subpixel_offset`]: `[dx, dy]` per keypoint, in selection
+    /// order. Orientation and descriptor stay those of the whole pixel; only the position moves.
+    fn queue_orient_refine(
         &self,
         dev: &GpuDevice,
         selection: &mut Selection,
-    ) -> Result<Scratch<i32>> {
-        let mut bins = self
-            .lane
-            .scratch::<i32>(self.selection_bound(), "orientation bins")?;
-        for (l, level) in self.levels.iter().enumerate() {
-            let (at, n) = selection.ranges[l];
-            if n == 0 {
-                continue;
-            }
-            let mut out = bins.whole_mut().slice_mut(at..at + n);
-            launch_orient_selected(
-                dev,
-                &self.lane,
-                level,
-                &mut selection.of_level_mut(l),
-                n,
-                &mut out,
-            )?;
-        }
-        Ok(bins)
+    ) -> Result<(Scratch<i32>, Option<Scratch<i32>>)> {
+        let bound = self.selection_bound();
+        let mut bins = self.lane.scratch::<i32>(bound, "orientation bins")?;
+        let mut offsets = match self.config.subpixel {
+            Subpixel::None => None,
+            _ => Some(self.lane.scratch::<i32>(2 * bound, "sub-pixel offsets")?),
+        };
+        let levels: Vec<(&DeviceImage, usize)> = self
+            .levels
+            .iter()
+            .zip(&selection.ranges)
+            .map(|(level, &(_, n))| (level, n))
+            .collect();
+        let total = selection.total;
+        launch_orient_refine(
+            dev,
+            &self.lane,
+            &levels,
+            &mut selection.keypoints.whole_mut().slice_mut(..total),
+            &mut bins.whole_mut().slice_mut(..total),
+            offsets
+                .as_mut()
+                .map(|o| o.whole_mut().slice_mut(..2 * total))
+                .as_mut(),
+        )?;
+        Ok((bins, offsets))
     }
 
     /// Queues the read-back of the orientation bins and, when refining, the offsets, through pinned
@@ -318,8 +302,7 @@ impl QueuedPyramid {
             self.levels.len(),
             self.selection_bound(),
         )?;
-        let bins = self.queue_orientation(dev, &mut selection)?;
-        let offsets = self.queue_offsets(dev, &selection)?;
+        let (bins, offsets) = self.queue_orient_refine(dev, &mut selection)?;
         self.queue_readback(&selection, &bins, offsets.as_ref())?
             .apply(&mut selected, &selection)?;
         Ok(self.report(&selected))
@@ -340,7 +323,7 @@ impl QueuedPyramid {
         let bound = self.selection_bound();
         let mut selection = Selection::upload(&lane, &selected, self.levels.len(), bound)?;
         // Oriented before they are described (same stream).
-        let bins = self.queue_orientation(dev, &mut selection)?;
+        let (bins, offsets) = self.queue_orient_refine(dev, &mut selection)?;
         let mut out = lane.scratch::<u64>(bound * words, "pyramid descriptors")?;
         for (l, level) in self.levels.iter_mut().enumerate() {
             // Every level's quad texture, even one without selected keypoints: the buffers a call
@@ -365,8 +348,6 @@ impl QueuedPyramid {
                 &mut out.whole_mut().slice_mut(at * words..(at + n) * words),
             )?;
         }
-        // Orientation and descriptor stay those of the whole pixel; only the position moves.
-        let offsets = self.queue_offsets(dev, &selection)?;
         Ok(Described {
             selected,
             selection,

@@ -115,19 +115,19 @@ pub fn debug_subpixel_offsets(
     }
     let stream = Leased::take(dev)?;
     let device_image = DeviceImage::upload(dev, &stream, image, ImageLife::Call)?;
-    let on_device = super::super::memory::upload(&stream, keypoints, "debug keypoint upload")?;
-    let mut offsets = crate::cuda::memory::alloc_zeros::<i32>(
-        &stream,
-        2 * keypoints.len(),
-        "debug sub-pixel offsets",
-    )?;
-    launch_subpixel(
+    let mut on_device = super::super::memory::upload(&stream, keypoints, "debug keypoint upload")?;
+    let n = keypoints.len();
+    let mut bins = crate::cuda::memory::alloc_zeros::<i32>(&stream, n, "debug orientation bins")?;
+    let mut offsets =
+        crate::cuda::memory::alloc_zeros::<i32>(&stream, 2 * n, "debug sub-pixel offsets")?;
+    // The pyramid's kernel, with one level: it orients them too.
+    launch_orient_refine(
         dev,
         &stream,
-        &device_image,
-        &on_device.as_view(),
-        keypoints.len(),
-        &mut offsets.as_view_mut(),
+        &[(&device_image, n)],
+        &mut on_device.as_view_mut(),
+        &mut bins.as_view_mut(),
+        Some(&mut offsets.as_view_mut()),
     )?;
     let flat = stream
         .clone_dtoh(&offsets)

@@ -11,6 +11,7 @@
 #       backend's start-up alone; every GPU suite; then the sanitizers side by side, bounded by what
 #       is left of the call: memcheck, initcheck and synccheck of every binary whose paths changed,
 #       racecheck trial by trial of the binaries a whole-binary run never finished.
+#   bash tools/gpu_call.sh final   same carry: main as it lands (see the part's comment).
 #   bash tools/gpu_call.sh soak    carry [.gpu/part-main.tar.xz]
 #       the 10-minute soak alone (its memory samples must not see other processes).
 # Summaries go to $OUT/summary_all.txt (printed last); logs stay in $OUT (at most 8 files come back).
@@ -108,7 +109,8 @@ suites() {
 }
 
 # sanitize PARALLEL JOB...: each JOB "tool binary [trial]" under compute-sanitizer with
-# CLATCH_TEST_SCALE=sanitizer, PARALLEL at a time, every one bounded by what is left of the call.
+# CLATCH_TEST_SCALE=sanitizer (a tool named plain... runs it plainly, at its usual scale), PARALLEL at a
+# time, every one bounded by what is left of the call.
 sanitize() {
     local parallel=$1; shift
     local bound=$(( $(left) - 15 ))
@@ -120,14 +122,17 @@ sanitize() {
         rest=$(( '"$deadline"' - $(date +%s) ))
         [ $rest -gt 5 ] || { echo "rc=skipped" > /tmp/s_$name.rc; exit 0; }
         trial=(); [ -n "$3" ] && trial=(--exact "$3")
-        CLATCH_TEST_SCALE=sanitizer timeout $rest compute-sanitizer --tool $1 --print-limit 1000 \
-            '"$B"'/$2 "${trial[@]}" > /tmp/s_$name.txt 2>&1
+        case $1 in
+        plain*) timeout $rest '"$B"'/$2 "${trial[@]}" > /tmp/s_$name.txt 2>&1 ;;
+        *) CLATCH_TEST_SCALE=sanitizer timeout $rest compute-sanitizer --tool $1 --print-limit 1000 \
+               '"$B"'/$2 "${trial[@]}" > /tmp/s_$name.txt 2>&1 ;;
+        esac
         echo "rc=$?" > /tmp/s_$name.rc'
     for job in "$@"; do
         set -- $job
         local name=$1_$2${3:+_$3} log=/tmp/s_$1_$2${3:+_$3}.txt
         { echo "== $job (CLATCH_TEST_SCALE=sanitizer) $(cat /tmp/s_$name.rc 2>/dev/null)"
-          grep -E '^test result|SUMMARY|growth sites|second pass' "$log" 2>/dev/null | tail -6
+          grep -E '^test result|SUMMARY|growth sites|second pass|wrong rows' "$log" 2>/dev/null | tail -6
           sed -n '/^failures:/,/^test result/p' "$log" 2>/dev/null | head -30
           grep -E 'Program hit|Invalid|Race|Uninitialized|Barrier' "$log" 2>/dev/null | sed 's/.*due to//' | sort | uniq -c | head -8; } >> "$OUT/sanitize.txt"
         say "$job $(cat /tmp/s_$name.rc 2>/dev/null): $(grep -E '^test result' "$log" 2>/dev/null | tail -1 | cut -c1-60) $(grep -E 'ERROR SUMMARY|RACECHECK SUMMARY' "$log" 2>/dev/null | tail -1)"
@@ -173,6 +178,46 @@ check)
     for t in cuda_collection cuda_extract_stream cuda_faults; do
         for trial in $(trials $t); do jobs+=("racecheck $t $trial"); done
     done
+    sanitize 12 "${jobs[@]}"
+    ;;
+final)
+    # Main as it lands: issue 9's bound against the commit before (.gpu/old), CPU = GPU on the photo,
+    # the real folders and the start-up, every GPU suite, then the sanitizers of the changed kernels
+    # and host code. arena_growth_fails_cleanly (it fails only under a loaded sanitizer) also runs
+    # with launches serialised (CUDA_LAUNCH_BLOCKING=1: the host cannot run ahead) and plainly three
+    # times among the sanitizer jobs (a loaded device, no sanitizer): a race of host and device shows
+    # in the second and not the first.
+    nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1
+    make_photo
+    for round in 1 2; do
+        [ -x .gpu/old/clatch ] && ncu_extract .gpu/old/clatch "previous commit round $round"
+        ncu_extract $B/clatch "main round $round"
+    done
+    photo_identity
+    python3 -c "import cv2, numpy; cv2.imwrite('/tmp/tiny.png', (numpy.arange(200*200) % 251).astype('uint8').reshape(200, 200))"
+    for be in cpu cuda; do
+        timed /tmp/tiny_$be.txt $B/clatch extract --backend $be /tmp/tiny.png -o /tmp/tiny_$be
+        say "tiny image $be: whole process ${wall}ms; $(grep -E '^  start' /tmp/tiny_$be.txt | sed 's/  */ /g')"
+    done
+    folders herzjesu sceaux
+    grid_cost $B/clatch main
+    CUDA_LAUNCH_BLOCKING=1 CLATCH_TEST_SCALE=sanitizer timeout 60 $B/cuda_faults --exact arena_growth_fails_cleanly > /tmp/blocking.txt 2>&1
+    say "arena_growth with CUDA_LAUNCH_BLOCKING=1 rc=$?: $(grep -E '^test result' /tmp/blocking.txt | cut -c1-40) $(grep -oE 'of the [0-9]+ wrong rows.*bits' /tmp/blocking.txt | head -1)"
+    suites cuda_pyramid cuda_detect cuda_extract_stream cuda_faults cuda_collection cuda_async cuda_pool \
+        cuda_describe cuda_describe_opencv cuda_match clatch_unit backend
+    CLATCH_FORCE_PTX=1 timeout 60 $B/cuda_pyramid >> "$OUT/suite.txt" 2>&1
+    say "cuda_pyramid (PTX JIT) rc=$?: $(grep -E '^test result' "$OUT/suite.txt" | tail -1)"
+    jobs=()
+    for tool in memcheck initcheck synccheck; do
+        for t in cuda_pyramid cuda_detect cuda_extract_stream cuda_faults; do jobs+=("$tool $t"); done
+    done
+    for i in 1 2 3; do jobs+=("plain$i cuda_faults arena_growth_fails_cleanly"); done
+    for trial in $(trials cuda_pyramid); do jobs+=("racecheck cuda_pyramid $trial"); done
+    jobs+=("racecheck cuda_detect subpixel_offsets_every_pixel_and_border_equal_cpu"
+           "racecheck cuda_extract_stream warm_streams_allocate_nothing"
+           "racecheck cuda_extract_stream large_images_arrive_in_bands"
+           "racecheck cuda_faults arena_growth_fails_cleanly"
+           "racecheck cuda_faults every_allocation_site_fails_cleanly")
     sanitize 12 "${jobs[@]}"
     ;;
 soak)

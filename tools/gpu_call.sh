@@ -139,6 +139,31 @@ sanitize() {
     done
 }
 
+# ncu_rounds OLD_LABEL: ncu_extract of .gpu/old (when there) and of main, twice, alternating.
+ncu_rounds() {
+    for round in 1 2; do
+        [ -x .gpu/old/clatch ] && ncu_extract .gpu/old/clatch "$1 round $round"
+        ncu_extract $B/clatch "main round $round"
+    done
+}
+
+# start_up: the backend's set-up alone, one tiny image per backend.
+start_up() {
+    python3 -c "import cv2, numpy; cv2.imwrite('/tmp/tiny.png', (numpy.arange(200*200) % 251).astype('uint8').reshape(200, 200))"
+    for be in cpu cuda; do
+        timed /tmp/tiny_$be.txt $B/clatch extract --backend $be /tmp/tiny.png -o /tmp/tiny_$be
+        say "tiny image $be: whole process ${wall}ms; $(grep -E '^  start' /tmp/tiny_$be.txt | sed 's/  */ /g')"
+    done
+}
+
+# all_suites: every GPU test binary, then the pyramid's from PTX (JIT) instead of the fatbin.
+all_suites() {
+    suites cuda_pyramid cuda_detect cuda_extract_stream cuda_faults cuda_collection cuda_async cuda_pool \
+        cuda_describe cuda_describe_opencv cuda_match clatch_unit backend
+    CLATCH_FORCE_PTX=1 timeout 60 $B/cuda_pyramid >> "$OUT/suite.txt" 2>&1
+    say "cuda_pyramid (PTX JIT) rc=$?: $(grep -E '^test result' "$OUT/suite.txt" | tail -1)"
+}
+
 # trials BINARY: its trial names.
 trials() { $B/$1 --list 2>/dev/null | sed -n 's/: test$//p'; }
 
@@ -146,28 +171,17 @@ case "${1:-check}" in
 check)
     nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1
     make_photo
-    for round in 1 2; do
-        [ -x .gpu/old/clatch ] && ncu_extract .gpu/old/clatch "old (fb8ab9b) round $round"
-        ncu_extract $B/clatch "main round $round"
-    done
+    ncu_rounds "old (fb8ab9b)"
     photo_identity
     grid_cost $B/clatch main
     [ -x .gpu/old/clatch ] && grid_cost .gpu/old/clatch old
     folders herzjesu sceaux
-    # The backend's set-up alone: one tiny image.
-    python3 -c "import cv2, numpy; cv2.imwrite('/tmp/tiny.png', (numpy.arange(200*200) % 251).astype('uint8').reshape(200, 200))"
-    for be in cpu cuda; do
-        timed /tmp/tiny_$be.txt $B/clatch extract --backend $be /tmp/tiny.png -o /tmp/tiny_$be
-        say "tiny image $be: whole process ${wall}ms; $(grep -E '^  start' /tmp/tiny_$be.txt | sed 's/  */ /g')"
-    done
+    start_up
     # The failing trial first, plainly and under synccheck, with its diagnosis.
     CLATCH_TEST_SCALE=sanitizer timeout 120 compute-sanitizer --tool synccheck $B/cuda_faults --exact arena_growth_fails_cleanly > /tmp/arena.txt 2>&1
     { echo "== synccheck arena_growth_fails_cleanly rc=$?"; grep -E 'differs|growth sites|^test result|SUMMARY' /tmp/arena.txt; } >> "$OUT/sanitize.txt"
     say "synccheck arena_growth: $(grep -E '^test result' /tmp/arena.txt | cut -c1-40) $(grep -oE 'of the [0-9]+ wrong rows.*bits' /tmp/arena.txt | head -1)"
-    suites cuda_pyramid cuda_detect cuda_extract_stream cuda_collection cuda_faults cuda_async cuda_pool \
-        cuda_describe cuda_describe_opencv cuda_match clatch_unit backend
-    CLATCH_FORCE_PTX=1 timeout 60 $B/cuda_pyramid >> "$OUT/suite.txt" 2>&1
-    say "cuda_pyramid (PTX JIT) rc=$?: $(grep -E '^test result' "$OUT/suite.txt" | tail -1)"
+    all_suites
     jobs=()
     for tool in memcheck initcheck synccheck; do
         for t in cuda_pyramid cuda_detect cuda_extract_stream cuda_faults cuda_collection cuda_async cuda_pool; do
@@ -189,24 +203,14 @@ final)
     # in the second and not the first.
     nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1
     make_photo
-    for round in 1 2; do
-        [ -x .gpu/old/clatch ] && ncu_extract .gpu/old/clatch "previous commit round $round"
-        ncu_extract $B/clatch "main round $round"
-    done
+    ncu_rounds "previous commit"
     photo_identity
-    python3 -c "import cv2, numpy; cv2.imwrite('/tmp/tiny.png', (numpy.arange(200*200) % 251).astype('uint8').reshape(200, 200))"
-    for be in cpu cuda; do
-        timed /tmp/tiny_$be.txt $B/clatch extract --backend $be /tmp/tiny.png -o /tmp/tiny_$be
-        say "tiny image $be: whole process ${wall}ms; $(grep -E '^  start' /tmp/tiny_$be.txt | sed 's/  */ /g')"
-    done
+    start_up
     folders herzjesu sceaux
     grid_cost $B/clatch main
     CUDA_LAUNCH_BLOCKING=1 CLATCH_TEST_SCALE=sanitizer timeout 60 $B/cuda_faults --exact arena_growth_fails_cleanly > /tmp/blocking.txt 2>&1
     say "arena_growth with CUDA_LAUNCH_BLOCKING=1 rc=$?: $(grep -E '^test result' /tmp/blocking.txt | cut -c1-40) $(grep -oE 'of the [0-9]+ wrong rows.*bits' /tmp/blocking.txt | head -1)"
-    suites cuda_pyramid cuda_detect cuda_extract_stream cuda_faults cuda_collection cuda_async cuda_pool \
-        cuda_describe cuda_describe_opencv cuda_match clatch_unit backend
-    CLATCH_FORCE_PTX=1 timeout 60 $B/cuda_pyramid >> "$OUT/suite.txt" 2>&1
-    say "cuda_pyramid (PTX JIT) rc=$?: $(grep -E '^test result' "$OUT/suite.txt" | tail -1)"
+    all_suites
     jobs=()
     for tool in memcheck initcheck synccheck; do
         for t in cuda_pyramid cuda_detect cuda_extract_stream cuda_faults; do jobs+=("$tool $t"); done

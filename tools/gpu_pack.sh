@@ -12,17 +12,7 @@ cd "$(dirname "$0")/.."
 stage=$(mktemp -d)
 trap 'rm -rf "$stage"' EXIT
 cargo test -p clatch --features cuda --no-run --message-format=json 2>/dev/null \
-    | python3 -c '
-import json, sys, shutil
-for line in sys.stdin:
-    m = json.loads(line)
-    if m.get("reason") != "compiler-artifact" or not m.get("executable"):
-        continue
-    t = m["target"]
-    name = "clatch_unit" if t["kind"] == ["lib"] else t["name"]
-    if name == "clatch_unit" or name.startswith("cuda_") or name == "backend":
-        shutil.copy(m["executable"], sys.argv[1] + "/" + name)
-' "$stage"
+    | python3 tools/copy_test_binaries.py "$stage"
 cargo build --release -p clatch-cli --features cuda
 cp target/release/clatch "$stage/clatch"
 if [ -n "${OLD:-}" ]; then

@@ -17,21 +17,7 @@ grep -qx '/.gpu/' "$exclude" 2>/dev/null || echo '/.gpu/' >> "$exclude"
 
 # Test binaries: their paths from cargo's JSON messages.
 cargo test -p clatch --features cuda --no-run --message-format=json 2>/dev/null \
-    | python3 -c '
-import json, sys, shutil
-for line in sys.stdin:
-    m = json.loads(line)
-    if m.get("reason") != "compiler-artifact" or not m.get("executable"):
-        continue
-    t = m["target"]
-    name = t["name"]
-    if t["kind"] == ["lib"]:
-        name = "clatch_unit"
-    elif not (name.startswith("cuda_") or name == "backend"):
-        continue
-    shutil.copy(m["executable"], ".gpu/bin/" + name)
-    print("packed", name)
-'
+    | python3 tools/copy_test_binaries.py .gpu/bin
 cargo bench -p clatch --features cuda --no-run --message-format=json 2>/dev/null \
     | python3 -c '
 import json, sys, shutil

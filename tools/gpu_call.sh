@@ -12,6 +12,7 @@
 #       is left of the call: memcheck, initcheck and synccheck of every binary whose paths changed,
 #       racecheck trial by trial of the binaries a whole-binary run never finished.
 #   bash tools/gpu_call.sh final   same carry: main as it lands (see the part's comment).
+#   bash tools/gpu_call.sh arena   carry [.gpu/part-main.tar.xz]: tools/PENDING_GPU.md items 1 and 2.
 #   bash tools/gpu_call.sh soak    carry [.gpu/part-main.tar.xz]
 #       the 10-minute soak alone (its memory samples must not see other processes).
 # Summaries go to $OUT/summary_all.txt (printed last); logs stay in $OUT (at most 8 files come back).
@@ -223,6 +224,28 @@ final)
            "racecheck cuda_faults arena_growth_fails_cleanly"
            "racecheck cuda_faults every_allocation_site_fails_cleanly")
     sanitize 12 "${jobs[@]}"
+    ;;
+arena)
+    # tools/PENDING_GPU.md item 1: arena_growth_fails_cleanly under synccheck, nine at once (the load
+    # under which it failed), three with texture objects as shipped, three that never destroy a
+    # replaced one (no handle reused), three that synchronise after each creation; then racecheck of
+    # the trial alone with what is left.
+    for i in 1 2 3; do
+        for mode in shipped keep sync; do
+            ( CLATCH_DEBUG_TEXTURES=$mode CLATCH_TEST_SCALE=sanitizer timeout 240 compute-sanitizer --tool synccheck \
+                  $B/cuda_faults --exact arena_growth_fails_cleanly > /tmp/a_${mode}_$i.txt 2>&1
+              echo "rc=$?" > /tmp/a_${mode}_$i.rc ) &
+        done
+    done
+    wait
+    for mode in shipped keep sync; do
+        for i in 1 2 3; do
+            f=/tmp/a_${mode}_$i.txt
+            cat "$f" >> "$OUT/arena.txt"
+            say "synccheck arena_growth textures=$mode #$i $(cat ${f%.txt}.rc): $(grep -E '^test result' "$f" | cut -c1-40) $(grep -oE 'at [a-z:, ]+ \(growth allocation [0-9]+\)|of the [0-9]+ wrong rows.*bits' "$f" | tr '\n' ' ')"
+        done
+    done
+    sanitize 1 "racecheck cuda_faults arena_growth_fails_cleanly"
     ;;
 soak)
     nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1

@@ -229,7 +229,7 @@ arena)
     # tools/PENDING_GPU.md item 1: arena_growth_fails_cleanly under synccheck, nine at once (the load
     # under which it failed), three with texture objects as shipped, three that never destroy a
     # replaced one (no handle reused), three that synchronise after each creation; then racecheck of
-    # the trial alone with what is left.
+    # the trial, and of cuda_pool's trials, with what is left.
     for i in 1 2 3; do
         for mode in shipped keep sync; do
             ( CLATCH_DEBUG_TEXTURES=$mode CLATCH_TEST_SCALE=sanitizer timeout 240 compute-sanitizer --tool synccheck \
@@ -245,7 +245,10 @@ arena)
             say "synccheck arena_growth textures=$mode #$i $(cat ${f%.txt}.rc): $(grep -E '^test result' "$f" | cut -c1-40) $(grep -oE 'at [a-z:, ]+ \(growth allocation [0-9]+\)|of the [0-9]+ wrong rows.*bits' "$f" | tr '\n' ' ')"
         done
     done
-    sanitize 1 "racecheck cuda_faults arena_growth_fails_cleanly"
+    # cuda_pool has never run under racecheck: its trials beside it.
+    jobs=("racecheck cuda_faults arena_growth_fails_cleanly")
+    for trial in $(trials cuda_pool); do jobs+=("racecheck cuda_pool $trial"); done
+    sanitize 4 "${jobs[@]}"
     ;;
 soak)
     nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1

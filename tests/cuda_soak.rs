@@ -1,10 +1,15 @@
 //! GPU soak: 16 host threads, two streams each, random image sizes and settings, extraction and
-//! matching queued asynchronously for `CLATCH_SOAK_SECONDS` (default 5; the device run uses 600).
-//! Every eighth result is compared with the CPU's (0 differences allowed) and the device's free memory
-//! is sampled once a second: it must stay flat while the work goes on (the last third of the run no
-//! lower than the first third after warm-up; judged on runs of a minute or more, as the arenas grow
-//! for longer than a short run), and come back once the work stops.
-
+//! matching queued asynchronously for `CLATCH_SOAK_SECONDS` (default 5; the device run uses as much of
+//! its call as it can). Every eighth result is compared with the CPU's (0 differences allowed).
+//!
+//! Memory: each thread first runs the largest work the random draws can ask for on both its streams,
+//! so that their arenas hold buffers for any later call. From then on the device's free memory,
+//! sampled once a second, may fall only by what the arenas are seen to grow (the hook
+//! `arena_bytes_grown`, each growth allowed one 32 MiB block of the driver's allocator): a leak
+//! outside the arenas shows as a fall no growth explains. A leak through them (buffers never given
+//! back, so every call allocates) shows as calls that grow an arena: at most 1 in 100. Both are
+//! judged on runs of a minute or more. Once the work stops and the streams are gone, the memory must
+//! come back.
 mod common;
 
 use libtest_mimic::Trial;
@@ -29,7 +34,7 @@ mod gpu {
     use std::time::{Duration, Instant};
 
     use clatch::cuda::GpuStream;
-    use clatch::cuda::hooks::device_memory;
+    use clatch::cuda::hooks::{arena_bytes_grown, device_memory};
     use clatch::synthetic::SplitMix64;
     use clatch::{
         Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, Extractor, ExtractorConfig,
@@ -66,17 +71,91 @@ mod gpu {
         }
     }
 
+    /// The largest image the random draws make (`worker`), as noise (the most corners).
+    const LARGEST: (usize, usize) = (64 + 1599, 64 + 1199);
+
+    /// The configurations whose buffers hold those of any random one at the same image size: the most
+    /// keypoints, the widest descriptor, the lowest threshold, with and without each pyramid.
+    fn largest_configs() -> Vec<ExtractorConfig> {
+        let mut configs = vec![None];
+        for levels in [2, 3, 4] {
+            for scale_factor in [1.2, 1.5, 2.0] {
+                configs.push(Some(Pyramid {
+                    levels,
+                    scale_factor,
+                }));
+            }
+        }
+        configs
+            .into_iter()
+            .map(|pyramid| ExtractorConfig {
+                detector: DetectorConfig {
+                    threshold: 8,
+                    max_keypoints: 200 + 5999,
+                    ..DetectorConfig::default()
+                },
+                descriptor: DescriptorConfig {
+                    width: DescriptorWidth::from_bits(512).expect("512 bits"),
+                    ..DescriptorConfig::default()
+                },
+                pyramid,
+            })
+            .collect()
+    }
+
+    /// Runs the largest work on both `streams` (extraction on each, matching of its result on each).
+    fn warm_up(streams: &[GpuStream; 2], seed: u64) -> Result<(), clatch::Error> {
+        let (w, h) = LARGEST;
+        let pixels = clatch::synthetic::noise(w, h, seed)?;
+        let view = GrayView::new(&pixels, w, h, w)?;
+        let matcher = Matcher::new(GPU, MatchConfig::default())?;
+        for config in largest_configs() {
+            let extractor = Extractor::new(GPU, config)?;
+            for stream in streams {
+                let features = extractor.detect_and_describe_async(stream, &view)?.wait()?;
+                for on in streams {
+                    matcher
+                        .match_descriptors_async(on, &features.descriptors, &features.descriptors)?
+                        .wait()?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// What the workers share with the sampler.
+    #[derive(Default)]
+    struct Shared {
+        stop: AtomicBool,
+        /// Workers whose streams have run the largest work.
+        warmed: AtomicUsize,
+        /// Workers that have stopped.
+        finished: AtomicUsize,
+        /// Arena growth after the warm-up, summed over workers: bytes, each rounded up to the
+        /// allocator's block ([`BLOCK`]).
+        grown: AtomicUsize,
+        /// Calls after the warm-up that grew an arena, and all calls after it.
+        growing_calls: AtomicUsize,
+    }
+
+    /// The driver's allocator takes device memory in blocks of this size (free memory falls in steps
+    /// of it on an H200); a small buffer that opens a new block costs the whole block.
+    const BLOCK: usize = 32 << 20;
+
     /// One worker: returns (extractions, comparisons with the CPU) or the first difference.
-    fn worker(t: u64, deadline: Instant, stop: &AtomicBool) -> Result<(usize, usize), String> {
+    fn worker(t: u64, deadline: Instant, shared: &Shared) -> Result<(usize, usize), String> {
         let err = |e: clatch::Error| e.to_string();
         let mut rng = SplitMix64::new(0x50a4 + t);
         let streams = [
             GpuStream::new(0).map_err(err)?,
             GpuStream::new(0).map_err(err)?,
         ];
+        warm_up(&streams, rng.next_u64()).map_err(err)?;
+        shared.warmed.fetch_add(1, Ordering::SeqCst);
         let mut previous: Option<Features> = None;
         let (mut runs, mut compared) = (0, 0);
-        while Instant::now() < deadline && !stop.load(Ordering::Relaxed) {
+        while Instant::now() < deadline && !shared.stop.load(Ordering::Relaxed) {
+            let grown_before = arena_bytes_grown();
             let (w, h) = (64 + rng.below(1600) as usize, 64 + rng.below(1200) as usize);
             let pixels = if rng.below(4) == 0 {
                 clatch::synthetic::noise(w, h, rng.next_u64())
@@ -107,6 +186,13 @@ mod gpu {
                 None => None,
             };
             runs += 1;
+            let grown = arena_bytes_grown() - grown_before;
+            if grown > 0 {
+                shared
+                    .grown
+                    .fetch_add(grown.next_multiple_of(BLOCK), Ordering::SeqCst);
+                shared.growing_calls.fetch_add(1, Ordering::SeqCst);
+            }
             if runs % 8 == 0 {
                 let cpu = Extractor::new(Backend::Cpu, config)
                     .and_then(|e| e.detect_and_describe(&view))
@@ -129,6 +215,14 @@ mod gpu {
         Ok((runs, compared))
     }
 
+    /// One sample of the sampler: seconds since the start, free device memory, and [`Shared::grown`]
+    /// at that moment, taken once every worker has warmed up.
+    struct Sample {
+        at: f32,
+        free: usize,
+        grown: usize,
+    }
+
     pub fn soak() -> Result<(), Failed> {
         let duration = Duration::from_secs(seconds());
         // Warm: the device and its kernels loaded, then the baseline.
@@ -141,30 +235,34 @@ mod gpu {
         let (baseline, _) = device_memory(0)?;
         let start = Instant::now();
         let deadline = start + duration;
-        let stop = AtomicBool::new(false);
-        let samples = std::sync::Mutex::new(Vec::new());
-        let finished = AtomicUsize::new(0);
+        let shared = Shared::default();
+        let mut samples = Vec::new();
         let results: Vec<Result<(usize, usize), String>> = std::thread::scope(|scope| {
             let workers: Vec<_> = (0..THREADS)
                 .map(|t| {
-                    let (stop, finished) = (&stop, &finished);
+                    let shared = &shared;
                     scope.spawn(move || {
-                        let r = worker(t, deadline, stop);
+                        let r = worker(t, deadline, shared);
                         if r.is_err() {
-                            stop.store(true, Ordering::Relaxed);
+                            shared.stop.store(true, Ordering::Relaxed);
                         }
-                        finished.fetch_add(1, Ordering::Relaxed);
+                        shared.finished.fetch_add(1, Ordering::SeqCst);
                         r
                     })
                 })
                 .collect();
-            // Free device memory once a second while the workers run.
-            while finished.load(Ordering::Relaxed) < THREADS as usize {
-                if let Ok((free, _)) = device_memory(0) {
-                    samples
-                        .lock()
-                        .expect("samples")
-                        .push((start.elapsed().as_secs_f32(), free));
+            // Free device memory once a second while the workers run, from when all have warmed up.
+            while shared.finished.load(Ordering::SeqCst) == 0 {
+                if shared.warmed.load(Ordering::SeqCst) == THREADS as usize {
+                    // Growth read before the free memory: a fall is never paired with growth after it.
+                    let grown = shared.grown.load(Ordering::SeqCst);
+                    if let Ok((free, _)) = device_memory(0) {
+                        samples.push(Sample {
+                            at: start.elapsed().as_secs_f32(),
+                            free,
+                            grown,
+                        });
+                    }
                 }
                 std::thread::sleep(Duration::from_millis(1000));
             }
@@ -179,65 +277,72 @@ mod gpu {
             runs += a;
             compared += b;
         }
-        let samples = samples.into_inner().expect("samples");
         let (after, total) = device_memory(0)?;
-        let warm: Vec<usize> = samples
-            .iter()
-            .filter(|(t, _)| *t >= 2.0)
-            .map(|&(_, f)| f)
-            .collect();
         let mib = |b: usize| b as f64 / (1 << 20) as f64;
-        let (lo, hi) = (
-            warm.iter().min().copied().unwrap_or(after),
-            warm.iter().max().copied().unwrap_or(after),
-        );
+        let lo = samples.iter().map(|s| s.free).min().unwrap_or(after);
+        let hi = samples.iter().map(|s| s.free).max().unwrap_or(after);
+        let growing = shared.growing_calls.load(Ordering::SeqCst);
         println!(
             "{} s, {THREADS} threads: {runs} extractions and matchings, {compared} compared with the CPU, \
-             0 differences; free device memory {:.0} MiB before, {:.0}..{:.0} MiB while running, \
-             {:.0} MiB after (of {:.0})",
+             0 differences; free device memory {:.0} MiB before, {:.0}..{:.0} MiB while running \
+             (after the warm-up), {:.0} MiB after (of {:.0}); {growing} calls grew an arena after the \
+             warm-up ({:.0} MiB in {}-MiB blocks)",
             duration.as_secs(),
             mib(baseline),
             mib(lo),
             mib(hi),
             mib(after),
-            mib(total)
+            mib(total),
+            mib(shared.grown.load(Ordering::SeqCst)),
+            BLOCK >> 20
         );
         // The free memory over the run, at about every tenth of it.
         let step = samples.len().div_ceil(10).max(1);
         let timeline: Vec<String> = samples
             .iter()
             .step_by(step)
-            .map(|&(t, f)| format!("{t:.0} s: {:.0}", mib(f)))
+            .map(|s| {
+                format!(
+                    "{:.0} s: {:.0} (grown {:.0})",
+                    s.at,
+                    mib(s.free),
+                    mib(s.grown)
+                )
+            })
             .collect();
         println!(
             "free device memory (MiB) while running: {}",
             timeline.join(", ")
         );
-        // Flat: a leak grows with the work, so the last third of the run must not sit lower than the
-        // first third (16 MiB for the allocator's granularity). The streams' arenas grow until each
-        // has seen the largest sizes of the random work, which takes longer than a short run: the
-        // judgement needs at least a minute of samples (the device run is 10 minutes). What the
-        // driver keeps after the workers' streams are gone (50 to 84 MiB on an H200, the same after
-        // 5 s as after 560 s) is reported, not judged.
-        let third = warm.len() / 3;
-        if warm.len() < 60 {
+        if samples.len() < 60 {
             println!(
-                "{} s of samples: too short to tell arena growth from a leak; flatness not judged",
-                warm.len()
+                "{} s of samples after the warm-up: too short to judge; flatness not judged",
+                samples.len()
             );
-        } else if third > 0 {
-            let first = warm[..third].iter().min().copied().unwrap_or(lo);
-            let last = warm[warm.len() - third..]
-                .iter()
-                .min()
-                .copied()
-                .unwrap_or(lo);
-            if last + (16 << 20) < first {
+        } else {
+            // A leak outside the arenas: free memory falls below its level after the warm-up by more
+            // than the arenas grew since (16 MiB for the measurement's own noise).
+            let first = &samples[0];
+            for s in &samples {
+                let fell = first.free.saturating_sub(s.free);
+                let explained = s.grown - first.grown + (16 << 20);
+                if fell > explained {
+                    return Err(format!(
+                        "device memory fell by {:.0} MiB from {:.0} s to {:.0} s, the arenas grew by {:.0} \
+                         MiB (in {}-MiB blocks)",
+                        mib(fell),
+                        first.at,
+                        s.at,
+                        mib(s.grown - first.grown),
+                        BLOCK >> 20
+                    )
+                    .into());
+                }
+            }
+            // A leak through the arenas: calls that keep growing them.
+            if growing * 100 > runs {
                 return Err(format!(
-                    "device memory fell while running: {:.0} MiB free at the lowest of the first third, \
-                     {:.0} MiB of the last",
-                    mib(first),
-                    mib(last)
+                    "{growing} of {runs} calls grew an arena after the warm-up: buffers not given back?"
                 )
                 .into());
             }

@@ -319,10 +319,16 @@ impl Lane {
         };
         let kept = match reused {
             Some(kept) => kept,
-            None => KeptDevice {
-                texture: None,
-                buffer: alloc_zeros::<T>(&self.stream, capacity_for(len), operation)?,
-            },
+            None => {
+                let buffer = alloc_zeros::<T>(&self.stream, capacity_for(len), operation)?;
+                #[cfg(feature = "internals")]
+                hooks::GROWN_BYTES
+                    .set(hooks::GROWN_BYTES.get() + buffer.len() * std::mem::size_of::<T>());
+                KeptDevice {
+                    texture: None,
+                    buffer,
+                }
+            }
         };
         Ok(Scratch {
             kept: Some(kept),
@@ -691,6 +697,7 @@ pub mod hooks {
 
     thread_local! {
         pub(super) static FREED: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+        pub(super) static GROWN_BYTES: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
     }
 
     /// `CLATCH_DEBUG_TEXTURES` (internals builds only), for the sanitizer trial of
@@ -731,6 +738,12 @@ pub mod hooks {
     /// a lane went back to the device's pool, or released on request.
     pub fn buffers_freed() -> usize {
         FREED.get()
+    }
+
+    /// How many bytes of device buffers this thread's calls have added to arenas so far (arena growth:
+    /// what a steady state never adds; freed buffers are not subtracted).
+    pub fn arena_bytes_grown() -> usize {
+        GROWN_BYTES.get()
     }
 }
 

@@ -154,7 +154,9 @@ mod gpu {
         shared.warmed.fetch_add(1, Ordering::SeqCst);
         let mut previous: Option<Features> = None;
         let (mut runs, mut compared) = (0, 0);
-        while Instant::now() < deadline && !shared.stop.load(Ordering::Relaxed) {
+        // At least 8 calls, so that each worker compares one with the CPU even when the warm-up
+        // took a short run's whole time.
+        while (Instant::now() < deadline || runs < 8) && !shared.stop.load(Ordering::Relaxed) {
             let grown_before = arena_bytes_grown();
             let (w, h) = (64 + rng.below(1600) as usize, 64 + rng.below(1200) as usize);
             let pixels = if rng.below(4) == 0 {

@@ -12,7 +12,7 @@
 #       is left of the call: memcheck, initcheck and synccheck of every binary whose paths changed,
 #       racecheck trial by trial of the binaries a whole-binary run never finished.
 #   bash tools/gpu_call.sh final   same carry: main as it lands (see the part's comment).
-#   bash tools/gpu_call.sh arena   carry [.gpu/part-main.tar.xz]: tools/PENDING_GPU.md items 1 and 2.
+#   bash tools/gpu_call.sh faults  carry [.gpu/part-main.tar.xz]: tools/PENDING_GPU.md item 1.
 #   bash tools/gpu_call.sh soak    carry [.gpu/part-main.tar.xz]
 #       the 10-minute soak alone (its memory samples must not see other processes).
 # Summaries go to $OUT/summary_all.txt (printed last); logs stay in $OUT (at most 8 files come back).
@@ -225,30 +225,17 @@ final)
            "racecheck cuda_faults every_allocation_site_fails_cleanly")
     sanitize 12 "${jobs[@]}"
     ;;
-arena)
-    # tools/PENDING_GPU.md item 1: arena_growth_fails_cleanly under synccheck, nine at once (the load
-    # under which it failed), three with texture objects as shipped, three that never destroy a
-    # replaced one (no handle reused), three that synchronise after each creation; then racecheck of
-    # the trial, and of cuda_pool's trials, with what is left.
-    for i in 1 2 3; do
-        for mode in shipped keep sync; do
-            ( CLATCH_DEBUG_TEXTURES=$mode CLATCH_TEST_SCALE=sanitizer timeout 240 compute-sanitizer --tool synccheck \
-                  $B/cuda_faults --exact arena_growth_fails_cleanly > /tmp/a_${mode}_$i.txt 2>&1
-              echo "rc=$?" > /tmp/a_${mode}_$i.rc ) &
+faults)
+    # tools/PENDING_GPU.md item 1: whole-binary cuda_faults (its trials now one at a time) under
+    # memcheck, initcheck and synccheck, among other binaries' sanitizer runs: the load under which
+    # arena_growth_fails_cleanly failed while every_allocation_site_fails_cleanly ran beside it.
+    jobs=()
+    for tool in memcheck initcheck synccheck; do
+        for t in cuda_faults cuda_pyramid cuda_detect cuda_extract_stream cuda_collection; do
+            jobs+=("$tool $t")
         done
     done
-    wait
-    for mode in shipped keep sync; do
-        for i in 1 2 3; do
-            f=/tmp/a_${mode}_$i.txt
-            cat "$f" >> "$OUT/arena.txt"
-            say "synccheck arena_growth textures=$mode #$i $(cat ${f%.txt}.rc): $(grep -E '^test result' "$f" | cut -c1-40) $(grep -oE 'at [a-z:, ]+ \(growth allocation [0-9]+\)|of the [0-9]+ wrong rows.*bits' "$f" | tr '\n' ' ')"
-        done
-    done
-    # cuda_pool has never run under racecheck: its trials beside it.
-    jobs=("racecheck cuda_faults arena_growth_fails_cleanly")
-    for trial in $(trials cuda_pool); do jobs+=("racecheck cuda_pool $trial"); done
-    sanitize 4 "${jobs[@]}"
+    sanitize 12 "${jobs[@]}"
     ;;
 soak)
     nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1

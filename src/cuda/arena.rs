@@ -456,11 +456,7 @@ impl<T: Pooled> Scratch<T> {
                 }
                 let texture = make(&kept.buffer)?;
                 let handle = texture.handle();
-                let old = kept.texture.replace((key, texture));
-                #[cfg(feature = "internals")]
-                hooks::after_texture_creation(&kept.buffer, old)?;
-                #[cfg(not(feature = "internals"))]
-                drop(old);
+                kept.texture = Some((key, texture));
                 Ok(handle)
             }
         }
@@ -688,50 +684,9 @@ impl Drop for Leased<'_> {
 /// Test hooks of the arenas (the `internals` feature only): not part of the API.
 #[cfg(feature = "internals")]
 pub mod hooks {
-    use std::sync::{Mutex, OnceLock};
-
-    use cudarc::driver::CudaSlice;
-
-    use super::{TextureKey, TextureObject};
-    use crate::error::Result;
-
     thread_local! {
         pub(super) static FREED: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
         pub(super) static GROWN_BYTES: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
-    }
-
-    /// `CLATCH_DEBUG_TEXTURES` (internals builds only), for the sanitizer trial of
-    /// `tools/PENDING_GPU.md` item 1: `keep` never destroys a replaced texture object (so no handle is
-    /// ever reused), `sync` synchronises the context after every texture object a buffer is given.
-    fn debug_textures() -> &'static str {
-        static MODE: OnceLock<String> = OnceLock::new();
-        MODE.get_or_init(|| std::env::var("CLATCH_DEBUG_TEXTURES").unwrap_or_default())
-    }
-
-    /// What happens after a buffer got a new texture object, `old` the one it replaced: dropped
-    /// (destroyed) as in every build, unless [`debug_textures`] says otherwise.
-    pub(super) fn after_texture_creation<T>(
-        buffer: &CudaSlice<T>,
-        old: Option<(TextureKey, TextureObject)>,
-    ) -> Result<()> {
-        match debug_textures() {
-            "keep" => {
-                static KEPT: Mutex<Vec<TextureObject>> = Mutex::new(Vec::new());
-                if let Some((_, texture)) = old {
-                    KEPT.lock().unwrap_or_else(|p| p.into_inner()).push(texture);
-                }
-            }
-            "sync" => {
-                drop(old);
-                buffer
-                    .stream()
-                    .context()
-                    .synchronize()
-                    .map_err(super::driver_error("synchronising after a texture"))?;
-            }
-            _ => drop(old),
-        }
-        Ok(())
     }
 
     /// How many kept buffers (device and pinned) this thread's calls have freed so far: trimmed when

@@ -18,10 +18,10 @@ fn trials() -> Vec<Trial> {
 /// The trials run one at a time, although libtest-mimic runs trials on parallel threads: the
 /// allocation-site trial empties the device's caches before each call
 /// (`hooks::release_cached_memory`), descriptor weight tables included, which is valid only while no
-/// other call is in flight. Beside another trial it freed a weight table that trial's describe kernels
-/// were still queued to read (cudarc frees without waiting for other streams), and the last levels'
-/// descriptors came out a few bits off: `arena_growth_fails_cleanly` failed that way in whole-binary
-/// runs under loaded sanitizers on 2026-12-02, never when run alone.
+/// other call is in flight: beside another trial it can free a weight table that trial's describe
+/// kernels are still queued to read (cudarc frees without waiting for other streams).
+/// `arena_growth_fails_cleanly` failed with that signature (the last levels' descriptors a few bits
+/// off) in whole-binary runs under loaded sanitizers on 2026-12-02, never when run alone.
 #[cfg(feature = "cuda")]
 fn one_at_a_time(
     trial: fn() -> Result<(), libtest_mimic::Failed>,
@@ -35,28 +35,21 @@ fn one_at_a_time(
 
 #[cfg(feature = "cuda")]
 fn trials() -> Vec<Trial> {
-    vec![
-        Trial::test(
-            "out_of_memory_is_typed_and_recoverable",
-            one_at_a_time(gpu::out_of_memory),
-        ),
-        Trial::test(
-            "widest_and_tallest_images",
-            one_at_a_time(gpu::extreme_shapes),
-        ),
-        Trial::test(
-            "many_threads_many_streams",
-            one_at_a_time(gpu::many_threads),
-        ),
-        Trial::test(
+    type Body = fn() -> Result<(), libtest_mimic::Failed>;
+    let trials: [(&str, Body); 5] = [
+        ("out_of_memory_is_typed_and_recoverable", gpu::out_of_memory),
+        ("widest_and_tallest_images", gpu::extreme_shapes),
+        ("many_threads_many_streams", gpu::many_threads),
+        (
             "every_allocation_site_fails_cleanly",
-            one_at_a_time(gpu::every_allocation_site),
+            gpu::every_allocation_site,
         ),
-        Trial::test(
-            "arena_growth_fails_cleanly",
-            one_at_a_time(gpu::arena_growth),
-        ),
-    ]
+        ("arena_growth_fails_cleanly", gpu::arena_growth),
+    ];
+    trials
+        .into_iter()
+        .map(|(name, body)| Trial::test(name, one_at_a_time(body)))
+        .collect()
 }
 
 #[cfg(feature = "cuda")]

@@ -14,7 +14,9 @@
 #   bash tools/gpu_call.sh final   same carry: main as it lands (see the part's comment).
 #   bash tools/gpu_call.sh faults  carry [.gpu/part-main.tar.xz]: tools/PENDING_GPU.md item 1.
 #   bash tools/gpu_call.sh soak    carry [.gpu/part-main.tar.xz]
-#       the 10-minute soak alone (its memory samples must not see other processes).
+#       the soak alone for what is left of the call (its memory samples must not see other processes).
+#   bash tools/gpu_call.sh soak-start, then soak-end: a soak of SOAK_SECONDS (default 630) over two
+#       calls, the second within the machine's warm window.
 # Summaries go to $OUT/summary_all.txt (printed last); logs stay in $OUT (at most 8 files come back).
 cd "$(dirname "$0")/.."
 export OUT=${OUT:-/tmp/out}
@@ -243,6 +245,24 @@ soak)
     CLATCH_SOAK_SECONDS=$seconds timeout $(( seconds + 20 )) $B/cuda_soak --nocapture > "$OUT/soak.txt" 2>&1
     say "cuda_soak ${seconds} s rc=$?: $(grep -E '^test result' "$OUT/soak.txt")"
     grep -E 'extractions|free device memory|fell|did not come back|differ' "$OUT/soak.txt" >> "$OUT/summary_all.txt"
+    ;;
+soak-start)
+    # A soak longer than one call (the device allows 600 s a call): started in a process session of
+    # its own (setsid), which outlives the call while the machine stays held, from a copy of the
+    # binary (the next call's unpacking replaces .gpu/bin); this call then sleeps out its time.
+    # Follow with `soak-end` within the machine's 30-s warm window.
+    nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1
+    cp $B/cuda_soak /tmp/cuda_soak_long
+    rm -f /tmp/soak_long.rc
+    setsid bash -c "CLATCH_SOAK_SECONDS=${SOAK_SECONDS:-630} /tmp/cuda_soak_long --nocapture > /tmp/soak_long.txt 2>&1; echo rc=\$? > /tmp/soak_long.rc" < /dev/null > /dev/null 2>&1 &
+    sleep $(( $(left) - 5 ))
+    say "soak of ${SOAK_SECONDS:-630} s running: $(tail -c 300 /tmp/soak_long.txt | tr '\n' ' ')"
+    ;;
+soak-end)
+    while [ ! -f /tmp/soak_long.rc ] && [ "$(left)" -gt 10 ]; do sleep 5; done
+    cp /tmp/soak_long.txt "$OUT/soak.txt" 2>/dev/null
+    say "long soak $(cat /tmp/soak_long.rc 2>/dev/null || echo 'not finished'): $(grep -E '^test result' "$OUT/soak.txt")"
+    grep -E 'extractions|free device memory|fell|did not come back|differ|grew' "$OUT/soak.txt" >> "$OUT/summary_all.txt"
     ;;
 esac
 say "call took $(( $(date +%s) - start )) s"

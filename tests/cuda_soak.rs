@@ -30,6 +30,7 @@ fn trials() -> Vec<Trial> {
 
 #[cfg(feature = "cuda")]
 mod gpu {
+    use std::ops::Range;
     use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
     use std::time::{Duration, Instant};
 
@@ -52,34 +53,49 @@ mod gpu {
             .unwrap_or(5)
     }
 
+    /// What the random work draws from (`random_config`, `worker`); the warm-up runs the top of each.
+    const WIDTHS: Range<usize> = 64..1664;
+    const HEIGHTS: Range<usize> = 64..1264;
+    const THRESHOLDS: Range<usize> = 8..38;
+    const MAX_KEYPOINTS: Range<usize> = 200..6200;
+    /// Descriptor widths in bytes (8 to 512 bits).
+    const WIDTH_BYTES: Range<usize> = 1..65;
+    const LEVELS: Range<usize> = 2..5;
+    const SCALE_FACTORS: [f32; 3] = [1.2, 1.5, 2.0];
+
+    /// A value of `range`, drawn from `rng`.
+    fn draw(rng: &mut SplitMix64, range: Range<usize>) -> usize {
+        range.start + rng.below((range.end - range.start) as u64) as usize
+    }
+
     fn random_config(rng: &mut SplitMix64) -> ExtractorConfig {
         ExtractorConfig {
             detector: DetectorConfig {
-                threshold: 8 + rng.below(30) as u8,
-                max_keypoints: 200 + rng.below(6000) as usize,
+                threshold: draw(rng, THRESHOLDS) as u8,
+                max_keypoints: draw(rng, MAX_KEYPOINTS),
                 ..DetectorConfig::default()
             },
             descriptor: DescriptorConfig {
-                width: DescriptorWidth::from_bits(8 * (1 + rng.below(64) as usize))
+                width: DescriptorWidth::from_bits(8 * draw(rng, WIDTH_BYTES))
                     .expect("a multiple of 8"),
                 ..DescriptorConfig::default()
             },
             pyramid: (rng.below(3) == 0).then_some(Pyramid {
-                levels: 2 + rng.below(3) as usize,
-                scale_factor: [1.2, 1.5, 2.0][rng.below(3) as usize],
+                levels: draw(rng, LEVELS),
+                scale_factor: SCALE_FACTORS[rng.below(3) as usize],
             }),
         }
     }
 
     /// The largest image the random draws make (`worker`), as noise (the most corners).
-    const LARGEST: (usize, usize) = (64 + 1599, 64 + 1199);
+    const LARGEST: (usize, usize) = (WIDTHS.end - 1, HEIGHTS.end - 1);
 
     /// The configurations whose buffers hold those of any random one at the same image size: the most
     /// keypoints, the widest descriptor, the lowest threshold, with and without each pyramid.
     fn largest_configs() -> Vec<ExtractorConfig> {
         let mut configs = vec![None];
-        for levels in [2, 3, 4] {
-            for scale_factor in [1.2, 1.5, 2.0] {
+        for levels in LEVELS {
+            for scale_factor in SCALE_FACTORS {
                 configs.push(Some(Pyramid {
                     levels,
                     scale_factor,
@@ -90,12 +106,12 @@ mod gpu {
             .into_iter()
             .map(|pyramid| ExtractorConfig {
                 detector: DetectorConfig {
-                    threshold: 8,
-                    max_keypoints: 200 + 5999,
+                    threshold: THRESHOLDS.start as u8,
+                    max_keypoints: MAX_KEYPOINTS.end - 1,
                     ..DetectorConfig::default()
                 },
                 descriptor: DescriptorConfig {
-                    width: DescriptorWidth::from_bits(512).expect("512 bits"),
+                    width: DescriptorWidth::from_bits(8 * (WIDTH_BYTES.end - 1)).expect("512 bits"),
                     ..DescriptorConfig::default()
                 },
                 pyramid,
@@ -134,7 +150,7 @@ mod gpu {
         /// Arena growth after the warm-up, summed over workers: bytes, each rounded up to the
         /// allocator's block ([`BLOCK`]).
         grown: AtomicUsize,
-        /// Calls after the warm-up that grew an arena, and all calls after it.
+        /// Calls after the warm-up that grew an arena.
         growing_calls: AtomicUsize,
     }
 
@@ -158,7 +174,7 @@ mod gpu {
         // took a short run's whole time.
         while (Instant::now() < deadline || runs < 8) && !shared.stop.load(Ordering::Relaxed) {
             let grown_before = arena_bytes_grown();
-            let (w, h) = (64 + rng.below(1600) as usize, 64 + rng.below(1200) as usize);
+            let (w, h) = (draw(&mut rng, WIDTHS), draw(&mut rng, HEIGHTS));
             let pixels = if rng.below(4) == 0 {
                 clatch::synthetic::noise(w, h, rng.next_u64())
             } else {

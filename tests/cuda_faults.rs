@@ -15,6 +15,10 @@ fn trials() -> Vec<Trial> {
     common::gpu::feature_missing("cuda_faults")
 }
 
+/// A trial's body.
+#[cfg(feature = "cuda")]
+type Body = fn() -> Result<(), libtest_mimic::Failed>;
+
 /// The trials run one at a time, although libtest-mimic runs trials on parallel threads: the
 /// allocation-site trial empties the device's caches before each call
 /// (`hooks::release_cached_memory`), descriptor weight tables included, which is valid only while no
@@ -24,7 +28,7 @@ fn trials() -> Vec<Trial> {
 /// off) in whole-binary runs under loaded sanitizers on 2026-12-02, never when run alone.
 #[cfg(feature = "cuda")]
 fn one_at_a_time(
-    trial: fn() -> Result<(), libtest_mimic::Failed>,
+    trial: Body,
 ) -> impl FnOnce() -> Result<(), libtest_mimic::Failed> + Send + 'static {
     static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
     move || {
@@ -35,7 +39,6 @@ fn one_at_a_time(
 
 #[cfg(feature = "cuda")]
 fn trials() -> Vec<Trial> {
-    type Body = fn() -> Result<(), libtest_mimic::Failed>;
     let trials: [(&str, Body); 5] = [
         ("out_of_memory_is_typed_and_recoverable", gpu::out_of_memory),
         ("widest_and_tallest_images", gpu::extreme_shapes),

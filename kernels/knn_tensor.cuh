@@ -294,25 +294,42 @@ __device__ __forceinline__ void knn_tensor_rows(const signed char* __restrict__ 
                     }
                 }
                 if constexpr (MUTUAL) {
-                    // Rows of this thread in increasing order: (mt, h) = (0,0), (0,1), (1,0), (1,1).
+                    // Each thread packs its four rows' keys of its eight columns j = 2 nt + e, then the
+                    // eight row groups (lanes 4 apart) reduce by halves: at each step a lane keeps the
+                    // half of its columns selected by its group bit and takes the other lane's maxima of
+                    // it, so after 4 + 2 + 1 shuffles lane (group, quad) holds column j = group's maximum
+                    // over the warp's 32 rows, and one shared atomic per lane folds the 32 columns in.
+                    // Max is associative and commutative: the same keys win as in any order.
+                    int key[8];
 #pragma unroll
                     for (int nt = 0; nt < 4; ++nt) {
 #pragma unroll
                         for (int e = 0; e < 2; ++e) {
-                            int key = 0;
+                            int k = 0;
 #pragma unroll
                             for (int mt = 0; mt < 2; ++mt) {
 #pragma unroll
                                 for (int h = 0; h < 2; ++h)
-                                    key = max(key, acc[mt][nt][2 * h + e] * scale[mt][h] + offset[mt][h]);
+                                    k = max(k, acc[mt][nt][2 * h + e] * scale[mt][h] + offset[mt][h]);
                             }
-                            key = max(key, __shfl_xor_sync(0xffffffffu, key, 4));
-                            key = max(key, __shfl_xor_sync(0xffffffffu, key, 8));
-                            key = max(key, __shfl_xor_sync(0xffffffffu, key, 16));
-                            if (group == 0 && key != 0)
-                                atomicMax(&column_keys[t & 1][half * 32 + nt * 8 + 2 * quad + e], (unsigned)key);
+                            key[2 * nt + e] = k;
                         }
                     }
+#pragma unroll
+                    for (int step = 0; step < 3; ++step) {
+                        const int width = 4 >> step;             // columns kept: 4, 2, 1
+                        const bool upper = (group >> (2 - step)) & 1;  // group bits 2, 1, 0
+#pragma unroll
+                        for (int i = 0; i < width; ++i) {
+                            const int send = upper ? key[i] : key[i + width];
+                            const int keep = upper ? key[i + width] : key[i];
+                            key[i] = max(keep, __shfl_xor_sync(0xffffffffu, send, 16 >> step));
+                        }
+                    }
+                    // Column j = group: n-tile j / 2, column 2 quad + j % 2 within it.
+                    if (key[0] != 0)
+                        atomicMax(&column_keys[t & 1][half * 32 + (group >> 1) * 8 + 2 * quad + (group & 1)],
+                                  (unsigned)key[0]);
                 }
             }
         }

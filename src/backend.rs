@@ -1,5 +1,8 @@
 //! Where the work runs. Every backend returns the same bits; only speed differs.
 
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
 use crate::error::{Error, Result};
 
 /// The compute backend of an [`crate::Extractor`] or [`crate::Matcher`].
@@ -49,6 +52,79 @@ impl Backend {
             Backend::Cuda { device } => cuda_available(device),
         }
     }
+
+    /// Starts [`Backend::ensure_available`]'s work on a thread of its own and returns at once, so
+    /// that the set-up (on a GPU the driver, the context and the kernels: a quarter of a second on an
+    /// H200) overlaps the caller's own work, such as reading and decoding the first images. An
+    /// [`crate::Extractor::starting`] made from the handle is usable at once; its first call waits
+    /// for the set-up. Extractors and matchers made the usual way meanwhile wait for it too, rather
+    /// than repeating it. The CPU needs no set-up: its handle is ready at once.
+    ///
+    /// ```
+    /// use clatch::{Backend, Extractor, ExtractorConfig, GrayView};
+    ///
+    /// let start = Backend::Cpu.start()?;
+    /// let extractor = Extractor::starting(&start, ExtractorConfig::default())?;
+    /// let pixels = clatch::synthetic::rectangles(200, 150, 3)?; // decoding, while the backend starts
+    /// let features = extractor.detect_and_describe(&GrayView::new(&pixels, 200, 150, 200)?)?;
+    /// let set_up = start.wait()?; // how long the set-up took, or why it failed
+    /// assert!(set_up.as_secs() < 60 && !features.keypoints.is_empty());
+    /// # Ok::<(), clatch::Error>(())
+    /// ```
+    ///
+    /// What is known without any set-up is an error at once: a build without the `cuda` feature, or
+    /// no CUDA driver on the machine.
+    pub fn start(self) -> Result<BackendStart> {
+        let thread = match self {
+            Backend::Cpu => None,
+            Backend::Cuda { device } => {
+                cuda_driver_present(device)?;
+                Some(std::thread::spawn(move || {
+                    let began = Instant::now();
+                    self.ensure_available().map(|()| began.elapsed())
+                }))
+            }
+        };
+        Ok(BackendStart {
+            backend: self,
+            thread,
+        })
+    }
+}
+
+/// A backend's set-up running on a thread of its own: [`Backend::start`].
+#[derive(Debug)]
+#[must_use = "wait for the set-up to learn whether the backend is usable"]
+pub struct BackendStart {
+    backend: Backend,
+    /// None for the CPU, which needs no set-up.
+    thread: Option<JoinHandle<Result<Duration>>>,
+}
+
+impl BackendStart {
+    /// The backend being set up.
+    pub fn backend(&self) -> Backend {
+        self.backend
+    }
+
+    /// Whether the set-up has ended (well or not): [`BackendStart::wait`] then returns at once.
+    pub fn is_finished(&self) -> bool {
+        self.thread.as_ref().is_none_or(JoinHandle::is_finished)
+    }
+
+    /// Waits for the set-up and returns how long it took (zero for the CPU), or the error
+    /// [`Backend::ensure_available`] gives.
+    pub fn wait(self) -> Result<Duration> {
+        match self.thread {
+            None => Ok(Duration::ZERO),
+            Some(thread) => thread.join().unwrap_or_else(|_| {
+                Err(Error::Internal {
+                    operation: "the backend's set-up",
+                    message: format!("the set-up thread of {} panicked", self.backend),
+                })
+            }),
+        }
+    }
 }
 
 #[cfg(feature = "cuda")]
@@ -59,6 +135,16 @@ fn cuda_available(device: usize) -> Result<()> {
 #[cfg(not(feature = "cuda"))]
 fn cuda_available(device: usize) -> Result<()> {
     Err(cuda_unavailable(device, CUDA_NOT_BUILT))
+}
+
+#[cfg(feature = "cuda")]
+fn cuda_driver_present(device: usize) -> Result<()> {
+    crate::cuda::check_driver(device)
+}
+
+#[cfg(not(feature = "cuda"))]
+fn cuda_driver_present(device: usize) -> Result<()> {
+    cuda_available(device)
 }
 
 impl Default for Backend {

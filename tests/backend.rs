@@ -133,3 +133,63 @@ fn a_device_that_does_not_exist_is_a_typed_error() {
         other => panic!("expected BackendUnavailable, got {other:?}"),
     }
 }
+
+/// `Backend::start` gives, in its handle or at once, the answer `ensure_available` gives, and an
+/// extractor made from the handle before the set-up ends gives the CPU's features or that error.
+#[test]
+fn a_background_start_agrees_with_ensure_available() {
+    let pixels = clatch::synthetic::rectangles(320, 240, 7).unwrap();
+    let image = clatch::GrayView::new(&pixels, 320, 240, 320).unwrap();
+    let expected = Extractor::new(Backend::Cpu, ExtractorConfig::default())
+        .unwrap()
+        .detect_and_describe(&image)
+        .unwrap();
+    assert!(!expected.keypoints.is_empty());
+    for backend in [
+        Backend::Cpu,
+        Backend::Cuda { device: 0 },
+        Backend::Cuda { device: 4096 },
+    ] {
+        let available = backend.ensure_available();
+        let start = match backend.start() {
+            Ok(start) => start,
+            Err(e) => {
+                // Only what needs no set-up may fail at once, and only where the backend cannot run.
+                assert!(matches!(e, Error::BackendUnavailable { .. }), "{e}");
+                assert!(available.is_err(), "{backend}: start refused a usable backend");
+                continue;
+            }
+        };
+        assert_eq!(start.backend(), backend);
+        let extractor = Extractor::starting(&start, ExtractorConfig::default()).unwrap();
+        match (extractor.detect_and_describe(&image), &available) {
+            (Ok(got), Ok(())) => {
+                assert_eq!(got.keypoints, expected.keypoints, "{backend}");
+                assert_eq!(got.descriptors, expected.descriptors, "{backend}");
+            }
+            (Err(Error::BackendUnavailable { .. }), Err(_)) => {}
+            (got, _) => panic!("{backend}: {got:?} where ensure_available gave {available:?}"),
+        }
+        match (start.wait(), available) {
+            (Ok(took), Ok(())) => {
+                if backend == Backend::Cpu {
+                    assert_eq!(took, std::time::Duration::ZERO);
+                }
+            }
+            (Err(Error::BackendUnavailable { .. }), Err(_)) => {}
+            (got, available) => panic!("{backend}: wait gave {got:?}, ensure_available {available:?}"),
+        }
+    }
+}
+
+/// `Extractor::starting` checks the configuration at once, as `new` does.
+#[test]
+fn a_starting_extractor_refuses_a_bad_configuration_at_once() {
+    let mut config = ExtractorConfig::default();
+    config.detector.max_keypoints = 0;
+    let start = Backend::Cpu.start().unwrap();
+    assert!(matches!(
+        Extractor::starting(&start, config),
+        Err(Error::InvalidConfig { .. })
+    ));
+}

@@ -2,6 +2,7 @@
 //! structure from motion (see [`clatch::colmap`] for the conventions).
 
 use std::ffi::OsString;
+use std::time::Duration;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -16,13 +17,14 @@ use crate::error::CliError;
 use crate::output::{Staged, TempDir, check_distinct, check_writable};
 use crate::progress::Progress;
 use crate::text_input::read_text;
-use crate::{report, settings};
+use crate::{report, settings_on};
 
 /// Wall and CPU time of each stage.
 #[derive(Default)]
 struct Times {
-    /// Creating the extractor: on the GPU, the device's context and kernels.
-    start: StageTime,
+    /// The backend's set-up (on the GPU, the device's context and kernels), on a thread of its own
+    /// alongside the checks and the first photos' decoding.
+    start: Duration,
     extract: StageTime,
     /// The decoders' side of `extract`.
     decoding: Prefetched,
@@ -48,22 +50,20 @@ struct Plan {
 /// Runs `clatch colmap`.
 pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let refinement = args.subpixel.refinement(args.subpixel_radius);
-    // The backend is set up here (on the GPU: the device's context and kernels).
-    let watch = Stopwatch::start();
-    let settings = settings(
-        &args.backend,
+    // The backend's set-up (on the GPU: the device's context and kernels) runs on a thread of its
+    // own while the inputs are checked and the first photos decoded.
+    let start = args.backend.start()?;
+    let settings = settings_on(
+        start.backend(),
         &args.detect,
         Some(refinement.detector_subpixel()),
         Some(&args.matching),
     )?;
-    let set_up = watch.stop();
     let plan = preflight(args)?;
     let mut times = Times::default();
 
     // Detect and describe every photo.
-    let watch = Stopwatch::start();
-    let extractor = Extractor::new(settings.backend, extraction_config(&settings, args))?;
-    times.start = set_up.plus(watch.stop());
+    let extractor = Extractor::starting(&start, extraction_config(&settings, args))?;
     let progress = Progress::counter(plan.folder.paths.len() as u64, "extracting features");
     let watch = Stopwatch::start();
     let (extracted, decoding) = clatch::colmap::extract_photos(
@@ -76,6 +76,8 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let (photos, descriptors): (Vec<Photo>, Vec<DescriptorSet>) = extracted.into_iter().unzip();
     times.extract = watch.stop();
     times.decoding = decoding;
+    // Done by now: the first photo's extraction waited for it.
+    times.start = start.wait()?;
     progress.finish();
 
     // Match every pair.
@@ -418,7 +420,10 @@ fn print_extraction_report(
         args.images.display()
     );
     println!("  backend     {backend}");
-    println!("  start       {} (the backend's set-up)", times.start);
+    println!(
+        "  start       {:.2} s (the backend's set-up, alongside the checks and decoding; extract includes any wait for it)",
+        times.start.as_secs_f64()
+    );
     println!(
         "  keypoints   {keypoints} ({:.0} per image)",
         keypoints as f64 / photos.len() as f64

@@ -56,16 +56,6 @@ impl Stopwatch {
     }
 }
 
-impl StageTime {
-    /// Both stages' times together (CPU time when both know it).
-    pub fn plus(self, other: StageTime) -> StageTime {
-        StageTime {
-            wall: self.wall + other.wall,
-            cpu: self.cpu.zip(other.cpu).map(|(a, b)| a + b),
-        }
-    }
-}
-
 impl std::fmt::Display for StageTime {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{:.2} s", self.wall.as_secs_f64())?;

@@ -12,7 +12,7 @@ use crate::output::{Staged, check_distinct, check_writable, ends_with_separator}
 use crate::pipeline::{self, EXTRACT_STAGES};
 use crate::progress::Progress;
 use crate::report::ms;
-use crate::{ExtractArgs, npy, settings};
+use crate::{ExtractArgs, npy, settings_on};
 
 /// `PREFIX` followed by `suffix` (no separator added).
 pub fn with_suffix(prefix: &Path, suffix: &str) -> PathBuf {
@@ -76,10 +76,15 @@ pub fn output_paths(prefix: &Path) -> Result<[PathBuf; 3], CliError> {
 
 /// Runs `clatch extract`.
 pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
-    // The backend is set up here and in `Extractor::new` (on the GPU: the device's context and
-    // kernels).
-    let started = std::time::Instant::now();
-    let settings = settings(&args.backend, &args.detect, args.subpixel.library(), None)?;
+    // The backend's set-up (on the GPU: the device's context and kernels) runs on a thread of its
+    // own while the outputs are checked and the images decoded.
+    let start = args.backend.start()?;
+    let settings = settings_on(
+        start.backend(),
+        &args.detect,
+        args.subpixel.library(),
+        None,
+    )?;
     // OpenCV-compatible LATCH describes full-resolution keypoints: single scale unless --pyramid
     // is asked for, which extract_opencv then refuses.
     let config = if args.opencv.opencv_latch {
@@ -89,8 +94,7 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
     } else {
         settings.extractor
     };
-    let extractor = Extractor::new(settings.backend, config)?;
-    let start = started.elapsed();
+    let extractor = Extractor::starting(&start, config)?;
     let image = match args.images.as_slice() {
         [one] => one,
         _ => return crate::extract_many::main(args, &extractor, start),
@@ -112,6 +116,8 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
     progress.stage("reading image");
     let img = load_gray(image, &args.input.limits())?;
     check_detectable(image, img.width(), img.height())?;
+    // Waited for here, so that the stages below time their own work only.
+    let set_up = start.wait()?;
     progress.done();
 
     let latch = args.opencv.latch()?;
@@ -148,7 +154,11 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
             l.sigma()
         );
     }
-    println!("  {:<12}{:>12} (the backend's set-up)", "start", ms(start));
+    println!(
+        "  {:<12}{:>12} (the backend's set-up, alongside reading the image)",
+        "start",
+        ms(set_up)
+    );
     println!("  {:<12}{n}", "keypoints");
     println!("  {:<12}{:>12}", "detect", ms(extracted.detect));
     println!("  {:<12}{:>12}", "describe", ms(extracted.describe));

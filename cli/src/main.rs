@@ -585,6 +585,20 @@ impl BackendArgs {
             }
         }
     }
+
+    /// The backend asked for, its set-up started on a thread of its own ([`Backend::start`]) so that
+    /// it overlaps checking and decoding the images; what is known at once (a build without CUDA, no
+    /// driver) is an error here.
+    pub fn start(&self) -> Result<clatch::BackendStart, CliError> {
+        let backend = match self.backend {
+            BackendChoice::Auto => Backend::auto(),
+            BackendChoice::Cpu => Backend::Cpu,
+            BackendChoice::Cuda => Backend::Cuda {
+                device: self.device,
+            },
+        };
+        Ok(backend.start()?)
+    }
 }
 
 impl DetectArgs {
@@ -658,12 +672,22 @@ pub fn settings(
     subpixel: Option<Subpixel>,
     matching: Option<&MatchingArgs>,
 ) -> Result<Settings, CliError> {
+    settings_on(backend.resolve()?, detect, subpixel, matching)
+}
+
+/// [`settings`] on a backend already chosen (one being set up: [`BackendArgs::start`]).
+pub fn settings_on(
+    backend: Backend,
+    detect: &DetectArgs,
+    subpixel: Option<Subpixel>,
+    matching: Option<&MatchingArgs>,
+) -> Result<Settings, CliError> {
     let mut extractor = detect.config()?;
     if let Some(subpixel) = subpixel {
         extractor.detector.subpixel = subpixel;
     }
     Ok(Settings {
-        backend: backend.resolve()?,
+        backend,
         extractor,
         matching: matching.map(MatchingArgs::config).unwrap_or_default(),
         opencv_latch: None,

@@ -184,14 +184,7 @@ pub fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
     if let Some(dev) = devices.get(&ordinal) {
         return Ok(dev.clone());
     }
-    // cudarc panics if libcuda cannot be loaded: ask first.
-    // SAFETY: only tries to open the driver library.
-    if !unsafe { sys::is_culib_present() } {
-        return Err(unavailable(
-            ordinal,
-            "no CUDA driver (libcuda) on this machine",
-        ));
-    }
+    check_driver(ordinal)?;
     let count = CudaContext::device_count()
         .map_err(|e| unavailable(ordinal, format!("no CUDA device ({e:?})")))?;
     if ordinal >= count.max(0) as usize {
@@ -203,6 +196,19 @@ pub fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
     let dev = Arc::new(GpuDevice::load(ordinal)?);
     devices.insert(ordinal, dev.clone());
     Ok(dev)
+}
+
+/// The driver library loads (cudarc panics on any call without it): the check that costs nothing.
+pub(crate) fn check_driver(ordinal: usize) -> Result<()> {
+    // SAFETY: only tries to open the driver library.
+    if unsafe { sys::is_culib_present() } {
+        Ok(())
+    } else {
+        Err(unavailable(
+            ordinal,
+            "no CUDA driver (libcuda) on this machine",
+        ))
+    }
 }
 
 impl GpuDevice {

@@ -91,12 +91,29 @@ pub struct Extractor {
 impl Extractor {
     /// Validates the configuration and the backend.
     pub fn new(backend: Backend, config: ExtractorConfig) -> Result<Self> {
-        config.detector.validate()?;
-        if let Some(p) = &config.pyramid {
-            p.validate(config.detector.keypoint_size)?;
-        }
+        Self::validate(&config)?;
         backend.ensure_available()?;
         Ok(Self { backend, config })
+    }
+
+    fn validate(config: &ExtractorConfig) -> Result<()> {
+        config.detector.validate()?;
+        match &config.pyramid {
+            Some(p) => p.validate(config.detector.keypoint_size),
+            None => Ok(()),
+        }
+    }
+
+    /// [`Extractor::new`] on a backend still being set up ([`Backend::start`]): checks the
+    /// configuration now and returns at once. The first call on the GPU waits for the set-up, and
+    /// returns its error if it failed (where `new` would have); the handle's
+    /// [`BackendStart::wait`](crate::BackendStart::wait) gives the same error and the set-up's time.
+    pub fn starting(start: &crate::BackendStart, config: ExtractorConfig) -> Result<Self> {
+        Self::validate(&config)?;
+        Ok(Self {
+            backend: start.backend(),
+            config,
+        })
     }
 
     /// The same configuration on `backend`, whose availability the caller has checked (a

@@ -12,6 +12,7 @@
 #       is left of the call: memcheck, initcheck and synccheck of every binary whose paths changed,
 #       racecheck trial by trial of the binaries a whole-binary run never finished.
 #   bash tools/gpu_call.sh final   same carry: main as it lands (see the part's comment).
+#   bash tools/gpu_call.sh s5      carry [.gpu/part-main.tar.xz, .gpu/img_src, .gpu/folders]: see its part.
 #   bash tools/gpu_call.sh faults  carry [.gpu/part-main.tar.xz]: tools/PENDING_GPU.md item 1.
 #   bash tools/gpu_call.sh soak    carry [.gpu/part-main.tar.xz]
 #       the soak alone for what is left of the call (its memory samples must not see other processes).
@@ -69,19 +70,21 @@ timed() {
     done
 }
 
-# folders NAME...: clatch colmap --no-colmap and clatch extract of each folder, CPU against GPU.
+# folders NAME...: clatch colmap --no-colmap and clatch extract of each folder, CPU against GPU
+# (CLI=another build's clatch, LABEL=its name in the summary).
 folders() {
+    local cli=${CLI:-$B/clatch} label=${LABEL:+$LABEL }
     for folder in "$@"; do
         for be in cpu cuda; do
             rm -rf /tmp/ws_$be /tmp/db_$be.db
-            timed /tmp/colmap_$be.txt $B/clatch colmap --images .gpu/folders/$folder --database /tmp/db_$be.db \
+            timed /tmp/colmap_$be.txt $cli colmap --images .gpu/folders/$folder --database /tmp/db_$be.db \
                 --workspace /tmp/ws_$be --no-colmap --force --backend $be
-            { echo "== colmap --no-colmap $folder --backend $be rc=$rc whole process ${wall}ms"; cat /tmp/colmap_$be.txt; } >> "$OUT/folders.txt"
-            say "colmap $folder $be rc=$rc whole process ${wall}ms: $(grep -E '^  (start|extract|decode|match|write) ' /tmp/colmap_$be.txt | sed 's/  */ /g' | tr '\n' ';')"
+            { echo "== ${label}colmap --no-colmap $folder --backend $be rc=$rc whole process ${wall}ms"; cat /tmp/colmap_$be.txt; } >> "$OUT/folders.txt"
+            say "${label}colmap $folder $be rc=$rc whole process ${wall}ms: $(grep -E '^  (start|extract|decode|match|write) ' /tmp/colmap_$be.txt | sed 's/  */ /g' | tr '\n' ';')"
             rm -rf /tmp/f_$be
-            timed /tmp/extract_$be.txt $B/clatch extract .gpu/folders/$folder/* -o /tmp/f_$be --backend $be
-            { echo "== extract $folder --backend $be rc=$rc whole process ${wall}ms"; cat /tmp/extract_$be.txt; } >> "$OUT/folders.txt"
-            say "extract $folder $be rc=$rc whole process ${wall}ms: $(grep -E '^  (start|extract) ' /tmp/extract_$be.txt | sed 's/  */ /g' | tr '\n' ';')"
+            timed /tmp/extract_$be.txt $cli extract .gpu/folders/$folder/* -o /tmp/f_$be --backend $be
+            { echo "== ${label}extract $folder --backend $be rc=$rc whole process ${wall}ms"; cat /tmp/extract_$be.txt; } >> "$OUT/folders.txt"
+            say "${label}extract $folder $be rc=$rc whole process ${wall}ms: $(grep -E '^  (start|extract) ' /tmp/extract_$be.txt | sed 's/  */ /g' | tr '\n' ';')"
         done
         same_files "$folder colmap databases cpu vs cuda" /tmp/db_cpu.db /tmp/db_cuda.db
         same_files "$folder extract files cpu vs cuda" /tmp/f_cpu /tmp/f_cuda
@@ -150,12 +153,20 @@ ncu_rounds() {
     done
 }
 
-# start_up: the backend's set-up alone, one tiny image per backend.
+# start_up: the backend's set-up alone, one tiny image per backend (CLI, LABEL as for folders).
 start_up() {
     python3 -c "import cv2, numpy; cv2.imwrite('/tmp/tiny.png', (numpy.arange(200*200) % 251).astype('uint8').reshape(200, 200))"
     for be in cpu cuda; do
-        timed /tmp/tiny_$be.txt $B/clatch extract --backend $be /tmp/tiny.png -o /tmp/tiny_$be
-        say "tiny image $be: whole process ${wall}ms; $(grep -E '^  start' /tmp/tiny_$be.txt | sed 's/  */ /g')"
+        timed /tmp/tiny_$be.txt ${CLI:-$B/clatch} extract --backend $be /tmp/tiny.png -o /tmp/tiny_$be
+        say "${LABEL:+$LABEL }tiny image $be: whole process ${wall}ms; $(grep -E '^  start' /tmp/tiny_$be.txt | sed 's/  */ /g')"
+    done
+}
+
+# one_photo LABEL CLI: clatch extract of one Herz-Jesu JPEG, each backend (the whole process).
+one_photo() {
+    for be in cpu cuda; do
+        timed /tmp/one_$be.txt "$2" extract --backend $be .gpu/img_src/0000.jpg -o /tmp/one_$be
+        say "$1 one photo $be: whole process ${wall}ms; $(grep -E '^  (start|detect|describe) ' /tmp/one_$be.txt | sed 's/  */ /g' | tr '\n' ';')"
     done
 }
 
@@ -237,6 +248,33 @@ faults)
             jobs+=("$tool $t")
         done
     done
+    sanitize 12 "${jobs[@]}"
+    ;;
+s5)
+    # Fifth session of 2026-12-02: the cross-check's new column reduction (kernels/knn_tensor.cuh) through
+    # the suites and the exhaustive-matching bench; the CLI's set-up overlapped with decoding
+    # (Backend::start) against the build before it (.gpu/old, OLD=5e362bb), folders, one photo and a
+    # tiny image; then the sanitizers of the changed kernel and host code.
+    nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1
+    suites cuda_match cuda_collection backend cuda_pool clatch_unit cuda_extract_stream
+    for round in 1 2; do
+        one_photo "main" $B/clatch
+        [ -x .gpu/old/clatch ] && one_photo "old" .gpu/old/clatch
+    done
+    folders herzjesu sceaux
+    [ -x .gpu/old/clatch ] && CLI=.gpu/old/clatch LABEL=old folders herzjesu sceaux
+    start_up
+    [ -x .gpu/old/clatch ] && CLI=.gpu/old/clatch LABEL=old start_up
+    CLATCH_COLLECTION_REPEATS=2 timeout 200 $B/bench_gpu_collection > "$OUT/collection_bench.txt" 2>&1
+    say "bench_gpu_collection rc=$?:"
+    grep -E "64k x 64k|sets x|exhaustive|checked|differ" "$OUT/collection_bench.txt" >> "$OUT/summary_all.txt"
+    jobs=()
+    for tool in memcheck racecheck synccheck initcheck; do
+        jobs+=("$tool cuda_match sanitizer_subset" "$tool cuda_collection collection_exhaustive_512_bits"
+               "$tool cuda_collection collection_search")
+    done
+    jobs+=("memcheck backend" "initcheck backend" "synccheck backend" "racecheck backend"
+           "memcheck cuda_match" "synccheck cuda_match" "memcheck cuda_collection" "synccheck cuda_collection")
     sanitize 12 "${jobs[@]}"
     ;;
 soak)

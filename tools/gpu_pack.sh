@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds, here, what tools/gpu_call.sh runs on the device and packs it into .gpu/part-main.tar.xz
 # (git-ignored): every GPU test binary (tests/cuda_*.rs, the library's unit tests, tests/backend.rs,
-# all with the `cuda` feature), the command-line tool, and with OLD=<commit> that commit's command-line
+# all with the `cuda` feature), the command-line tool, the gpu_collection bench, and with OLD=<commit> that commit's command-line
 # tool under old/ (built in a worktree beside this checkout). One solid xz stream at -9 with one thread:
 # the binaries share most of their bytes (the embedded kernels, the dependencies), which a 64 MiB
 # dictionary finds, so 15 stripped binaries of 20-40 MB each pack into about 12 MB (separate or
@@ -15,6 +15,13 @@ cargo test -p clatch --features cuda --no-run --message-format=json 2>/dev/null 
     | python3 tools/copy_test_binaries.py "$stage"
 cargo build --release -p clatch-cli --features cuda
 cp target/release/clatch "$stage/clatch"
+# The exhaustive-matching bench (issue 13), as bench_gpu_collection.
+cargo bench -p clatch --features cuda --bench gpu_collection --no-run --message-format=json 2>/dev/null \
+    | python3 -c 'import json, shutil, sys
+for line in sys.stdin:
+    m = json.loads(line)
+    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] == "gpu_collection":
+        shutil.copy(m["executable"], sys.argv[1] + "/bench_gpu_collection")' "$stage"
 if [ -n "${OLD:-}" ]; then
     tree=$(mktemp -d)/old
     git worktree add -f "$tree" "$OLD" > /dev/null

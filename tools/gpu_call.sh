@@ -277,6 +277,21 @@ s5)
            "memcheck cuda_match" "synccheck cuda_match" "memcheck cuda_collection" "synccheck cuda_collection")
     sanitize 12 "${jobs[@]}"
     ;;
+modules)
+    # The driver's module loading, lazy (each kernel loaded at its first launch, on the caller's
+    # clock) against eager (everything in the set-up, which now runs beside decoding): folders, one
+    # photo and a tiny image, two rounds alternating.
+    nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1
+    for round in 1 2; do
+        for mode in LAZY EAGER; do
+            export CUDA_MODULE_LOADING=$mode
+            LABEL="$mode r$round" folders herzjesu sceaux
+            one_photo "$mode r$round" $B/clatch
+            LABEL="$mode r$round" start_up
+        done
+    done
+    unset CUDA_MODULE_LOADING
+    ;;
 soak)
     nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1
     seconds=$(( $(left) - 25 ))

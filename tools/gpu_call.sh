@@ -62,7 +62,7 @@ photo_identity() {
 # timed LOG COMMAND...: runs it twice (the first warms the page cache and the driver), logs the second
 # with its whole-process wall time; sets $rc and $wall.
 timed() {
-    local log=$1; shift
+    local log=$1 round; shift
     for round in warm timed; do
         local t0=$(date +%s%N)
         timeout 100 "$@" > "$log" 2>&1; rc=$?
@@ -276,6 +276,10 @@ s5)
     jobs+=("memcheck backend" "initcheck backend" "synccheck backend" "racecheck backend"
            "memcheck cuda_match" "synccheck cuda_match" "memcheck cuda_collection" "synccheck cuda_collection")
     sanitize 12 "${jobs[@]}"
+    ;;
+suites)
+    nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader >> "$OUT/summary_all.txt" 2>&1
+    all_suites
     ;;
 modules)
     # The driver's module loading, lazy (each kernel loaded at its first launch, on the caller's

@@ -156,7 +156,10 @@ fn a_background_start_agrees_with_ensure_available() {
             Err(e) => {
                 // Only what needs no set-up may fail at once, and only where the backend cannot run.
                 assert!(matches!(e, Error::BackendUnavailable { .. }), "{e}");
-                assert!(available.is_err(), "{backend}: start refused a usable backend");
+                assert!(
+                    available.is_err(),
+                    "{backend}: start refused a usable backend"
+                );
                 continue;
             }
         };
@@ -177,7 +180,9 @@ fn a_background_start_agrees_with_ensure_available() {
                 }
             }
             (Err(Error::BackendUnavailable { .. }), Err(_)) => {}
-            (got, available) => panic!("{backend}: wait gave {got:?}, ensure_available {available:?}"),
+            (got, available) => {
+                panic!("{backend}: wait gave {got:?}, ensure_available {available:?}")
+            }
         }
     }
 }

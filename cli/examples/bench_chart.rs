@@ -124,7 +124,9 @@ fn panel(
     series: &Series,
 ) -> Result<(), Box<dyn Error>> {
     let xs = log_range(series.values().flatten().map(|p| p.0));
+    // Room below the lowest point for the legend (lower right).
     let ys = log_range(series.values().flatten().map(|p| p.1));
+    let ys = ys.start / 4.0..ys.end;
     let mut chart = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 20))
         .margin(12)

@@ -2,9 +2,9 @@
 //! structure from motion (see [`clatch::colmap`] for the conventions).
 
 use std::ffi::OsString;
-use std::time::Duration;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use clatch::colmap::{ColmapError, FolderWriter, ImageFolder, Photo, PinholeCamera};
 use clatch::prefetch::Prefetched;

@@ -79,12 +79,7 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
     // The backend's set-up (on the GPU: the device's context and kernels) runs on a thread of its
     // own while the outputs are checked and the images decoded.
     let start = args.backend.start()?;
-    let settings = settings_on(
-        start.backend(),
-        &args.detect,
-        args.subpixel.library(),
-        None,
-    )?;
+    let settings = settings_on(start.backend(), &args.detect, args.subpixel.library(), None)?;
     // OpenCV-compatible LATCH describes full-resolution keypoints: single scale unless --pyramid
     // is asked for, which extract_opencv then refuses.
     let config = if args.opencv.opencv_latch {

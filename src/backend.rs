@@ -93,6 +93,10 @@ impl Backend {
 }
 
 /// A backend's set-up running on a thread of its own: [`Backend::start`].
+///
+/// Keep the handle for as long as the set-up should run beside your work: dropping it waits for the
+/// set-up to end, so that no thread is ever left inside the driver when the program exits (an early
+/// error return then comes back after the set-up, not during it).
 #[derive(Debug)]
 #[must_use = "wait for the set-up to learn whether the backend is usable"]
 pub struct BackendStart {
@@ -114,8 +118,8 @@ impl BackendStart {
 
     /// Waits for the set-up and returns how long it took (zero for the CPU), or the error
     /// [`Backend::ensure_available`] gives.
-    pub fn wait(self) -> Result<Duration> {
-        match self.thread {
+    pub fn wait(mut self) -> Result<Duration> {
+        match self.thread.take() {
             None => Ok(Duration::ZERO),
             Some(thread) => thread.join().unwrap_or_else(|_| {
                 Err(Error::Internal {
@@ -123,6 +127,15 @@ impl BackendStart {
                     message: format!("the set-up thread of {} panicked", self.backend),
                 })
             }),
+        }
+    }
+}
+
+impl Drop for BackendStart {
+    fn drop(&mut self) {
+        if let Some(thread) = self.thread.take() {
+            // The outcome is the caller's to ask for with `wait`; dropped, it is only waited for.
+            let _ = thread.join();
         }
     }
 }
@@ -172,5 +185,37 @@ pub(crate) fn cuda_unavailable(device: usize, reason: impl Into<String>) -> Erro
     Error::BackendUnavailable {
         backend: Backend::Cuda { device }.to_string(),
         reason: reason.into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    #[test]
+    fn dropping_a_start_waits_for_its_set_up() {
+        let done = Arc::new(AtomicBool::new(false));
+        let flag = done.clone();
+        let start = BackendStart {
+            backend: Backend::Cuda { device: 0 },
+            thread: Some(std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(50));
+                flag.store(true, Ordering::SeqCst);
+                Ok(Duration::from_millis(50))
+            })),
+        };
+        drop(start);
+        assert!(done.load(Ordering::SeqCst), "the set-up was still running");
+    }
+
+    #[test]
+    fn a_panicking_set_up_is_an_internal_error() {
+        let start = BackendStart {
+            backend: Backend::Cuda { device: 0 },
+            thread: Some(std::thread::spawn(|| panic!("set-up (on purpose)"))),
+        };
+        assert!(matches!(start.wait(), Err(Error::Internal { .. })));
     }
 }

@@ -17,11 +17,7 @@ cargo build --release -p clatch-cli --features cuda
 cp target/release/clatch "$stage/clatch"
 # The exhaustive-matching bench (issue 13), as bench_gpu_collection.
 cargo bench -p clatch --features cuda --bench gpu_collection --no-run --message-format=json 2>/dev/null \
-    | python3 -c 'import json, shutil, sys
-for line in sys.stdin:
-    m = json.loads(line)
-    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] == "gpu_collection":
-        shutil.copy(m["executable"], sys.argv[1] + "/bench_gpu_collection")' "$stage"
+    | python3 tools/copy_bench_binaries.py "$stage" gpu_collection
 if [ -n "${OLD:-}" ]; then
     tree=$(mktemp -d)/old
     git worktree add -f "$tree" "$OLD" > /dev/null

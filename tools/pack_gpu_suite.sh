@@ -19,14 +19,7 @@ grep -qx '/.gpu/' "$exclude" 2>/dev/null || echo '/.gpu/' >> "$exclude"
 cargo test -p clatch --features cuda --no-run --message-format=json 2>/dev/null \
     | python3 tools/copy_test_binaries.py .gpu/bin
 cargo bench -p clatch --features cuda --no-run --message-format=json 2>/dev/null \
-    | python3 -c '
-import json, sys, shutil
-for line in sys.stdin:
-    m = json.loads(line)
-    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] in ("gpu_detect", "gpu_match", "gpu_pool", "gpu_extract_stream", "gpu_collection"):
-        shutil.copy(m["executable"], ".gpu/bin/bench_" + m["target"]["name"])
-        print("packed bench", m["target"]["name"])
-'
+    | python3 tools/copy_bench_binaries.py .gpu/bin gpu_detect gpu_match gpu_pool gpu_extract_stream gpu_collection
 cargo build --release -p clatch-cli --features cuda
 cargo build --release -p clatch --features cuda --example gpu_streams
 cp target/release/clatch .gpu/bin/clatch

@@ -571,33 +571,29 @@ fn parse_tolerance(s: &str) -> Result<f64, String> {
 }
 
 impl BackendArgs {
+    /// The backend asked for (`auto`: CUDA device 0 when usable, else the CPU), not yet checked.
+    fn chosen(&self) -> Backend {
+        match self.backend {
+            BackendChoice::Auto => Backend::auto(),
+            BackendChoice::Cpu => Backend::Cpu,
+            BackendChoice::Cuda => Backend::Cuda {
+                device: self.device,
+            },
+        }
+    }
+
     /// The backend asked for; `cuda` gives the library's typed error when it cannot exist here.
     pub fn resolve(&self) -> Result<Backend, CliError> {
-        match self.backend {
-            BackendChoice::Auto => Ok(Backend::auto()),
-            BackendChoice::Cpu => Ok(Backend::Cpu),
-            BackendChoice::Cuda => {
-                let backend = Backend::Cuda {
-                    device: self.device,
-                };
-                backend.ensure_available()?;
-                Ok(backend)
-            }
-        }
+        let backend = self.chosen();
+        backend.ensure_available()?;
+        Ok(backend)
     }
 
     /// The backend asked for, its set-up started on a thread of its own ([`Backend::start`]) so that
     /// it overlaps checking and decoding the images; what is known at once (a build without CUDA, no
     /// driver) is an error here.
     pub fn start(&self) -> Result<clatch::BackendStart, CliError> {
-        let backend = match self.backend {
-            BackendChoice::Auto => Backend::auto(),
-            BackendChoice::Cpu => Backend::Cpu,
-            BackendChoice::Cuda => Backend::Cuda {
-                device: self.device,
-            },
-        };
-        Ok(backend.start()?)
+        Ok(self.chosen().start()?)
     }
 }
 

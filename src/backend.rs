@@ -53,6 +53,26 @@ impl Backend {
         }
     }
 
+    /// How long each step of this backend's set-up took in this process, once it has run and
+    /// succeeded (by [`Backend::ensure_available`], [`Backend::start`] or the first extractor or
+    /// matcher); `None` for the CPU, which needs none, and for a GPU not set up (yet). Waits for a
+    /// set-up in progress on another thread.
+    ///
+    /// ```
+    /// use clatch::Backend;
+    ///
+    /// assert_eq!(Backend::Cpu.set_up_steps(), None);
+    /// if let Some(steps) = (Backend::Cuda { device: 0 }).set_up_steps() {
+    ///     println!("set-up {:?}: {steps}", steps.total());
+    /// }
+    /// ```
+    pub fn set_up_steps(&self) -> Option<SetUpSteps> {
+        match *self {
+            Backend::Cpu => None,
+            Backend::Cuda { device } => cuda_set_up_steps(device),
+        }
+    }
+
     /// Starts [`Backend::ensure_available`]'s work on a thread of its own and returns at once, so
     /// that the set-up (on a GPU the driver, the context and the kernels: a quarter of a second on an
     /// H200) overlaps the caller's own work, such as reading and decoding the first images. An
@@ -89,6 +109,46 @@ impl Backend {
             backend: self,
             thread,
         })
+    }
+}
+
+/// The steps of a GPU's set-up, timed once per process: [`Backend::set_up_steps`].
+///
+/// The driver's own work dominates all but the last: on an H200 the whole set-up took 150–370 ms a
+/// process (BENCHMARKS.md), against under 2 ms of kernels for a 21-megapixel photo.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct SetUpSteps {
+    /// `cuInit` and counting the devices (and loading the driver library, if nothing did before).
+    pub driver: Duration,
+    /// Creating the device's primary context (`cuDevicePrimaryCtxRetain`) and making it current.
+    pub context: Duration,
+    /// Loading clatch's kernel modules (the fatbins' native code, or their PTX through the JIT).
+    pub kernels: Duration,
+    /// Uploading the lookup tables (rotations, triplets, direction boundaries) and reading the
+    /// device's attributes and name.
+    pub tables: Duration,
+}
+
+impl SetUpSteps {
+    /// The four steps together.
+    pub fn total(&self) -> Duration {
+        self.driver + self.context + self.kernels + self.tables
+    }
+}
+
+/// Formats as `driver 41.2 ms, context 120.0 ms, kernels 60.3 ms, tables 1.1 ms`.
+impl std::fmt::Display for SetUpSteps {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
+        write!(
+            f,
+            "driver {:.1} ms, context {:.1} ms, kernels {:.1} ms, tables {:.1} ms",
+            ms(self.driver),
+            ms(self.context),
+            ms(self.kernels),
+            ms(self.tables)
+        )
     }
 }
 
@@ -151,6 +211,16 @@ fn cuda_available(device: usize) -> Result<()> {
 }
 
 #[cfg(feature = "cuda")]
+fn cuda_set_up_steps(device: usize) -> Option<SetUpSteps> {
+    crate::cuda::set_up_steps(device)
+}
+
+#[cfg(not(feature = "cuda"))]
+fn cuda_set_up_steps(_device: usize) -> Option<SetUpSteps> {
+    None
+}
+
+#[cfg(feature = "cuda")]
 fn cuda_driver_present(device: usize) -> Result<()> {
     crate::cuda::check_driver(device)
 }
@@ -193,6 +263,21 @@ mod tests {
     use super::*;
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
+
+    #[test]
+    fn set_up_steps_add_up_and_print_in_milliseconds() {
+        let steps = SetUpSteps {
+            driver: Duration::from_micros(41_250),
+            context: Duration::from_millis(120),
+            kernels: Duration::from_micros(60_340),
+            tables: Duration::from_micros(1_060),
+        };
+        assert_eq!(steps.total(), Duration::from_micros(222_650));
+        assert_eq!(
+            steps.to_string(),
+            "driver 41.2 ms, context 120.0 ms, kernels 60.3 ms, tables 1.1 ms"
+        );
+    }
 
     #[test]
     fn dropping_a_start_waits_for_its_set_up() {

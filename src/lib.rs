@@ -48,7 +48,7 @@ pub mod numerics {}
 #[doc = include_str!("../docs/opencv_compat.md")]
 pub mod opencv_compat {}
 
-pub use backend::{Backend, BackendStart};
+pub use backend::{Backend, BackendStart, SetUpSteps};
 pub use describe::opencv::OpencvLatch;
 pub use describe::{DescriptorConfig, PatchWeights, SkipReason, Skipped, Smoothing, WINDOW};
 pub use descriptor::{Descriptor, DescriptorSet, DescriptorWidth};

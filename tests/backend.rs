@@ -198,3 +198,36 @@ fn a_starting_extractor_refuses_a_bad_configuration_at_once() {
         Err(Error::InvalidConfig { .. })
     ));
 }
+
+/// `set_up_steps` is there exactly when the backend has been set up: never for the CPU or a device
+/// that cannot run; for a usable GPU once `ensure_available` has returned, each step with its time.
+#[test]
+fn set_up_steps_are_known_once_a_device_is_set_up() {
+    assert_eq!(Backend::Cpu.set_up_steps(), None);
+    let missing = Backend::Cuda { device: 4096 };
+    assert!(missing.ensure_available().is_err());
+    assert_eq!(missing.set_up_steps(), None);
+    let gpu = Backend::Cuda { device: 0 };
+    match gpu.ensure_available() {
+        Ok(()) => {
+            let steps = gpu.set_up_steps().expect("a device set up has its steps");
+            // Each step makes driver calls (context creation alone is tens of milliseconds).
+            for (step, took) in [
+                ("driver", steps.driver),
+                ("context", steps.context),
+                ("kernels", steps.kernels),
+                ("tables", steps.tables),
+            ] {
+                assert!(took > std::time::Duration::ZERO, "{step}: {steps}");
+            }
+            assert_eq!(
+                steps.total(),
+                steps.driver + steps.context + steps.kernels + steps.tables
+            );
+            assert!(steps.to_string().starts_with("driver "), "{steps}");
+            // Timed once per process: asking again gives the same figures.
+            assert_eq!(gpu.set_up_steps(), Some(steps));
+        }
+        Err(_) => assert_eq!(gpu.set_up_steps(), None),
+    }
+}

@@ -80,7 +80,7 @@ folders() {
             timed /tmp/colmap_$be.txt $cli colmap --images .gpu/folders/$folder --database /tmp/db_$be.db \
                 --workspace /tmp/ws_$be --no-colmap --force --backend $be
             { echo "== ${label}colmap --no-colmap $folder --backend $be rc=$rc whole process ${wall}ms"; cat /tmp/colmap_$be.txt; } >> "$OUT/folders.txt"
-            say "${label}colmap $folder $be rc=$rc whole process ${wall}ms: $(grep -E '^  (start|extract|decode|match|write) ' /tmp/colmap_$be.txt | sed 's/  */ /g' | tr '\n' ';')"
+            say "${label}colmap $folder $be rc=$rc whole process ${wall}ms: $(grep -E '^  (start|set-up|extract|decode|match|write) ' /tmp/colmap_$be.txt | sed 's/  */ /g' | tr '\n' ';')"
             rm -rf /tmp/f_$be
             timed /tmp/extract_$be.txt $cli extract .gpu/folders/$folder/* -o /tmp/f_$be --backend $be
             { echo "== ${label}extract $folder --backend $be rc=$rc whole process ${wall}ms"; cat /tmp/extract_$be.txt; } >> "$OUT/folders.txt"
@@ -166,7 +166,7 @@ start_up() {
 one_photo() {
     for be in cpu cuda; do
         timed /tmp/one_$be.txt "$2" extract --backend $be .gpu/img_src/0000.jpg -o /tmp/one_$be
-        say "$1 one photo $be: whole process ${wall}ms; $(grep -E '^  (start|detect|describe) ' /tmp/one_$be.txt | sed 's/  */ /g' | tr '\n' ';')"
+        say "$1 one photo $be: whole process ${wall}ms; $(grep -E '^  (start|set-up|detect|describe) ' /tmp/one_$be.txt | sed 's/  */ /g' | tr '\n' ';')"
     done
 }
 

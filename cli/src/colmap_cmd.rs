@@ -16,6 +16,7 @@ use crate::cpu_time::{StageTime, Stopwatch};
 use crate::error::CliError;
 use crate::output::{Staged, TempDir, check_distinct, check_writable};
 use crate::progress::Progress;
+use crate::report::print_set_up_steps;
 use crate::text_input::read_text;
 use crate::{report, settings_on};
 
@@ -424,6 +425,7 @@ fn print_extraction_report(
         "  start       {:.2} s (the backend's set-up, alongside the checks and decoding; extract includes any wait for it)",
         times.start.as_secs_f64()
     );
+    print_set_up_steps(*backend);
     println!(
         "  keypoints   {keypoints} ({:.0} per image)",
         keypoints as f64 / photos.len() as f64

@@ -11,7 +11,7 @@ use crate::input::{check_detectable, load_gray};
 use crate::output::{Staged, check_distinct, check_writable, ends_with_separator};
 use crate::pipeline::{self, EXTRACT_STAGES};
 use crate::progress::Progress;
-use crate::report::ms;
+use crate::report::{ms, print_set_up_steps};
 use crate::{ExtractArgs, npy, settings_on};
 
 /// `PREFIX` followed by `suffix` (no separator added).
@@ -154,6 +154,7 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
         "start",
         ms(set_up)
     );
+    print_set_up_steps(extractor.backend());
     println!("  {:<12}{n}", "keypoints");
     println!("  {:<12}{:>12}", "detect", ms(extracted.detect));
     println!("  {:<12}{:>12}", "describe", ms(extracted.describe));

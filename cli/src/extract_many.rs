@@ -13,7 +13,7 @@ use crate::extract::{write_descriptors_npy, write_keypoints_csv, write_keypoints
 use crate::input::{check_detectable, load_gray};
 use crate::output::{Staged, check_distinct, check_writable};
 use crate::progress::Progress;
-use crate::report::{self, ms, per_second};
+use crate::report::{self, ms, per_second, print_set_up_steps};
 use clatch::prefetch::extract_decoded;
 
 /// A decoded image waiting for extraction.
@@ -124,6 +124,7 @@ pub fn main(
         "start",
         ms(set_up)
     );
+    print_set_up_steps(extractor.backend());
     println!(
         "  {:<12}{keypoints} ({:.0} per image)",
         "keypoints",

@@ -3,7 +3,7 @@
 use std::fmt::Write as _;
 use std::time::Duration;
 
-use clatch::{KeyPoint, Match, MatchConfig};
+use clatch::{Backend, KeyPoint, Match, MatchConfig};
 
 use crate::draw::MatchClass;
 use crate::homography::Homography;
@@ -84,6 +84,13 @@ pub fn evaluate(
         inliers,
         mean_error,
         median_error,
+    }
+}
+
+/// The report's `set-up` line, with the time of each step of a GPU's set-up (none for the CPU).
+pub fn print_set_up_steps(backend: Backend) {
+    if let Some(steps) = backend.set_up_steps() {
+        println!("  {:<12}{steps}", "set-up");
     }
 }
 

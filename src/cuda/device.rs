@@ -1,7 +1,8 @@
 //! One loaded device: context, kernels and the constant tables, created once per ordinal.
 
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::time::{Duration, Instant};
 
 use cudarc::driver::{
     CudaContext, CudaEvent, CudaFunction, CudaSlice, CudaStream, DriverError, sys,
@@ -12,6 +13,7 @@ use super::arena::LanePool;
 use super::matching_tensor::{self, MatchKernel};
 use super::ptx;
 use crate::angle::{quadrant_boundaries, rotation_table};
+use crate::backend::SetUpSteps;
 use crate::describe::triplets::TRIPLETS;
 use crate::error::{Error, Result};
 
@@ -153,6 +155,8 @@ pub struct GpuDevice {
     pub(crate) lanes: LanePool,
     /// Descriptor weight tables uploaded so far, by value.
     weights: Mutex<HashMap<Vec<i32>, Arc<CudaSlice<i32>>>>,
+    /// How long each step of [`GpuDevice::load`] took.
+    set_up: SetUpSteps,
 }
 
 /// Maps a driver error to ours, naming the operation and keeping the driver's error as the source.
@@ -174,16 +178,23 @@ pub(crate) fn driver_error(operation: &str) -> impl Fn(DriverError) -> Error + '
 
 use crate::backend::cuda_unavailable as unavailable;
 
-/// The loaded device `ordinal`, created on first use and shared afterwards.
-pub fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
+/// The devices loaded so far, by ordinal. Held while one loads, so that a second caller waits for
+/// that set-up rather than repeating it.
+fn loaded_devices() -> MutexGuard<'static, HashMap<usize, Arc<GpuDevice>>> {
     static DEVICES: OnceLock<Mutex<HashMap<usize, Arc<GpuDevice>>>> = OnceLock::new();
-    let mut devices = DEVICES
+    DEVICES
         .get_or_init(Default::default)
         .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner());
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// The loaded device `ordinal`, created on first use and shared afterwards.
+pub fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
+    let mut devices = loaded_devices();
     if let Some(dev) = devices.get(&ordinal) {
         return Ok(dev.clone());
     }
+    let began = Instant::now();
     check_driver(ordinal)?;
     let count = CudaContext::device_count()
         .map_err(|e| unavailable(ordinal, format!("no CUDA device ({e:?})")))?;
@@ -193,9 +204,14 @@ pub fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
             format!("no CUDA device {ordinal} ({count} present)"),
         ));
     }
-    let dev = Arc::new(GpuDevice::load(ordinal)?);
+    let dev = Arc::new(GpuDevice::load(ordinal, began.elapsed())?);
     devices.insert(ordinal, dev.clone());
     Ok(dev)
+}
+
+/// [`crate::Backend::set_up_steps`] of device `ordinal`: `None` until it has loaded. Never loads it.
+pub(crate) fn set_up_steps(ordinal: usize) -> Option<SetUpSteps> {
+    loaded_devices().get(&ordinal).map(|dev| dev.set_up)
 }
 
 /// The driver library loads (cudarc panics on any call without it): the check that costs nothing.
@@ -212,7 +228,14 @@ pub(crate) fn check_driver(ordinal: usize) -> Result<()> {
 }
 
 impl GpuDevice {
-    fn load(ordinal: usize) -> Result<Self> {
+    /// Creates the context, loads the kernels and uploads the tables; `driver` is the time already
+    /// spent in `cuInit` (by [`device`]), recorded with the other steps.
+    fn load(ordinal: usize, driver: Duration) -> Result<Self> {
+        let mut step = Instant::now();
+        let mut lap = || {
+            let now = Instant::now();
+            std::mem::replace(&mut step, now).elapsed()
+        };
         let ctx = CudaContext::new(ordinal).map_err(driver_error("context creation"))?;
         // cudarc by default gives every buffer two events and waits on / records them around every
         // use, so that a buffer can hop between streams safely. clatch never lets one hop: each call
@@ -225,6 +248,7 @@ impl GpuDevice {
         // SAFETY: the invariant above: no buffer is used on a stream other than the one it was
         // allocated on, except the tables, which are complete before they are shared.
         unsafe { ctx.disable_event_tracking() };
+        let context = lap();
         if ptx::STUB {
             return Err(unavailable(
                 ordinal,
@@ -245,6 +269,7 @@ impl GpuDevice {
         {
             load_module(&ctx, force_ptx, file, &mut kernels)?;
         }
+        let kernels_loaded = lap();
         let stream = ctx.default_stream();
         let rotation: Vec<i32> = rotation_table().iter().flatten().copied().collect();
         let rotation = stream
@@ -273,6 +298,12 @@ impl GpuDevice {
         let name = ctx
             .name()
             .map_err(driver_error("reading the device name"))?;
+        let set_up = SetUpSteps {
+            driver,
+            context,
+            kernels: kernels_loaded,
+            tables: lap(),
+        };
         Ok(Self {
             ctx,
             kernels,
@@ -290,6 +321,7 @@ impl GpuDevice {
             bench_kernels: OnceLock::new(),
             lanes: LanePool::default(),
             weights: Mutex::default(),
+            set_up,
         })
     }
 

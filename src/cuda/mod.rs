@@ -38,7 +38,7 @@ pub(crate) use collection::DeviceCollection;
 pub(crate) use describe::describe;
 pub(crate) use describe_opencv::describe_opencv;
 pub(crate) use detect::detect;
-pub(crate) use device::{check_driver, device};
+pub(crate) use device::{check_driver, device, set_up_steps};
 pub use matching::MAX_K;
 pub(crate) use matching::{knn, match_descriptors};
 pub(crate) use pyramid::{pyramid_detect, pyramid_detect_and_describe};

@@ -96,11 +96,14 @@ def test_two_actors_write_the_single_process_files(cluster, backend, folder, sin
     assert ("extract", PHOTOS, PHOTOS) in calls
 
 
-# How a worker dies: its process exits during its third block (that block and any queued behind it
+# How a worker dies: its process exits during its second block (that block and any queued behind it
 # are lost), during its second extraction task, or the driver kills it (ray.kill) after the first
-# three results (the one extraction task and two blocks), with blocks left to give it.
+# three results (the one extraction task and two blocks), with blocks left to give it. The first
+# actor is sure to get a second block and a second extraction task: the driver hands each actor two
+# tasks at the start (`_PER_ACTOR`), the first actor first. A third block was not sure: under load the
+# other actor could take all the rest while the first was still on its first block.
 DEATHS = {
-    "exits-in-block-3": {"_exit_after": ("match", 2)},
+    "exits-in-block-2": {"_exit_after": ("match", 1)},
     "exits-in-extraction-2": {"_exit_after": ("extract", 1), "photos_per_task": 2},
     "killed-by-the-driver": {"_kill_after_results": 3},
 }

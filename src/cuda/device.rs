@@ -232,9 +232,10 @@ impl GpuDevice {
     /// spent in `cuInit` (by [`device`]), recorded with the other steps.
     fn load(ordinal: usize, driver: Duration) -> Result<Self> {
         let mut step = Instant::now();
+        // One clock read per step boundary, so that the steps add up to the whole load.
         let mut lap = || {
             let now = Instant::now();
-            std::mem::replace(&mut step, now).elapsed()
+            now.duration_since(std::mem::replace(&mut step, now))
         };
         let ctx = CudaContext::new(ordinal).map_err(driver_error("context creation"))?;
         // cudarc by default gives every buffer two events and waits on / records them around every

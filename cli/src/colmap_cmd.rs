@@ -14,6 +14,7 @@ use crate::ColmapArgs;
 use crate::colmap_program::{ColmapProgram, ModelStats, parse_model_analyzer};
 use crate::cpu_time::{StageTime, Stopwatch};
 use crate::error::CliError;
+use crate::model_folder::{ModelFolder, check_images_outside};
 use crate::output::{Staged, TempDir, check_distinct, check_writable};
 use crate::progress::Progress;
 use crate::report::print_set_up_steps;
@@ -43,7 +44,8 @@ struct Plan {
     camera: Option<PinholeCamera>,
     workspace: PathBuf,
     match_list: PathBuf,
-    sparse: PathBuf,
+    /// The workspace's `sparse/`, checked: what clatch may replace there.
+    sparse: ModelFolder,
     /// `None` with --no-colmap or when `colmap` is not on PATH.
     colmap: Option<ColmapProgram>,
 }
@@ -137,7 +139,7 @@ fn write_and_run(
             let final_paths = (
                 args.database.as_path(),
                 plan.match_list.as_path(),
-                plan.sparse.as_path(),
+                plan.sparse.path(),
             );
             for (step, step_args) in &colmap_steps(args, final_paths) {
                 println!("    colmap {step} {}", shell_words(step_args));
@@ -146,9 +148,9 @@ fn write_and_run(
         return Ok(());
     };
 
-    let sparse = TempDir::beside(&plan.sparse)?;
+    let built = TempDir::beside(plan.sparse.path())?;
     let [(_, import_args), (_, mapper_args)] =
-        &colmap_steps(args, (&database, &match_list, sparse.path()));
+        &colmap_steps(args, (&database, &match_list, built.path()));
     let watch = Stopwatch::start();
     colmap.run("matches_importer", import_args)?;
     times.verify = watch.stop();
@@ -158,12 +160,15 @@ fn write_and_run(
     times.map = watch.stop();
 
     staged.commit()?;
-    sparse.replace(&plan.sparse)?;
+    let installed = plan.sparse.install(&built)?;
     print_extraction_report(args, backend, photos, pairs, matches, times);
 
     let watch = Stopwatch::start();
     let mut models = Vec::new();
-    for model in model_dirs(&plan.sparse)? {
+    for model in installed
+        .into_iter()
+        .filter(|m| m.join("images.bin").exists())
+    {
         let output = colmap.run(
             "model_analyzer",
             &[OsString::from("--path"), model.clone().into()],
@@ -192,6 +197,7 @@ fn preflight(args: &ColmapArgs) -> Result<Plan, CliError> {
         .unwrap_or_else(|| default_workspace(&args.database));
     let match_list = workspace.join("matches.txt");
     let sparse = workspace.join("sparse");
+    check_images_outside(&args.images, &workspace, &sparse)?;
     check_writable(&args.database)?;
     check_writable(&match_list)?;
     let mut inputs: Vec<(&'static str, &Path)> = folder
@@ -213,9 +219,6 @@ fn preflight(args: &ColmapArgs) -> Result<Plan, CliError> {
             }
             .into());
         }
-        if !args.no_colmap && !model_dirs_if_any(&sparse)?.is_empty() {
-            return Err(CliError::ModelsExist { path: sparse });
-        }
     }
 
     let colmap = if args.no_colmap {
@@ -231,6 +234,11 @@ fn preflight(args: &ColmapArgs) -> Result<Plan, CliError> {
             });
         }
         found
+    };
+    // Without COLMAP nothing is written there; a run that installs models may replace only its own.
+    let sparse = match colmap {
+        Some(_) => ModelFolder::inspect(&sparse, args.force)?,
+        None => ModelFolder::untouched(&sparse),
     };
     Ok(Plan {
         folder,
@@ -377,31 +385,6 @@ fn verified_pairs(database: &Path) -> Result<(usize, usize), CliError> {
         },
     )
     .map_err(|e| sql(e).into())
-}
-
-/// [`model_dirs`], or none when `sparse` does not exist yet.
-fn model_dirs_if_any(sparse: &Path) -> Result<Vec<PathBuf>, CliError> {
-    if sparse.exists() {
-        model_dirs(sparse)
-    } else {
-        Ok(Vec::new())
-    }
-}
-
-/// The model folders the mapper wrote (`sparse/0`, `sparse/1`, ...), in order.
-fn model_dirs(sparse: &Path) -> Result<Vec<PathBuf>, CliError> {
-    let mut dirs = Vec::new();
-    let entries = std::fs::read_dir(sparse).map_err(|source| CliError::Read {
-        path: sparse.to_path_buf(),
-        source,
-    })?;
-    for entry in entries.flatten() {
-        if entry.path().join("images.bin").exists() {
-            dirs.push(entry.path());
-        }
-    }
-    dirs.sort();
-    Ok(dirs)
 }
 
 fn print_extraction_report(

@@ -98,6 +98,21 @@ pub enum CliError {
     #[error("{path} already holds COLMAP models; use --force to replace them or choose another --workspace", path = .path.display())]
     ModelsExist { path: PathBuf },
 
+    /// The workspace's model folder holds something clatch did not put there; clatch never replaces it.
+    #[error(
+        "{folder} holds {entry}, which clatch did not write: clatch replaces only the COLMAP models it \
+         installed there itself; move it or choose another --workspace",
+        folder = .folder.display()
+    )]
+    ForeignInWorkspace { folder: PathBuf, entry: String },
+
+    /// The images folder is where clatch writes its outputs.
+    #[error(
+        "the images folder {images} is {what}, where clatch writes; move the photos or choose another --workspace",
+        images = .images.display()
+    )]
+    ImagesInWorkspace { images: PathBuf, what: &'static str },
+
     /// The `colmap` program could not be started.
     #[error("cannot run {program} ({step}): {source}", program = .program.display())]
     ColmapStart {
@@ -165,6 +180,14 @@ impl CliError {
     /// Attaches an image's path to a library error.
     pub fn in_image(path: &Path) -> impl FnOnce(clatch::Error) -> CliError + '_ {
         move |source| CliError::ClatchImage {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    /// Wraps a read error on `path`.
+    pub fn read(path: &Path) -> impl FnOnce(std::io::Error) -> CliError + '_ {
+        move |source| CliError::Read {
             path: path.to_path_buf(),
             source,
         }

@@ -15,6 +15,7 @@ mod extract_many;
 mod homography;
 mod input;
 mod match_cmd;
+mod model_folder;
 mod npy;
 mod output;
 mod pipeline;

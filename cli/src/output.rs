@@ -89,7 +89,7 @@ pub fn write_file(
 }
 
 /// A folder of this run's own (`.NAME.clatch-PID-N.tmp` beside `path`), removed with its content when
-/// dropped unless [`TempDir::replace`] moved it onto `path`.
+/// dropped (what was moved out of it first is kept).
 pub struct TempDir {
     path: Option<PathBuf>,
 }
@@ -106,33 +106,6 @@ impl TempDir {
     /// The folder's current path.
     pub fn path(&self) -> &Path {
         self.path.as_deref().unwrap_or(Path::new(""))
-    }
-
-    /// Moves the folder onto `path`, replacing what was there: the old folder is moved aside first and
-    /// removed only once the new one is in place.
-    pub fn replace(mut self, path: &Path) -> Result<(), CliError> {
-        let Some(temp) = self.path.take() else {
-            return Ok(());
-        };
-        let old = if path.exists() {
-            let aside = create_temp_beside(path)?;
-            std::fs::remove_file(&aside).map_err(CliError::write(&aside))?;
-            std::fs::rename(path, &aside).map_err(CliError::write(path))?;
-            Some(aside)
-        } else {
-            None
-        };
-        if let Err(source) = std::fs::rename(&temp, path) {
-            if let Some(aside) = &old {
-                std::fs::rename(aside, path).ok();
-            }
-            std::fs::remove_dir_all(&temp).ok();
-            return Err(CliError::write(path)(source));
-        }
-        if let Some(aside) = old {
-            std::fs::remove_dir_all(&aside).map_err(CliError::write(&aside))?;
-        }
-        Ok(())
     }
 }
 
@@ -341,15 +314,10 @@ mod tests {
     }
 
     #[test]
-    fn a_temporary_folder_replaces_the_old_one_or_vanishes() {
+    fn a_temporary_folder_vanishes() {
         let d = dir("tempdir");
         let target = d.join("sparse");
-        std::fs::create_dir_all(target.join("0")).unwrap();
-        let temp = TempDir::beside(&target).unwrap();
-        std::fs::create_dir(temp.path().join("new")).unwrap();
-        temp.replace(&target).unwrap();
-        assert_eq!(listing(&target), ["new"]);
-        assert_eq!(listing(&d), ["sparse"]);
+        std::fs::create_dir_all(target.join("new")).unwrap();
         let temp = TempDir::beside(&target).unwrap();
         std::fs::write(temp.path().join("half"), "x").unwrap();
         drop(temp);

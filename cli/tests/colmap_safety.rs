@@ -124,3 +124,114 @@ fn bad_inputs_are_refused_before_any_work_and_leave_nothing_behind() {
     let out = colmap(&images, &db, &["--camera-k", str(&k)]);
     assert!(out.status.success(), "{}", common::stderr(&out));
 }
+
+/// A `colmap` stand-in that succeeds: its mapper writes one binary model (`OUT/0/*.bin`) and its
+/// model analyzer prints the figures clatch reads.
+#[cfg(unix)]
+fn succeeding_colmap(dir: &Path) -> std::path::PathBuf {
+    use std::os::unix::fs::PermissionsExt;
+    let fake = dir.join("fake-colmap");
+    std::fs::write(
+        &fake,
+        "#!/bin/sh\nstep=\"$1\"; shift\ncase \"$step\" in\n\
+         mapper) while [ $# -gt 0 ]; do [ \"$1\" = --output_path ] && out=\"$2\"; shift; done\n\
+           mkdir -p \"$out/0\" && for f in cameras images points3D; do echo m > \"$out/0/$f.bin\"; done ;;\n\
+         model_analyzer) printf 'Registered images: 3\\nPoints: 9\\nMean track length: 2\\nMean reprojection error: 0.5px\\n' ;;\n\
+         esac\n",
+    )
+    .unwrap();
+    std::fs::set_permissions(&fake, std::fs::Permissions::from_mode(0o755)).unwrap();
+    fake
+}
+
+/// Every file under `dir`, with its bytes, in order.
+fn snapshot(dir: &Path) -> Vec<(std::path::PathBuf, Vec<u8>)> {
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                files.push((path.clone(), std::fs::read(&path).unwrap()));
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+/// A run that succeeds (COLMAP included) removes nothing the user put in the workspace: not photos
+/// in its `sparse/` (the images folder there is refused), not a model or notes of the user's, with
+/// or without --force; --force replaces only the models clatch installed itself.
+#[cfg(unix)]
+#[test]
+fn a_successful_run_never_removes_what_the_user_put_in_the_workspace() {
+    let dir = workdir("colmap-safety", "workspace");
+    let fake = succeeding_colmap(&dir);
+    let run = |images: &Path, db: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "colmap",
+            "--images",
+            str(images),
+            "--database",
+            str(db),
+            "--backend",
+            "cpu",
+            "--colmap",
+            str(&fake),
+        ];
+        args.extend_from_slice(extra);
+        clatch(&args)
+    };
+
+    // Photos in WORKSPACE/sparse: refused before any work, every photo kept.
+    let project = dir.join("p");
+    write_photos(&project.join("sparse"), 200);
+    let before = snapshot(&project);
+    for force in [&[][..], &["--force"][..]] {
+        let mut extra = vec!["--workspace", str(&project)];
+        extra.extend_from_slice(force);
+        let out = run(&project.join("sparse"), &project.join("db.db"), &extra);
+        assert_refused(&out, "where clatch writes");
+        assert_eq!(snapshot(&project), before, "every photo is still there");
+    }
+
+    // A text model and notes of the user's in the default workspace's sparse/.
+    let images = dir.join("images");
+    write_photos(&images, 200);
+    let db = dir.join("out.db");
+    let sparse = dir.join("out-colmap/sparse");
+    std::fs::create_dir_all(sparse.join("0")).unwrap();
+    std::fs::write(sparse.join("0/cameras.txt"), "# the user's model").unwrap();
+    std::fs::write(sparse.join("notes.md"), "the user's notes").unwrap();
+    let before = snapshot(&sparse);
+    for force in [&[][..], &["--force"][..]] {
+        let out = run(&images, &db, force);
+        assert_refused(&out, "which clatch did not write");
+        assert_eq!(snapshot(&sparse), before, "the user's files are kept");
+        assert!(!db.exists());
+    }
+
+    // Once they are gone, a run installs its model; a rerun needs --force and replaces only it.
+    std::fs::remove_dir_all(&sparse).unwrap();
+    let out = run(&images, &db, &[]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    assert!(sparse.join("0/images.bin").exists());
+    assert!(String::from_utf8_lossy(&out.stdout).contains("registered"));
+    assert_refused(&run(&images, &db, &[]), "already");
+    let out = run(&images, &db, &["--force"]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    // A note the user adds beside clatch's model, or inside it, stops the next --force run.
+    for note in [sparse.join("mine.txt"), sparse.join("0/mine.txt")] {
+        std::fs::write(&note, "keep me").unwrap();
+        let before = snapshot(&dir.join("out-colmap"));
+        assert_refused(
+            &run(&images, &db, &["--force"]),
+            "which clatch did not write",
+        );
+        assert_eq!(snapshot(&dir.join("out-colmap")), before);
+        std::fs::remove_file(&note).unwrap();
+    }
+}

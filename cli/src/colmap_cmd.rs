@@ -212,13 +212,11 @@ fn preflight(args: &ColmapArgs) -> Result<Plan, CliError> {
         &inputs,
         &[("database", &args.database), ("match list", &match_list)],
     )?;
-    if !args.force {
-        if args.database.exists() {
-            return Err(clatch::colmap::ColmapError::DatabaseExists {
-                path: args.database.display().to_string(),
-            }
-            .into());
+    if !args.force && args.database.exists() {
+        return Err(clatch::colmap::ColmapError::DatabaseExists {
+            path: args.database.display().to_string(),
         }
+        .into());
     }
 
     let colmap = if args.no_colmap {

@@ -17,11 +17,14 @@ macro_rules! internal_modules {
 internal_modules!(angle, describe, detect, gray_view, matching, pyramid);
 
 mod backend;
+mod collection;
 mod descriptor;
 mod error;
-mod facade;
+mod extract;
 mod features;
+mod in_flight;
 mod keypoint;
+mod matcher;
 mod parallel;
 
 #[cfg(feature = "colmap")]
@@ -30,7 +33,7 @@ pub mod colmap;
 #[cfg(feature = "cuda")]
 pub mod cuda;
 #[cfg(not(feature = "cuda"))]
-#[path = "cuda_unavailable.rs"]
+#[path = "cuda/unavailable.rs"]
 pub mod cuda;
 #[cfg(feature = "image")]
 #[cfg_attr(docsrs, doc(cfg(feature = "image")))]
@@ -48,16 +51,19 @@ pub mod numerics {}
 #[doc = include_str!("../docs/opencv_compat.md")]
 pub mod opencv_compat {}
 
-pub use backend::{Backend, BackendStart, SetUpSteps};
+pub use backend::{Backend, BackendStart};
+pub use collection::{DescriptorCollection, DevicePool};
+pub use cuda::SetUpSteps;
 pub use describe::opencv::OpencvLatch;
 pub use describe::{DescriptorConfig, PatchWeights, SkipReason, Skipped, Smoothing, WINDOW};
 pub use descriptor::{Descriptor, DescriptorSet, DescriptorWidth};
 pub use detect::{DetectorConfig, LevelBudget, Ranking, Subpixel, fast_score};
 pub use error::{Error, Result};
-pub use facade::{DescriptorCollection, DevicePool, Extractor, ExtractorConfig, Matcher};
+pub use extract::{Extractor, ExtractorConfig};
 pub use features::Features;
 pub use gray_view::{AsGrayView, GrayView, MAX_IMAGE_SIDE};
 pub use keypoint::KeyPoint;
+pub use matcher::Matcher;
 pub use matching::{KnnMatches, Match, MatchConfig};
 pub use pyramid::Pyramid;
 

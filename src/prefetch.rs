@@ -38,7 +38,7 @@ use std::time::{Duration, Instant};
 
 use crate::backend::Backend;
 use crate::error::Error;
-use crate::facade::Extractor;
+use crate::extract::Extractor;
 use crate::features::Features;
 use crate::gray_view::AsGrayView;
 

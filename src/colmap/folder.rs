@@ -14,7 +14,7 @@ use crate::decode::{DecodeLimits, open_gray_with_exif, probe};
 use crate::describe::WINDOW;
 use crate::descriptor::DescriptorSet;
 use crate::detect::DetectorConfig;
-use crate::facade::Extractor;
+use crate::extract::Extractor;
 use crate::features::Features;
 use crate::gray_view::{AsGrayView, GrayView};
 use crate::keypoint::KeyPoint;

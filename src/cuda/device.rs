@@ -12,8 +12,8 @@ use cudarc::nvrtc::Ptx;
 use super::arena::LanePool;
 use super::matching_tensor::{self, MatchKernel};
 use super::ptx;
+use super::set_up::SetUpSteps;
 use crate::angle::{quadrant_boundaries, rotation_table};
-use crate::backend::SetUpSteps;
 use crate::describe::triplets::TRIPLETS;
 use crate::error::{Error, Result};
 
@@ -176,7 +176,7 @@ pub(crate) fn driver_error(operation: &str) -> impl Fn(DriverError) -> Error + '
     }
 }
 
-use crate::backend::cuda_unavailable as unavailable;
+use super::set_up::unavailable;
 
 /// The devices loaded so far, by ordinal. Held while one loads, so that a second caller waits for
 /// that set-up rather than repeating it.

@@ -1,10 +1,11 @@
 //! Many pairs of descriptor sets in one call: the collection path (every pair of a photo collection, or
 //! a given pair list), as structure from motion needs it.
 
-use super::{DescriptorCollection, Matcher};
+use super::DescriptorCollection;
 use crate::backend::Backend;
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
+use crate::matcher::Matcher;
 use crate::matching::{self, Match};
 use crate::parallel::*;
 

@@ -12,15 +12,17 @@ use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::convert::Infallible;
 
-use super::super::in_flight::{IN_FLIGHT_PER_STREAM, Queued, STREAMS, run_window, streams};
-use super::super::{DescriptorCollection, Extractor, Matcher};
+use super::super::DescriptorCollection;
 use super::schedule::{Block, WorkQueue};
 use crate::backend::Backend;
 use crate::cuda::PendingFeatures;
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
+use crate::extract::Extractor;
 use crate::features::Features;
 use crate::gray_view::GrayView;
+use crate::in_flight::{IN_FLIGHT_PER_STREAM, Queued, STREAMS, run_window, streams};
+use crate::matcher::Matcher;
 use crate::matching::{self, Match};
 
 /// A device as a worker drives it through blocks of pairs.

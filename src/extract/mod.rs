@@ -1,4 +1,12 @@
-//! Detection and description behind one backend-independent interface.
+//! Detection and description behind one backend-independent interface: the [`Extractor`] validates its
+//! inputs once, then hands them to the backend chosen at construction, the one place (with the
+//! [`crate::Matcher`]) where a [`crate::Backend`] is matched on. Each stage has a CPU reference
+//! (`detect::cpu`, `describe::cpu`, `describe::opencv::cpu`, `pyramid::cpu`) and a CUDA twin in `cuda`;
+//! no algorithm module chooses a backend. Without the `cuda` feature `crate::cuda` is a stand-in whose
+//! device type has no values, so a `Backend::Cuda` arm can never be reached (construction already
+//! refused it) and this file needs no `cfg`.
+
+mod batch;
 
 use crate::backend::Backend;
 use crate::cuda::{self, GpuStream, ImageLife, PendingFeatures};

@@ -8,7 +8,6 @@
 use std::convert::Infallible;
 use std::sync::Arc;
 
-use crate::backend::{CUDA_NOT_BUILT as NOT_BUILT, cuda_unavailable};
 use crate::describe::opencv::{OpencvLatch, Placed};
 use crate::describe::{Described, DescriptorConfig};
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
@@ -20,12 +19,16 @@ use crate::keypoint::KeyPoint;
 use crate::matching::{KnnMatches, Match, MatchConfig};
 use crate::pyramid::Pyramid;
 
+mod set_up;
+
 pub use crate::matching::GPU_MAX_K as MAX_K;
+pub use set_up::SetUpSteps;
+pub(crate) use set_up::{NOT_BUILT, unavailable};
 
 /// Frees the memory clatch keeps between calls on CUDA device `ordinal`: always
 /// [`crate::Error::BackendUnavailable`] in this build.
 pub fn release_cached_memory(ordinal: usize) -> Result<()> {
-    Err(cuda_unavailable(ordinal, NOT_BUILT))
+    Err(unavailable(ordinal, NOT_BUILT))
 }
 
 /// A CUDA stream owned by clatch, on one device. Without the `cuda` feature none can be created.
@@ -38,7 +41,7 @@ impl GpuStream {
     /// A new stream on CUDA device `ordinal`: always [`crate::Error::BackendUnavailable`] in this
     /// build.
     pub fn new(ordinal: usize) -> Result<Self> {
-        Err(cuda_unavailable(ordinal, NOT_BUILT))
+        Err(unavailable(ordinal, NOT_BUILT))
     }
 
     /// A stream of the device's pool: always [`crate::Error::BackendUnavailable`] in this build.
@@ -123,7 +126,7 @@ impl PendingMatches {
 pub(crate) enum GpuDevice {}
 
 pub(crate) fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
-    Err(cuda_unavailable(ordinal, NOT_BUILT))
+    Err(unavailable(ordinal, NOT_BUILT))
 }
 
 pub(crate) fn detect(dev: &GpuDevice, _: &GrayView, _: &DetectorConfig) -> Result<Vec<KeyPoint>> {

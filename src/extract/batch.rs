@@ -3,12 +3,12 @@
 use std::collections::VecDeque;
 
 use super::Extractor;
-use super::in_flight::{IN_FLIGHT_PER_STREAM, STREAMS, streams};
 use crate::backend::Backend;
 use crate::cuda::{GpuStream, ImageLife, PendingFeatures};
 use crate::error::{Error, Result};
 use crate::features::Features;
 use crate::gray_view::{AsGrayView, GrayView};
+use crate::in_flight::{IN_FLIGHT_PER_STREAM, STREAMS, streams};
 use crate::parallel::*;
 
 impl Extractor {

@@ -4,12 +4,17 @@
 
 use std::ops::Range;
 
-use super::Matcher;
+mod pairs;
+mod pool;
+
+pub use pool::DevicePool;
+
 use crate::backend::Backend;
 use crate::cuda;
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::error::{Error, Result};
 use crate::keypoint::KeyPoint;
+use crate::matcher::Matcher;
 use crate::matching::{self, Match, MatchConfig};
 use crate::parallel::*;
 

@@ -1,4 +1,6 @@
-//! Hamming matching behind one backend-independent interface.
+//! Hamming matching behind one backend-independent interface: the [`Matcher`] checks its inputs once,
+//! then runs the CPU reference (`matching::cpu`) or its CUDA twin. Many pairs in one call live with the
+//! collections (`crate::collection`), which this module does not import.
 
 use crate::backend::Backend;
 use crate::cuda::{self, GpuStream, PendingMatches};

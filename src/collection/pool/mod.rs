@@ -4,12 +4,13 @@
 mod lane;
 mod schedule;
 
-use super::{Extractor, ExtractorConfig, Matcher};
 use crate::backend::Backend;
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
+use crate::extract::{Extractor, ExtractorConfig};
 use crate::features::Features;
 use crate::gray_view::GrayView;
+use crate::matcher::Matcher;
 use crate::matching::{Match, MatchConfig};
 use lane::Collection;
 

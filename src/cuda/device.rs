@@ -1,7 +1,7 @@
 //! One loaded device: context, kernels and the constant tables, created once per ordinal.
 
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 use cudarc::driver::{
@@ -12,6 +12,7 @@ use cudarc::nvrtc::Ptx;
 use super::arena::LanePool;
 use super::matching_tensor::{self, MatchKernel};
 use super::ptx;
+use super::registry::PerOrdinal;
 use super::set_up::SetUpSteps;
 use crate::angle::{quadrant_boundaries, rotation_table};
 use crate::describe::triplets::TRIPLETS;
@@ -178,40 +179,29 @@ pub(crate) fn driver_error(operation: &str) -> impl Fn(DriverError) -> Error + '
 
 use super::set_up::unavailable;
 
-/// The devices loaded so far, by ordinal. Held while one loads, so that a second caller waits for
-/// that set-up rather than repeating it.
-fn loaded_devices() -> MutexGuard<'static, HashMap<usize, Arc<GpuDevice>>> {
-    static DEVICES: OnceLock<Mutex<HashMap<usize, Arc<GpuDevice>>>> = OnceLock::new();
-    DEVICES
-        .get_or_init(Default::default)
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner())
-}
+/// The devices loaded so far, one slot per ordinal: different devices load side by side.
+static DEVICES: PerOrdinal<GpuDevice> = PerOrdinal::new();
 
 /// The loaded device `ordinal`, created on first use and shared afterwards.
 pub fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
-    let mut devices = loaded_devices();
-    if let Some(dev) = devices.get(&ordinal) {
-        return Ok(dev.clone());
-    }
-    let began = Instant::now();
-    check_driver(ordinal)?;
-    let count = CudaContext::device_count()
-        .map_err(|e| unavailable(ordinal, format!("no CUDA device ({e:?})")))?;
-    if ordinal >= count.max(0) as usize {
-        return Err(unavailable(
-            ordinal,
-            format!("no CUDA device {ordinal} ({count} present)"),
-        ));
-    }
-    let dev = Arc::new(GpuDevice::load(ordinal, began.elapsed())?);
-    devices.insert(ordinal, dev.clone());
-    Ok(dev)
+    DEVICES.get_or_load(ordinal, || {
+        let began = Instant::now();
+        check_driver(ordinal)?;
+        let count = CudaContext::device_count()
+            .map_err(|e| unavailable(ordinal, format!("no CUDA device ({e:?})")))?;
+        if ordinal >= count.max(0) as usize {
+            return Err(unavailable(
+                ordinal,
+                format!("no CUDA device {ordinal} ({count} present)"),
+            ));
+        }
+        GpuDevice::load(ordinal, began.elapsed())
+    })
 }
 
 /// [`crate::Backend::set_up_steps`] of device `ordinal`: `None` until it has loaded. Never loads it.
 pub(crate) fn set_up_steps(ordinal: usize) -> Option<SetUpSteps> {
-    loaded_devices().get(&ordinal).map(|dev| dev.set_up)
+    DEVICES.get(ordinal).map(|dev| dev.set_up)
 }
 
 /// The driver library loads (cudarc panics on any call without it): the check that costs nothing.

@@ -18,6 +18,7 @@ mod matching;
 mod matching_tensor;
 mod memory;
 mod pyramid;
+mod registry;
 mod set_up;
 mod spans;
 mod stream;

@@ -10,8 +10,11 @@ use crate::error::Result;
 
 /// One lazily loaded value per device ordinal.
 pub(crate) struct PerOrdinal<T> {
-    slots: Mutex<BTreeMap<usize, Arc<Mutex<Option<Arc<T>>>>>>,
+    slots: Mutex<BTreeMap<usize, Slot<T>>>,
 }
+
+/// One ordinal's value: empty until its load succeeds; locked while it loads.
+type Slot<T> = Arc<Mutex<Option<Arc<T>>>>;
 
 impl<T> PerOrdinal<T> {
     pub(crate) const fn new() -> Self {
@@ -21,7 +24,7 @@ impl<T> PerOrdinal<T> {
     }
 
     /// The slot of `ordinal`; the map's lock is held only while finding it.
-    fn slot(&self, ordinal: usize) -> Arc<Mutex<Option<Arc<T>>>> {
+    fn slot(&self, ordinal: usize) -> Slot<T> {
         let mut slots = lock(&self.slots);
         slots.entry(ordinal).or_default().clone()
     }

@@ -22,7 +22,8 @@ use std::sync::{Arc, Mutex};
 
 use cudarc::driver::{CudaSlice, CudaStream, CudaViewMut};
 
-use super::device::{GpuDevice, driver_error};
+use super::device::GpuDevice;
+use super::error::driver_error;
 use super::header::{CLATCH_MATCH_ROW_PAD, CLATCH_PAIRS_ROW_ALIGN};
 use super::matching_tensor::{self, MatchKernel};
 use super::memory::alloc_zeros;

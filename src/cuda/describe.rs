@@ -6,10 +6,11 @@ use cudarc::driver::{
     CudaSlice, CudaStream, CudaView, CudaViewMut, DeviceRepr, LaunchConfig, PushKernelArg,
 };
 
-use super::arena::{Lane, Leased, PinnedScratch, Scratch, settled};
-use super::device::{GpuDevice, driver_error};
+use super::device::GpuDevice;
+use super::error::driver_error;
 use super::header::{CLATCH_DESCRIBE_WARPS, CLATCH_GATHER_THREADS};
-use super::texture::{DeviceImage, ImageLife};
+use super::image::{DeviceImage, ImageLife};
+use super::memory::arena::{Lane, Leased, PinnedScratch, Scratch, settled};
 use crate::describe::{Described, DescriptorConfig, SamplingFrame, SkipReason, Skipped};
 use crate::descriptor::DescriptorSet;
 use crate::error::{Error, Result};
@@ -123,7 +124,10 @@ impl Job {
 
 /// `counts` as a device buffer of u32 on `lane`, through a pinned buffer (the copy is queued; the
 /// pinned buffer goes back to the arena with its event, so its next user waits for the copy).
-pub(crate) fn upload_counts(lane: &super::arena::Lane, counts: &[usize]) -> Result<Scratch<u32>> {
+pub(crate) fn upload_counts(
+    lane: &super::memory::arena::Lane,
+    counts: &[usize],
+) -> Result<Scratch<u32>> {
     let mut staged: PinnedScratch<u32> = lane.pinned(counts.len(), "count staging buffer")?;
     for (slot, &n) in staged.host()?.iter_mut().zip(counts) {
         *slot = n as u32;

@@ -11,7 +11,8 @@ use std::borrow::Cow;
 
 use cudarc::driver::{DeviceRepr, LaunchConfig, PushKernelArg};
 
-use super::device::{GpuDevice, driver_error};
+use super::device::GpuDevice;
+use super::error::driver_error;
 use super::header::CLATCH_OPENCV_THREADS;
 use super::memory::{alloc_zeros, upload};
 use crate::describe::Described;

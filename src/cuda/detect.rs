@@ -18,14 +18,15 @@ use cudarc::driver::{
     ValidAsZeroBits,
 };
 
-use super::arena::{Lane, Leased, Scratch, settled};
-use super::device::{GpuDevice, driver_error};
+use super::device::GpuDevice;
+use super::error::driver_error;
 use super::header::{
     CLATCH_DETECT_ROW_ALIGN, CLATCH_DETECT_TILE_X, CLATCH_DETECT_TILE_Y, CLATCH_DETECT_WARPS,
     CLATCH_MAX_LEVELS, CLATCH_SCAN_CHUNK, CLATCH_SCAN_THREADS, CLATCH_SCAN_TOP_THREADS,
     clatch_levels,
 };
-use super::texture::{DeviceImage, ImageLife};
+use super::image::{DeviceImage, ImageLife};
+use super::memory::arena::{Lane, Leased, Scratch, settled};
 use crate::detect::DetectorConfig;
 use crate::error::Result;
 use crate::gray_view::GrayView;

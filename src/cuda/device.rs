@@ -4,13 +4,12 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
-use cudarc::driver::{
-    CudaContext, CudaEvent, CudaFunction, CudaSlice, CudaStream, DriverError, sys,
-};
+use cudarc::driver::{CudaContext, CudaEvent, CudaFunction, CudaSlice, CudaStream, sys};
 use cudarc::nvrtc::Ptx;
 
-use super::arena::LanePool;
+use super::error::driver_error;
 use super::matching_tensor::{self, MatchKernel};
+use super::memory::arena::LanePool;
 use super::ptx;
 use super::registry::PerOrdinal;
 use super::set_up::SetUpSteps;
@@ -158,23 +157,6 @@ pub struct GpuDevice {
     weights: Mutex<HashMap<Vec<i32>, Arc<CudaSlice<i32>>>>,
     /// How long each step of [`GpuDevice::load`] took.
     set_up: SetUpSteps,
-}
-
-/// Maps a driver error to ours, naming the operation and keeping the driver's error as the source.
-pub(crate) fn driver_error(operation: &str) -> impl Fn(DriverError) -> Error + '_ {
-    move |source| {
-        if source.0 == sys::cudaError_enum::CUDA_ERROR_OUT_OF_MEMORY {
-            Error::DeviceOutOfMemory {
-                operation: operation.to_string(),
-                bytes: 0,
-            }
-        } else {
-            Error::Cuda {
-                operation: operation.to_string(),
-                source,
-            }
-        }
-    }
 }
 
 use super::set_up::unavailable;
@@ -489,7 +471,6 @@ pub(crate) fn time_launches(
 
 #[cfg(test)]
 mod tests {
-    use std::error::Error as _;
 
     use super::*;
 
@@ -516,27 +497,5 @@ mod tests {
             listed.sort_unstable();
             assert_eq!(entries, listed, "{}", file.path);
         }
-    }
-
-    #[test]
-    fn driver_errors_keep_the_driver_code_as_their_source() {
-        let invalid = DriverError(sys::cudaError_enum::CUDA_ERROR_INVALID_VALUE);
-        let error = driver_error("uploading the tables")(invalid);
-        match &error {
-            Error::Cuda { operation, source } => {
-                assert_eq!(operation, "uploading the tables");
-                assert_eq!(*source, invalid);
-            }
-            other => panic!("expected Error::Cuda, got {other:?}"),
-        }
-        let source = error.source().expect("the driver error is the source");
-        let driver = source.downcast_ref::<DriverError>().expect("a DriverError");
-        assert_eq!(driver.0, sys::cudaError_enum::CUDA_ERROR_INVALID_VALUE);
-        // Out of memory has its own variant (the caller may retry with less).
-        let oom = DriverError(sys::cudaError_enum::CUDA_ERROR_OUT_OF_MEMORY);
-        assert!(matches!(
-            driver_error("alloc")(oom),
-            Error::DeviceOutOfMemory { .. }
-        ));
     }
 }

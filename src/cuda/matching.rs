@@ -17,7 +17,8 @@ use cudarc::driver::{
     CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg, ValidAsZeroBits,
 };
 
-use super::device::{GpuDevice, driver_error};
+use super::device::GpuDevice;
+use super::error::driver_error;
 use super::header::{
     CLATCH_MATCH_QUERIES_PER_THREAD, CLATCH_MATCH_ROW_PAD, CLATCH_MATCH_SCAN_THREADS,
     CLATCH_MATCH_SELECT_THREADS, CLATCH_MATCH_THREADS, CLATCH_MATCH_TILE,

@@ -12,7 +12,8 @@ use std::sync::Arc;
 
 use cudarc::driver::{CudaFunction, CudaSlice, CudaStream, LaunchConfig, PushKernelArg, sys};
 
-use super::device::{GpuDevice, driver_error};
+use super::device::GpuDevice;
+use super::error::driver_error;
 use super::header::{
     CLATCH_EXPAND_THREADS, CLATCH_MATCH_ROW_PAD, CLATCH_TENSOR_QUERIES, CLATCH_TENSOR_STAGES,
     CLATCH_TENSOR_TILE, CLATCH_TENSOR_WARPS,

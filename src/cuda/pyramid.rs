@@ -12,15 +12,15 @@
 
 use cudarc::driver::CudaView;
 
-use super::arena::{Lane, Leased, PinnedScratch, Scratch, settled};
 use super::collection::DeviceCollection;
 use super::describe::{gather_rows, launch_describe, upload_counts, weights};
 use super::detect::{
     DeviceKeypoints, detect_unoriented_on_device, download_counts, launch_orient_refine,
 };
 use super::device::GpuDevice;
+use super::image::{DeviceImage, ImageLife};
+use super::memory::arena::{Lane, Leased, PinnedScratch, Scratch, settled};
 use super::spans::Span;
-use super::texture::{DeviceImage, ImageLife};
 use crate::describe::DescriptorConfig;
 use crate::descriptor::DescriptorSet;
 use crate::detect::{DetectorConfig, Ranking, Subpixel};

@@ -91,7 +91,7 @@ fn record(stream: &Arc<CudaStream>) -> Option<CudaEvent> {
 #[cfg(feature = "internals")]
 pub mod hooks {
     use super::*;
-    use crate::cuda::device::driver_error;
+    use crate::cuda::error::driver_error;
     use crate::error::Result;
 
     /// Runs `f` (calls of the extraction path on this thread, which wait for their results) and

@@ -11,15 +11,16 @@ use std::sync::Arc;
 
 use cudarc::driver::CudaEvent;
 
-use super::arena::{Lane, Scratch};
 use super::collection::DeviceCollection;
 use super::describe::{launch_describe, weights};
 use super::detect::{DeviceKeypoints, detect_on_device, download_counts};
-use super::device::{GpuDevice, driver_error};
+use super::device::GpuDevice;
+use super::error::driver_error;
+use super::image::{DeviceImage, ImageLife};
 use super::matching::{MatchJob, check_rows};
+use super::memory::arena::{Lane, Scratch};
 use super::pyramid::QueuedPyramid;
 use super::spans::Span;
-use super::texture::{DeviceImage, ImageLife};
 use crate::describe::DescriptorConfig;
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::detect::DetectorConfig;
@@ -94,7 +95,7 @@ impl GpuStream {
 
     /// `result`, after waiting for the stream when it is an error (see [`ImageLife::Work`]).
     pub(crate) fn settle<T>(&self, result: Result<T>) -> Result<T> {
-        super::arena::settled(self.lane(), result)
+        super::memory::arena::settled(self.lane(), result)
     }
 
     /// The device ordinal.

@@ -21,7 +21,8 @@ use cudarc::driver::{
 
 use super::kernel_name;
 use super::plan::{Block, Budget, PairRows, blocks};
-use crate::cuda::device::{GpuDevice, driver_error};
+use crate::cuda::device::GpuDevice;
+use crate::cuda::error::driver_error;
 use crate::cuda::header::{
     CLATCH_MATCH_SELECT_THREADS, CLATCH_MATCH_THREADS, CLATCH_TENSOR_WARPS, clatch_pair,
     clatch_pair_task,

@@ -2,7 +2,7 @@
 
 use super::*;
 use crate::cuda::device::time_launches;
-use crate::cuda::texture::ImageLife;
+use crate::cuda::image::ImageLife;
 
 /// Kernel times in milliseconds of `repeats` launches after `warmup` launches, measured with CUDA
 /// events on the job's stream (upload and download excluded). Keypoints must all fit.

@@ -2,7 +2,7 @@
 
 use super::*;
 use crate::cuda::device::time_launches;
-use crate::cuda::texture::ImageLife;
+use crate::cuda::image::ImageLife;
 
 /// Times the detector: `repeats` runs of all its launches after `warmup` runs, each measured with CUDA
 /// events on its stream (image upload, allocation and read-back excluded). Returns the times in

@@ -1,7 +1,7 @@
 //! Test and bench hooks of `cuda/pyramid.rs` (the `internals` feature only): not part of the API.
 
 use super::*;
-use crate::cuda::texture::ImageLife;
+use crate::cuda::image::ImageLife;
 
 /// The pyramid levels of `image` for a detector margin of `margin` as the GPU builds them, level 0
 /// first, each row-major with stride = width: for comparing with [`crate::pyramid::cpu::build_levels`].

@@ -18,7 +18,7 @@
 //! lane of the device's pool is trimmed when it goes back to the pool ([`Free::split_off`]: buffers
 //! over [`KEPT_BUFFER_BYTES`], and the largest beyond [`KEPT_LANE_BYTES`] in all), so one huge image
 //! does not keep gigabytes for the life of the process, while calls of a size seen before allocate
-//! nothing. [`release_cached_memory`] and [`super::GpuStream::release_cached_memory`] free what the
+//! nothing. [`release_cached_memory`] and [`crate::cuda::GpuStream::release_cached_memory`] free what the
 //! arenas hold on request. Everything is freed with the arena, i.e. with the stream ([`Lane`]).
 
 use std::ops::Deref;
@@ -29,9 +29,10 @@ use cudarc::driver::{
     DriverError, PinnedHostSlice, ValidAsZeroBits,
 };
 
-use super::device::{GpuDevice, driver_error};
-use super::memory::{alloc_pinned, alloc_zeros};
-use super::texture::TextureObject;
+use super::{alloc_pinned, alloc_zeros};
+use crate::cuda::device::GpuDevice;
+use crate::cuda::error::driver_error;
+use crate::cuda::image::TextureObject;
 use crate::error::Result;
 use crate::keypoint::KeyPoint;
 
@@ -372,7 +373,7 @@ impl Lane {
 }
 
 /// `result`, after waiting for `lane`'s stream when it is an error: work queued before the error may
-/// still read the caller's image ([`super::texture::ImageLife::Work`]), which must not be released
+/// still read the caller's image ([`crate::cuda::image::ImageLife::Work`]), which must not be released
 /// before that work has run. (On success the caller's last read-back has waited already.)
 pub(crate) fn settled<T>(lane: &Lane, result: Result<T>) -> Result<T> {
     if result.is_err() {
@@ -449,10 +450,9 @@ impl<T: Pooled> Scratch<T> {
                 // belong to calls on this stream whose owners dropped this buffer; destroying a texture
                 // object while queued work uses it is allowed only after that work, so wait for it.
                 if kept.texture.is_some() {
-                    kept.buffer
-                        .stream()
-                        .synchronize()
-                        .map_err(super::device::driver_error("replacing a texture object"))?;
+                    kept.buffer.stream().synchronize().map_err(
+                        crate::cuda::error::driver_error("replacing a texture object"),
+                    )?;
                 }
                 let texture = make(&kept.buffer)?;
                 let handle = texture.handle();
@@ -499,7 +499,7 @@ impl<T: Pooled> PinnedScratch<T> {
     pub(crate) fn wait(&mut self, len: usize) -> Result<&[T]> {
         let host = self.host()?;
         let capacity = host.len();
-        super::invariant(len <= capacity, "reading results back", || {
+        crate::cuda::invariant(len <= capacity, "reading results back", || {
             format!("{len} elements of a {capacity}-element buffer")
         })?;
         Ok(&host[..len])
@@ -517,7 +517,7 @@ impl<T: Pooled> PinnedScratch<T> {
         let stream = self.stream.clone();
         let kept = self.kept();
         let capacity = kept.buffer.len();
-        super::invariant(at + len <= capacity, operation, || {
+        crate::cuda::invariant(at + len <= capacity, operation, || {
             format!("{len} elements at {at} of a {capacity}-element pinned buffer")
         })?;
         if len == 0 {
@@ -532,7 +532,7 @@ impl<T: Pooled> PinnedScratch<T> {
             .buffer
             .as_mut_ptr()
             .map_err(driver_error("waiting for a copy"))?;
-        let span = super::spans::Span::open(&stream);
+        let span = crate::cuda::spans::Span::open(&stream);
         // SAFETY: element `at` is inside the buffer (checked above).
         copy(unsafe { host.add(at) }, &stream).map_err(driver_error(operation))?;
         drop(span);
@@ -608,7 +608,7 @@ impl LanePool {
     /// arena trimmed to [`KEPT_BUFFER_BYTES`] and [`KEPT_LANE_BYTES`].
     ///
     /// While the thread panics, the lane is waited for first: the call that held it may have queued a
-    /// copy that reads the caller's image straight from its memory ([`super::texture::ImageLife::Work`]),
+    /// copy that reads the caller's image straight from its memory ([`crate::cuda::image::ImageLife::Work`]),
     /// which the unwinding may release next.
     pub(crate) fn give(&self, lane: Lane) {
         if std::thread::panicking() {
@@ -644,9 +644,9 @@ impl LanePool {
 
 /// Frees the device memory (and pinned host memory) clatch keeps between calls on CUDA device `ordinal`
 /// in the idle streams of the device's pool, which the blocking calls, batches and image streams of
-/// [`crate::Extractor`] and [`crate::Matcher`] use. See [`super::release_cached_memory`].
+/// [`crate::Extractor`] and [`crate::Matcher`] use. See [`crate::cuda::release_cached_memory`].
 pub(crate) fn release_cached_memory(ordinal: usize) -> Result<()> {
-    super::device(ordinal)?.lanes.release_cached_memory()
+    crate::cuda::device(ordinal)?.lanes.release_cached_memory()
 }
 
 /// A lane of the device's pool, given back when dropped (waited for first if the thread panics,

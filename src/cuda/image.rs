@@ -8,12 +8,13 @@ use cudarc::driver::{
     CudaEvent, CudaSlice, CudaStream, DevicePtr, LaunchConfig, PushKernelArg, sys,
 };
 
-use super::arena::{Lane, Scratch};
-use super::device::{GpuDevice, driver_error};
+use super::device::GpuDevice;
+use super::error::driver_error;
 use super::header::{
     CLATCH_DETECT_TILE_Y, CLATCH_PYRAMID_TILE_X, CLATCH_PYRAMID_TILE_Y, CLATCH_SMOOTH_TILE_X,
     CLATCH_SMOOTH_TILE_Y,
 };
+use super::memory::arena::{Lane, Scratch};
 use super::memory::{band_rows, copy_rows_2d, is_pinned, upload_rows};
 use crate::describe::Smoothing;
 use crate::error::{Error, Result};

@@ -9,7 +9,9 @@ use cudarc::driver::{
     sys,
 };
 
-use super::device::driver_error;
+pub(crate) mod arena;
+
+use super::error::driver_error;
 use crate::error::{Error, Result};
 use crate::parallel::*;
 

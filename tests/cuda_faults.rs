@@ -39,7 +39,7 @@ fn one_at_a_time(
 
 #[cfg(feature = "cuda")]
 fn trials() -> Vec<Trial> {
-    let trials: [(&str, Body); 5] = [
+    let trials: [(&str, Body); 6] = [
         ("out_of_memory_is_typed_and_recoverable", gpu::out_of_memory),
         ("widest_and_tallest_images", gpu::extreme_shapes),
         ("many_threads_many_streams", gpu::many_threads),
@@ -48,6 +48,10 @@ fn trials() -> Vec<Trial> {
             gpu::every_allocation_site,
         ),
         ("arena_growth_fails_cleanly", gpu::arena_growth),
+        (
+            "release_cached_memory_frees_the_staging_buffers",
+            gpu::release_frees_staging,
+        ),
     ];
     trials
         .into_iter()
@@ -87,6 +91,34 @@ mod gpu {
             return Err("describe after an out-of-memory error differs from the CPU".into());
         }
         println!("4 TiB request: DeviceOutOfMemory; context usable afterwards");
+        Ok(())
+    }
+
+    /// `clatch::cuda::release_cached_memory` gives back the page-locked staging buffers that uploads
+    /// from pageable memory went through (it kept them before), and the next call still gives the
+    /// CPU's results. Run alone (no upload in flight), so every staging buffer is idle.
+    pub fn release_frees_staging() -> Result<(), Failed> {
+        use clatch::cuda::hooks::staging_buffers;
+        let image = rectangles(1280, 720, 7);
+        let gpu = Extractor::new(GPU, ExtractorConfig::default())?;
+        let expected = Extractor::new(Backend::Cpu, ExtractorConfig::default())?
+            .detect_and_describe(&image.view())?;
+        for _ in 0..2 {
+            gpu.detect_and_describe(&image.view())?;
+        }
+        let warm = staging_buffers(0);
+        clatch::cuda::release_cached_memory(0)?;
+        let released = staging_buffers(0);
+        let again = gpu.detect_and_describe(&image.view())?;
+        if warm.0 == 0 || released != (0, 0) || again != expected {
+            return Err(format!(
+                "staging buffers (all, idle): {warm:?} warm, {released:?} after the release; \
+                 the call after equals the CPU's: {}",
+                again == expected
+            )
+            .into());
+        }
+        println!("staging buffers {warm:?} warm, {released:?} after release_cached_memory");
         Ok(())
     }
 

@@ -90,8 +90,9 @@ pub(crate) fn invariant(
 
 /// Frees the device memory (and page-locked host memory) that clatch keeps between calls on CUDA device
 /// `ordinal` for the blocking calls, batches and image streams of [`crate::Extractor`] and
-/// [`crate::Matcher`]: the free buffers of the device's pooled streams. The next call allocates what
-/// it needs again.
+/// [`crate::Matcher`]: the free buffers of the device's pooled streams, and the idle page-locked
+/// staging buffers that uploads from pageable memory go through. The next call allocates what it
+/// needs again.
 ///
 /// Those streams keep their buffers so that a steady state of similar images allocates nothing; when
 /// a pooled stream goes back to the pool it already gives up every buffer over 256 MiB and keeps at
@@ -112,7 +113,9 @@ pub(crate) fn invariant(
 /// # Ok(()) }
 /// ```
 pub fn release_cached_memory(ordinal: usize) -> Result<()> {
-    memory::arena::release_cached_memory(ordinal)
+    memory::arena::release_cached_memory(ordinal)?;
+    memory::release_idle_staging(ordinal);
+    Ok(())
 }
 
 pub(crate) fn ensure_available(ordinal: usize) -> Result<()> {

@@ -1,4 +1,4 @@
-//! Test and bench hooks of `cuda/memory.rs` (the `internals` feature only): not part of the API.
+//! Test and bench hooks of `cuda/memory/` (the `internals` feature only): not part of the API.
 
 use super::*;
 
@@ -60,9 +60,14 @@ pub fn release_cached_memory(ordinal: usize) -> Result<()> {
     };
     sync()?;
     dev.lanes.clear();
-    clear_staging();
+    release_idle_staging(ordinal);
     dev.clear_weights();
     sync()
+}
+
+/// The page-locked staging buffers of device `ordinal`: all of them (idle or in use), and the idle.
+pub fn staging_buffers(ordinal: usize) -> (usize, usize) {
+    staging::staging_buffers(ordinal)
 }
 
 /// Page-locked host bytes (tests and benches: images in pinned memory, as a camera or a decoder

@@ -1,13 +1,18 @@
 //! One loaded device: context, kernels and the constant tables, created once per ordinal.
 
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex, OnceLock};
+#[cfg(feature = "internals")]
+use std::sync::OnceLock;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use cudarc::driver::{CudaContext, CudaEvent, CudaFunction, CudaSlice, CudaStream, sys};
 use cudarc::nvrtc::Ptx;
 
 use super::error::driver_error;
+#[cfg(feature = "internals")]
+use super::kernels::BENCH_KERNELS;
+use super::kernels::{KERNELS, KernelFile};
 use super::matching_tensor::{self, MatchKernel};
 use super::memory::arena::LanePool;
 use super::ptx;
@@ -16,119 +21,6 @@ use super::set_up::SetUpSteps;
 use crate::angle::{quadrant_boundaries, rotation_table};
 use crate::describe::triplets::TRIPLETS;
 use crate::error::{Error, Result};
-
-/// One kernel file: its portable PTX, its fatbin and its entry points.
-struct KernelFile {
-    path: &'static str,
-    ptx: &'static str,
-    fatbin: &'static [u8],
-    names: &'static [&'static str],
-    /// Int8 MMA: loaded only on compute capability 8.0 and later.
-    needs_tensor_cores: bool,
-}
-
-/// Every kernel entry point the library launches, by the file that defines it. Add a kernel here and
-/// fetch it with [`GpuDevice::kernel`].
-const KERNELS: &[KernelFile] = &[
-    KernelFile {
-        path: "kernels/describe.cu",
-        ptx: ptx::DESCRIBE_PTX,
-        fatbin: ptx::DESCRIBE_FATBIN,
-        names: &[
-            "clatch_describe",
-            "clatch_describe_binary",
-            "clatch_build_quads",
-            "clatch_smooth_binomial3",
-            "clatch_smooth_binomial5",
-            "clatch_gather_rows",
-        ],
-        needs_tensor_cores: false,
-    },
-    KernelFile {
-        path: "kernels/describe_opencv.cu",
-        ptx: ptx::DESCRIBE_OPENCV_PTX,
-        fatbin: ptx::DESCRIBE_OPENCV_FATBIN,
-        names: &["clatch_describe_opencv"],
-        needs_tensor_cores: false,
-    },
-    KernelFile {
-        path: "kernels/detect.cu",
-        ptx: ptx::DETECT_PTX,
-        fatbin: ptx::DETECT_FATBIN,
-        names: &[
-            "clatch_detect_nms",
-            "clatch_scan_reduce",
-            "clatch_scan_partials",
-            "clatch_scan_apply",
-            "clatch_detect_scatter",
-            "clatch_detect_orient",
-            "clatch_orient_refine",
-        ],
-        needs_tensor_cores: false,
-    },
-    KernelFile {
-        path: "kernels/pyramid.cu",
-        ptx: ptx::PYRAMID_PTX,
-        fatbin: ptx::PYRAMID_FATBIN,
-        names: &["clatch_downscale"],
-        needs_tensor_cores: false,
-    },
-    KernelFile {
-        path: "kernels/matching.cu",
-        ptx: ptx::MATCHING_PTX,
-        fatbin: ptx::MATCHING_FATBIN,
-        names: super::matching::KERNELS,
-        needs_tensor_cores: false,
-    },
-    KernelFile {
-        path: "kernels/match_pairs.cu",
-        ptx: ptx::MATCH_PAIRS_PTX,
-        fatbin: ptx::MATCH_PAIRS_FATBIN,
-        names: super::collection::KERNELS,
-        needs_tensor_cores: false,
-    },
-    KernelFile {
-        path: "kernels/match_pairs_tensor.cu",
-        ptx: ptx::MATCH_PAIRS_TENSOR_PTX,
-        fatbin: ptx::MATCH_PAIRS_TENSOR_FATBIN,
-        names: super::collection::TENSOR_KERNELS,
-        needs_tensor_cores: true,
-    },
-    KernelFile {
-        path: "kernels/matching_tensor.cu",
-        ptx: ptx::MATCHING_TENSOR_PTX,
-        fatbin: ptx::MATCHING_TENSOR_FATBIN,
-        names: matching_tensor::KERNELS,
-        needs_tensor_cores: true,
-    },
-];
-
-/// Bench and diagnostic kernels (`kernels/bench_*.cu`), compiled and loaded only with the `internals`
-/// feature, on first use ([`GpuDevice::load_bench_kernels`]).
-#[cfg(feature = "internals")]
-const BENCH_KERNELS: &[KernelFile] = &[
-    KernelFile {
-        path: "kernels/bench_knn_variants.cu",
-        ptx: ptx::BENCH_KNN_VARIANTS_PTX,
-        fatbin: ptx::BENCH_KNN_VARIANTS_FATBIN,
-        names: super::matching::hooks::VARIANT_KERNELS,
-        needs_tensor_cores: false,
-    },
-    KernelFile {
-        path: "kernels/bench_mma_rate.cu",
-        ptx: ptx::BENCH_MMA_RATE_PTX,
-        fatbin: ptx::BENCH_MMA_RATE_FATBIN,
-        names: &["clatch_mma_s8_rate"],
-        needs_tensor_cores: true,
-    },
-    KernelFile {
-        path: "kernels/bench_texture_read.cu",
-        ptx: ptx::BENCH_TEXTURE_READ_PTX,
-        fatbin: ptx::BENCH_TEXTURE_READ_FATBIN,
-        names: &["clatch_debug_read_texture"],
-        needs_tensor_cores: false,
-    },
-];
 
 /// A CUDA device with clatch's kernels loaded and its tables uploaded.
 #[derive(Debug)]
@@ -467,35 +359,4 @@ pub(crate) fn time_launches(
         );
     }
     Ok(times)
-}
-
-#[cfg(test)]
-mod tests {
-
-    use super::*;
-
-    /// Every entry point a file lists is in that file's PTX, and every kernel of the PTX is listed, so
-    /// a moved or renamed kernel fails here, on any machine, not at device start.
-    #[test]
-    fn kernel_lists_match_the_ptx() {
-        if ptx::STUB {
-            return;
-        }
-        #[cfg(feature = "internals")]
-        let files = KERNELS.iter().chain(BENCH_KERNELS);
-        #[cfg(not(feature = "internals"))]
-        let files = KERNELS.iter();
-        for file in files {
-            let mut entries: Vec<&str> = file
-                .ptx
-                .lines()
-                .filter_map(|l| l.trim().strip_prefix(".visible .entry "))
-                .map(|l| l.trim_end_matches('(').trim())
-                .collect();
-            let mut listed = file.names.to_vec();
-            entries.sort_unstable();
-            listed.sort_unstable();
-            assert_eq!(entries, listed, "{}", file.path);
-        }
-    }
 }

@@ -15,6 +15,7 @@ mod detect;
 mod device;
 mod error;
 mod image;
+mod kernels;
 mod matching;
 mod matching_tensor;
 mod memory;

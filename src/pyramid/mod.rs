@@ -28,7 +28,9 @@
 pub mod cpu;
 mod select;
 
-pub use select::{LevelKeypoint, fast_rank, level_shares, of_level, select};
+pub use select::{LevelKeypoint, fast_rank, of_level, select};
+#[cfg(feature = "internals")]
+pub use select::level_shares;
 
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::error::{Error, Result};

@@ -29,7 +29,7 @@
 #define CLATCH_MATCH_ROW_PAD 256 /* device descriptor buffers hold a multiple of this many rows */
 #define CLATCH_MATCH_SELECT_THREADS 256 /* clatch_match_filter / clatch_match_compact (8 warps) */
 #define CLATCH_MATCH_SCAN_THREADS 1024 /* clatch_match_scan: one block */
-/* Grouped matching of many pairs per launch (kernels/match_pairs.cu, src/cuda/collection.rs). */
+/* Grouped matching of many pairs per launch (kernels/match_pairs.cu, src/cuda/collection/). */
 #define CLATCH_PAIRS_ROW_ALIGN 16 /* each set of a device collection starts at a multiple of this many rows */
 #define CLATCH_PAIRS_BLOCK_QUERIES 256 /* queries per task (CLATCH_MATCH_THREADS * CLATCH_MATCH_QUERIES_PER_THREAD) */
 #define CLATCH_PAIRS_REJECTED 0xffffffffu /* query field of a best-match record the ratio test or distance limit refused */

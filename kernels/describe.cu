@@ -1,4 +1,4 @@
-// CLATCH description on the GPU. Reproduces src/describe/cpu.rs bit for bit (docs/numerics.md, section 4).
+// CLATCH description on the GPU. Reproduces src/describe/cpu/ bit for bit (docs/numerics.md, section 4).
 //
 // Two kernels with one signature; the host picks one by the patch weights:
 // - clatch_describe (any weights): one block of CLATCH_DESCRIBE_WARPS warps describes keypoints
@@ -305,7 +305,7 @@ extern "C" __global__ void __launch_bounds__(CLATCH_DESCRIBE_WARPS * 32)
 }
 
 // Descriptor rows put in another order: dst row r = src row source_row[r], for r < rows (rows of
-// `words` words). A pyramid's descriptors come out level by level; src/cuda/pyramid.rs gathers them
+// `words` words). A pyramid's descriptors come out level by level; src/cuda/pyramid/ gathers them
 // into the reported keypoint order straight into a device-resident collection (no host round trip),
 // the order crate::pyramid::assemble gives on the host. A copy: no bit is computed here.
 extern "C" __global__ void __launch_bounds__(CLATCH_GATHER_THREADS)

@@ -49,7 +49,7 @@ __device__ __forceinline__ void pairs_knn_tensor(const signed char* __restrict__
 }  // namespace
 
 // Names start with clatch_knn_tensor so that the host raises their dynamic shared memory limit as for
-// the single-pair tensor kernels (src/cuda/matching_tensor.rs, configure).
+// the single-pair tensor kernels (src/cuda/matching_tensor/, configure).
 #define CLATCH_PAIRS_TENSOR_KERNEL(NAME, BYTES, K, MUTUAL)                                                 \
     extern "C" __global__ void __launch_bounds__(CLATCH_TENSOR_WARPS * 32, 1)                               \
         NAME(const signed char* __restrict__ query_rows, const signed char* __restrict__ train_rows,        \

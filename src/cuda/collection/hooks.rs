@@ -1,4 +1,4 @@
-//! Test and bench hooks of `cuda/collection.rs` (the `internals` feature only): not part of the API.
+//! Test and bench hooks of `cuda/collection/` (the `internals` feature only): not part of the API.
 
 use super::*;
 

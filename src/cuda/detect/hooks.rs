@@ -1,4 +1,4 @@
-//! Test and bench hooks of `cuda/detect.rs` (the `internals` feature only): not part of the API.
+//! Test and bench hooks of `cuda/detect/` (the `internals` feature only): not part of the API.
 
 use super::*;
 use crate::cuda::device::time_launches;

@@ -1,4 +1,4 @@
-//! Test and bench hooks of `cuda/pyramid.rs` (the `internals` feature only): not part of the API.
+//! Test and bench hooks of `cuda/pyramid/` (the `internals` feature only): not part of the API.
 
 use super::*;
 use crate::cuda::image::ImageLife;

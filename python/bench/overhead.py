@@ -2,7 +2,7 @@
 
     pip install ./python && python python/bench/overhead.py [--repeats 21] [--backend cpu]
 
-Two workloads (issue 11's goal: at most 5 % over the Rust call):
+Two workloads (the goal: at most 5 % over the Rust call):
 - matching 10,000 x 10,000 512-bit descriptors (random queries; half the gallery noisy copies of
   half of them, so that about 5000 matches pass the ratio test and cross-check);
 - detecting and describing a 1920 x 1080 image (the repository's photo tiled), default settings.

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Extract + match timing of every clatch row again with a binary of known provenance (this branch, built from
-# 256bb5f with CARGO_TARGET_DIR=/tmp/sfm/target), `--no-colmap`, one after the other, and a check that
+# 256bb5f in a target folder of its own), `--no-colmap`, one after the other, and a check that
 # its database keypoints and match list equal those of run.sh's run (so the COLMAP figures stand).
 #   docs/bench/2026-12-01-sfm/retime.sh CLATCH DATA_DIR WORK_DIR
 set -uo pipefail

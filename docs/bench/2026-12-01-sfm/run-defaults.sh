@@ -4,7 +4,7 @@
 # --max-keypoints 8000, both scenes, each mapped twice (as run.sh), then extract + match again with
 # --no-colmap (as retime.sh) for the CPU time, checking that the keypoints and match list are identical.
 # One job at a time. Run from the repository root:
-#   CLATCH=/tmp/sfm/clatch-ee81601 docs/bench/2026-12-01-sfm/run-defaults.sh DATA_DIR WORK_DIR
+#   CLATCH=path/to/clatch docs/bench/2026-12-01-sfm/run-defaults.sh DATA_DIR WORK_DIR
 set -uo pipefail
 data=$1 work=$2
 logs=docs/bench/2026-12-01-sfm/logs

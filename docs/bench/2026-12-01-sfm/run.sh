@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The SfM table of issue 9 for the candidate defaults: every method on both scenes, one after the other
+# The SfM table for the candidate defaults: every method on both scenes, one after the other
 # (never two at once: the machine has 2 cores), each followed by a second `colmap mapper` run on the
 # same database (the mapper is randomised). Run from the repository root:
 #   docs/bench/2026-12-01-sfm/run.sh DATA_DIR WORK_DIR

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The SfM table of issue 9 for `clatch colmap`'s defaults of 2026-12-02 (8192 keypoints per photo, the
+# The SfM table for `clatch colmap`'s defaults of 2026-12-02 (8192 keypoints per photo, the
 # given K kept fixed by the mapper, the AVX-512 CPU matcher), beside COLMAP SIFT measured in the same run. One job at a time (2 cores).
 # Every clatch configuration: `clatch colmap` (extract, match, COLMAP verification and mapper), a
 # second `colmap mapper` on the same database, then extract + match again with --no-colmap for the CPU

@@ -1,4 +1,4 @@
-//! Whole extraction calls against the device's busy time for them (issue 13, extraction side):
+//! Whole extraction calls against the device's busy time for them (extraction side):
 //! `cargo bench --features cuda --bench gpu_extract_stream`.
 //!
 //! - A 1080p frame stream: `CLATCH_BENCH_FRAMES` (default 2000, at least 1000) frames from page-locked
@@ -10,8 +10,8 @@
 //!   blocking call (median of 20 after warm-up), with its device busy time.
 //!
 //! Configurations: the single-scale preset at threshold 20 (about 1.7k keypoints on the 1080p frame:
-//! the issue's "~2k keypoints, 0.10 ms on the device") and the default pyramid; for the photo, single
-//! scale at threshold 2 capped at 20k (the issue's 0.855 ms row) and the default pyramid at threshold
+//! about 0.10 ms on the device) and the default pyramid; for the photo, single scale at threshold 2
+//! capped at 20k (about 0.86 ms on the device) and the default pyramid at threshold
 //! 10 capped at 20k. Every GPU result is checked against the CPU's once per configuration.
 
 #[cfg(feature = "cuda")]

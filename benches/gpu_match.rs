@@ -179,7 +179,7 @@ fn main() {
             median(walls)
         );
     }
-    // Collections (issue 13): every pair of `sets` feature sets, through one match_descriptors call per
+    // Collections: every pair of `sets` feature sets, through one match_descriptors call per
     // pair (blocking) and through Matcher::match_pairs (the library's streams, pairs in flight), with
     // the CPU backend's match_pairs beside them; wall clock of the whole call, after one warm-up run.
     for (n, count) in [(2000usize, 40usize), (5000, 24)] {

@@ -159,11 +159,12 @@ pub(crate) fn weights(dev: &GpuDevice, config: &DescriptorConfig) -> Result<Devi
     })
 }
 
-/// Queues `clatch_describe` on `stream`: describes the first `min(*count, keypoints.len())` keypoints
-/// (all of which must fit) into `out` (at least `keypoints.len()` rows of the width's words).
+/// Queues `clatch_describe` on `lane`: describes the first `min(*count, keypoints.len())` keypoints
+/// (all of which must fit) into `out` (at least `keypoints.len()` rows of the width's words). The
+/// lane keeps the weight table alive until the kernel has run.
 pub(crate) fn launch_describe(
     dev: &GpuDevice,
-    stream: &Arc<CudaStream>,
+    lane: &Lane,
     image: &DeviceImage,
     (keypoints, count): (&CudaView<'_, KeyPoint>, &CudaView<'_, u32>),
     weights: &DeviceWeights,
@@ -197,7 +198,7 @@ pub(crate) fn launch_describe(
     } else {
         "clatch_describe"
     };
-    let mut launch = stream.launch_builder(dev.kernel(kernel));
+    let mut launch = lane.launch_builder(dev.kernel(kernel));
     launch
         .arg(&texture)
         .arg(&width)
@@ -219,7 +220,7 @@ pub(crate) fn launch_describe(
     // kernel indexes (capacity keypoints, one count, 2880 rotations, 512 triplets, 64 weights,
     // capacity * words outputs).
     unsafe { launch.launch(config) }.map_err(driver_error(kernel))?;
-    Ok(())
+    lane.keep_until_passed(&weights.values)
 }
 
 /// Queues `clatch_gather_rows` on `stream`: row `r` of `dst` (`rows` rows of `words` words) becomes

@@ -211,6 +211,10 @@ pub(crate) fn capacity_for(len: usize) -> usize {
 #[derive(Default)]
 pub(crate) struct Arena {
     free: Mutex<Free>,
+    /// Device tables shared by every stream (the descriptor weights) that work queued on this stream
+    /// reads, each kept alive until the stream passes the event recorded after that work: whoever else
+    /// drops the table meanwhile (the device's cache, on release), the work still reads valid memory.
+    tables: Mutex<Vec<(Arc<CudaSlice<i32>>, CudaEvent)>>,
 }
 
 impl std::fmt::Debug for Arena {
@@ -227,6 +231,11 @@ impl Drop for Arena {
         let free = self.free.get_mut().unwrap_or_else(|p| p.into_inner());
         if let Some(kept) = free.bytes.device.iter().find(|k| k.texture.is_some()) {
             let _ = kept.buffer.stream().synchronize();
+        }
+        // Tables are released only once the work that reads them has run.
+        let tables = self.tables.get_mut().unwrap_or_else(|p| p.into_inner());
+        for (_, passed) in tables.drain(..) {
+            let _ = passed.synchronize();
         }
     }
 }
@@ -285,6 +294,29 @@ impl Lane {
             copy: dev.new_stream()?,
             arena: Arc::default(),
         })
+    }
+
+    /// Keeps `table` alive until this lane's stream passes the work queued on it so far (call it after
+    /// queuing the kernels that read the table). One event per table, recorded again by each call;
+    /// tables whose work has run are let go.
+    pub(crate) fn keep_until_passed(&self, table: &Arc<CudaSlice<i32>>) -> Result<()> {
+        let mut tables = self.arena.tables.lock().unwrap_or_else(|p| p.into_inner());
+        tables.retain(|(kept, passed)| Arc::ptr_eq(kept, table) || !passed.is_complete());
+        if let Some((_, passed)) = tables.iter().find(|(kept, _)| Arc::ptr_eq(kept, table)) {
+            return passed
+                .record(&self.stream)
+                .map_err(driver_error("event record"));
+        }
+        let passed = self
+            .stream
+            .context()
+            .new_event(None)
+            .map_err(driver_error("event creation"))?;
+        passed
+            .record(&self.stream)
+            .map_err(driver_error("event record"))?;
+        tables.push((table.clone(), passed));
+        Ok(())
     }
 
     /// The lane's copy stream (see the field).

@@ -47,10 +47,8 @@ pub fn device_allocations() -> usize {
 /// Frees every buffer the crate keeps between calls on device `ordinal` that no call holds now: the
 /// device's idle streams with their scratch arenas, the pinned staging buffers and the descriptor
 /// weight tables. The next call starts cold and allocates again (so allocation-failure tests reach
-/// every site). Only between calls, on every thread: nothing may be queued on the device and no call
-/// may be in flight. A call holds the weight table it queued describe kernels with only until it has
-/// queued them; if this empties the device's tables meanwhile, the table is freed while those kernels
-/// wait to read it (cudarc frees it on its own stream, without waiting for others).
+/// every site). Meant for between calls: a call in flight keeps what it holds (its lane's buffers,
+/// and the weight table its describe kernels read, which its lane keeps alive until they have run).
 pub fn release_cached_memory(ordinal: usize) -> Result<()> {
     let dev = crate::cuda::device(ordinal)?;
     let sync = || {

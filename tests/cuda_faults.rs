@@ -39,7 +39,7 @@ fn one_at_a_time(
 
 #[cfg(feature = "cuda")]
 fn trials() -> Vec<Trial> {
-    let trials: [(&str, Body); 6] = [
+    let trials: [(&str, Body); 7] = [
         ("out_of_memory_is_typed_and_recoverable", gpu::out_of_memory),
         ("widest_and_tallest_images", gpu::extreme_shapes),
         ("many_threads_many_streams", gpu::many_threads),
@@ -51,6 +51,10 @@ fn trials() -> Vec<Trial> {
         (
             "release_cached_memory_frees_the_staging_buffers",
             gpu::release_frees_staging,
+        ),
+        (
+            "weight_tables_outlive_the_work_that_reads_them",
+            gpu::weight_tables_outlive_their_work,
         ),
     ];
     trials
@@ -119,6 +123,33 @@ mod gpu {
             .into());
         }
         println!("staging buffers {warm:?} warm, {released:?} after release_cached_memory");
+        Ok(())
+    }
+
+    /// The device's weight-table cache let go while describe kernels that read a table are still
+    /// queued (a 21-megapixel-class image on its own stream): their results still equal the CPU's,
+    /// and under compute-sanitizer's memcheck no kernel reads freed memory. Then a cold table again.
+    pub fn weight_tables_outlive_their_work() -> Result<(), Failed> {
+        use clatch::cuda::GpuStream;
+        use clatch::cuda::hooks::forget_weight_tables;
+        let (w, h) = scale::pick((5600, 3700), (640, 480));
+        let image = rectangles(w, h, 11);
+        let gpu = Extractor::new(GPU, ExtractorConfig::default())?;
+        let expected = Extractor::new(Backend::Cpu, ExtractorConfig::default())?
+            .detect_and_describe(&image.view())?;
+        let stream = GpuStream::new(0)?;
+        for round in 0..3 {
+            let pending = gpu.detect_and_describe_async(&stream, &image.view())?;
+            forget_weight_tables(0)?;
+            // Memory the table held is reused at once if it was freed: a new table of other
+            // weights, uploaded while the first work may still run.
+            let _other = clatch::cuda::hooks::probe_allocation(0, 1 << 20);
+            let got = pending.wait()?;
+            if got != expected {
+                return Err(format!("round {round}: features differ from the CPU's").into());
+            }
+        }
+        println!("{w}x{h}: 3 rounds with the table cache dropped mid-flight, equal to the CPU");
         Ok(())
     }
 

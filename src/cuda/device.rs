@@ -190,7 +190,8 @@ impl GpuDevice {
         })
     }
 
-    /// Forgets the uploaded weight tables (test hooks: a cold start; only while no call is queued).
+    /// Forgets the uploaded weight tables (test hooks: a cold start). Work queued with one keeps it
+    /// alive until it has run (`Lane::keep_until_passed`).
     #[cfg(feature = "internals")]
     pub(crate) fn clear_weights(&self) {
         self.weights

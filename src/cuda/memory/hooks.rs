@@ -63,6 +63,13 @@ pub fn release_cached_memory(ordinal: usize) -> Result<()> {
     sync()
 }
 
+/// Drops the device's own references to its descriptor weight tables at once, without waiting for
+/// anything: work queued with a table must still read it (its lane keeps it alive).
+pub fn forget_weight_tables(ordinal: usize) -> Result<()> {
+    crate::cuda::device(ordinal)?.clear_weights();
+    Ok(())
+}
+
 /// The page-locked staging buffers of device `ordinal`: all of them (idle or in use), and the idle.
 pub fn staging_buffers(ordinal: usize) -> (usize, usize) {
     staging::staging_buffers(ordinal)

@@ -39,7 +39,7 @@ fn one_at_a_time(
 
 #[cfg(feature = "cuda")]
 fn trials() -> Vec<Trial> {
-    let trials: [(&str, Body); 7] = [
+    let trials: [(&str, Body); 8] = [
         ("out_of_memory_is_typed_and_recoverable", gpu::out_of_memory),
         ("widest_and_tallest_images", gpu::extreme_shapes),
         ("many_threads_many_streams", gpu::many_threads),
@@ -55,6 +55,10 @@ fn trials() -> Vec<Trial> {
         (
             "weight_tables_outlive_the_work_that_reads_them",
             gpu::weight_tables_outlive_their_work,
+        ),
+        (
+            "idle_lanes_keep_one_budget_per_device",
+            gpu::one_budget_per_device,
         ),
     ];
     trials
@@ -150,6 +154,27 @@ mod gpu {
             }
         }
         println!("{w}x{h}: 3 rounds with the table cache dropped mid-flight, equal to the CPU");
+        Ok(())
+    }
+
+    /// Sixteen lanes of the device's pool held at once, each grown by a 200 MiB buffer (kept by the
+    /// per-lane rules), then given back: together the idle lanes keep at most the device's budget, and
+    /// they do keep up to it (not nothing).
+    pub fn one_budget_per_device() -> Result<(), Failed> {
+        use clatch::cuda::hooks::{KEPT_DEVICE_BYTES, fill_idle_lanes, release_cached_memory};
+        release_cached_memory(0)?;
+        let each = 200 << 20;
+        let kept = fill_idle_lanes(0, 16, each)?;
+        if kept > KEPT_DEVICE_BYTES || kept + 2 * each < KEPT_DEVICE_BYTES {
+            return Err(
+                format!("idle lanes keep {kept} bytes; the budget is {KEPT_DEVICE_BYTES}").into(),
+            );
+        }
+        println!(
+            "16 lanes of 200 MiB given back: the idle lanes keep {} MiB",
+            kept >> 20
+        );
+        release_cached_memory(0)?;
         Ok(())
     }
 

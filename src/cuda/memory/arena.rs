@@ -16,9 +16,10 @@
 //! Buffers grow geometrically (capacities rounded up to eighths of a power of two); a call takes the
 //! smallest free buffer that holds what it asks for. A stream's arena never shrinks by itself, but a
 //! lane of the device's pool is trimmed when it goes back to the pool ([`Free::split_off`]: buffers
-//! over [`KEPT_BUFFER_BYTES`], and the largest beyond [`KEPT_LANE_BYTES`] in all), so one huge image
-//! does not keep gigabytes for the life of the process, while calls of a size seen before allocate
-//! nothing. [`release_cached_memory`] and [`crate::cuda::GpuStream::release_cached_memory`] free what the
+//! over [`KEPT_BUFFER_BYTES`], and the largest beyond [`KEPT_LANE_BYTES`] in all, and beyond what the
+//! device's other idle lanes leave of [`KEPT_DEVICE_BYTES`]), so one huge image, or many streams at
+//! once, do not keep gigabytes for the life of the process, while calls of a size seen before
+//! allocate nothing. [`release_cached_memory`] and [`crate::cuda::GpuStream::release_cached_memory`] free what the
 //! arenas hold on request. Everything is freed with the arena, i.e. with the stream ([`Lane`]).
 
 use std::ops::Deref;
@@ -121,6 +122,11 @@ pub(crate) const KEPT_BUFFER_BYTES: usize = 256 << 20;
 /// flight with the default pyramid).
 pub(crate) const KEPT_LANE_BYTES: usize = 512 << 20;
 
+/// The most free bytes all idle lanes of one device's pool keep together (2 GiB: four lanes at
+/// [`KEPT_LANE_BYTES`], the streams a batch keeps busy); a lane given back when the others hold it all
+/// keeps nothing.
+pub(crate) const KEPT_DEVICE_BYTES: usize = 2 << 30;
+
 impl Free {
     /// Splits off (into the returned lists) the buffers beyond what a lane keeps: every buffer of more
     /// than `largest` bytes, and of the rest those beyond the first `total` bytes, smallest kept first
@@ -150,6 +156,17 @@ impl Free {
             + both(self.ints.device.len(), self.ints.host.len())
             + both(self.longs.device.len(), self.longs.host.len())
             + both(self.keypoints.device.len(), self.keypoints.host.len())
+    }
+
+    /// The bytes of every buffer the lists hold.
+    fn bytes(&self) -> usize {
+        let mut sizes = Vec::new();
+        self.bytes.sizes(&mut sizes);
+        self.words.sizes(&mut sizes);
+        self.ints.sizes(&mut sizes);
+        self.longs.sizes(&mut sizes);
+        self.keypoints.sizes(&mut sizes);
+        sizes.iter().sum()
     }
 
     /// Whether a texture object is kept with one of the device buffers.
@@ -637,7 +654,9 @@ impl LanePool {
     }
 
     /// Gives `lane` back (work it queued may still run: whoever takes it next queues after it), its
-    /// arena trimmed to [`KEPT_BUFFER_BYTES`] and [`KEPT_LANE_BYTES`].
+    /// arena trimmed to [`KEPT_BUFFER_BYTES`], [`KEPT_LANE_BYTES`] and what the idle lanes leave of
+    /// [`KEPT_DEVICE_BYTES`] (lanes given back at the same moment may each take the same room: the
+    /// budget holds to within their number times [`KEPT_LANE_BYTES`]).
     ///
     /// While the thread panics, the lane is waited for first: the call that held it may have queued a
     /// copy that reads the caller's image straight from its memory ([`crate::cuda::image::ImageLife::Work`]),
@@ -646,8 +665,16 @@ impl LanePool {
         if std::thread::panicking() {
             let _ = lane.synchronize_all();
         }
+        let others: usize = {
+            let idle = self.idle.lock().unwrap_or_else(|p| p.into_inner());
+            idle.iter().map(|l| l.arena.lock().bytes()).sum()
+        };
+        let room = KEPT_DEVICE_BYTES
+            .saturating_sub(others)
+            .min(KEPT_LANE_BYTES);
         // A failed wait while trimming leaves the lane as it is: its next user meets the same error.
-        let _ = lane.arena.trim(&lane, KEPT_BUFFER_BYTES, KEPT_LANE_BYTES);
+        // (Trimmed outside the pool's lock: it may wait for the lane's stream.)
+        let _ = lane.arena.trim(&lane, KEPT_BUFFER_BYTES, room);
         let mut idle = self.idle.lock().unwrap_or_else(|p| p.into_inner());
         if idle.len() < KEPT_LANES {
             idle.push(lane);
@@ -665,6 +692,13 @@ impl LanePool {
             }
         }
         first_error
+    }
+
+    /// The free bytes the idle lanes keep together (test hooks).
+    #[cfg(feature = "internals")]
+    pub(crate) fn idle_bytes(&self) -> usize {
+        let idle = self.idle.lock().unwrap_or_else(|p| p.into_inner());
+        idle.iter().map(|l| l.arena.lock().bytes()).sum()
     }
 
     /// Drops every idle lane and its buffers (test hooks: a cold start).
@@ -731,6 +765,30 @@ pub mod hooks {
     /// what a steady state never adds; freed buffers are not subtracted).
     pub fn arena_bytes_grown() -> usize {
         GROWN_BYTES.get()
+    }
+
+    /// The most free bytes the idle lanes of one device keep together.
+    pub const KEPT_DEVICE_BYTES: usize = super::KEPT_DEVICE_BYTES;
+
+    /// Takes `lanes` lanes of device `ordinal`'s pool at once, grows each one's arena by a buffer of
+    /// `bytes`, gives them back one after another, and returns the free bytes the device's idle lanes
+    /// then keep together: at most [`KEPT_DEVICE_BYTES`].
+    pub fn fill_idle_lanes(
+        ordinal: usize,
+        lanes: usize,
+        bytes: usize,
+    ) -> crate::error::Result<usize> {
+        let dev = crate::cuda::device(ordinal)?;
+        let taken = (0..lanes)
+            .map(|_| super::Leased::take(&dev))
+            .collect::<crate::error::Result<Vec<_>>>()?;
+        for lane in &taken {
+            drop(lane.scratch::<u8>(bytes, "filling an idle lane")?);
+        }
+        for lane in taken {
+            drop(lane);
+        }
+        Ok(dev.lanes.idle_bytes())
     }
 }
 

@@ -12,7 +12,9 @@
 #     bash dev/gpu_suite.sh NAME...         only these binaries (cuda_match, backend, clatch_unit, ...)
 #     bash dev/gpu_suite.sh --build-only    build, and list the binaries (NAME PATH) on stdout
 #
-# Environment: OUT (the log folder, default target/gpu-suite), TEST_TIMEOUT (seconds a binary may run,
+# Environment: BINARIES (a "NAME PATH" list of test binaries built elsewhere, as --build-only prints
+# it: nothing is built, for a GPU machine without a Rust toolchain), OUT (the log folder, default
+# target/gpu-suite), TEST_TIMEOUT (seconds a binary may run,
 # default 1800), CLATCH_SOAK_SECONDS (the soak's length, default 5), CLATCH_TEST_SCALE (`sanitizer`
 # shrinks every suite's workload, see tests/common/scale.rs).
 #
@@ -45,7 +47,12 @@ PY
     rm -f "$OUT/build.json"
 }
 
-build || exit 1
+if [ -n "${BINARIES:-}" ]; then
+    mkdir -p "$OUT"
+    [ "$(realpath "$BINARIES")" = "$(realpath -m "$OUT/binaries.txt")" ] || cp "$BINARIES" "$OUT/binaries.txt"
+else
+    build || exit 1
+fi
 if [ "${1:-}" = --build-only ]; then
     cat "$OUT/binaries.txt"
     exit 0

@@ -13,7 +13,7 @@
 #     bash dev/sanitize.sh NAME...          only these binaries (cuda_match, backend, clatch_unit, ...)
 #     TOOLS="memcheck racecheck" bash dev/sanitize.sh cuda_detect
 #
-# Environment: OUT (default target/sanitize), TOOLS (default all four), SAN_TIMEOUT (seconds one
+# Environment: BINARIES (prebuilt binaries, as for dev/gpu_suite.sh), OUT (default target/sanitize), TOOLS (default all four), SAN_TIMEOUT (seconds one
 # binary may run under one tool, default 3600), RACECHECK_SCALE (default sanitizer; `full` for the
 # normal workload), SEQUENTIAL=1 (the tools one after another instead of side by side, for a GPU with
 # little memory).
@@ -39,7 +39,7 @@ fi
 [ -n "$san" ] || { echo "compute-sanitizer not found: put it on PATH or set COMPUTE_SANITIZER" >&2; exit 1; }
 
 mkdir -p "$OUT"
-OUT="$OUT/build" bash dev/gpu_suite.sh --build-only > /dev/null || exit 1
+OUT="$OUT/build" BINARIES="${BINARIES:-}" bash dev/gpu_suite.sh --build-only > /dev/null || exit 1
 list="$OUT/build/binaries.txt"
 if [ $# -gt 0 ]; then
     names=("$@")

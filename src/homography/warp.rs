@@ -2,8 +2,8 @@
 //! of the evaluation's synthetic pairs, whose ground truth is the homography itself.
 
 use super::Homography;
-use crate::error::{Error, Result};
-use crate::gray_view::{GrayView, MAX_IMAGE_SIDE};
+use crate::error::Result;
+use crate::gray_view::{GrayView, check_sides};
 
 /// Value given to output pixels whose source lies outside the input.
 pub const FILL: u8 = 0;
@@ -13,18 +13,10 @@ pub const FILL: u8 = 0;
 ///
 /// Each output pixel `(x, y)` samples `src` at `h⁻¹(x, y)` bilinearly, rounded; samples outside
 /// `[0, w - 1] x [0, h - 1]`, at infinity, or of a singular `h` get [`FILL`]. Sides of 0 are
-/// [`Error::EmptyImage`], above [`MAX_IMAGE_SIDE`] [`Error::ImageTooLarge`].
+/// [`Error::EmptyImage`](crate::Error::EmptyImage), above [`MAX_IMAGE_SIDE`](crate::MAX_IMAGE_SIDE)
+/// [`Error::ImageTooLarge`](crate::Error::ImageTooLarge).
 pub fn warp(src: &GrayView<'_>, h: &Homography, width: usize, height: usize) -> Result<Vec<u8>> {
-    if width == 0 || height == 0 {
-        return Err(Error::EmptyImage { width, height });
-    }
-    if width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
-        return Err(Error::ImageTooLarge {
-            width,
-            height,
-            max: MAX_IMAGE_SIDE,
-        });
-    }
+    check_sides(width, height)?;
     let mut out = vec![FILL; width * height];
     let Some(inv) = h.inverse() else {
         return Ok(out);
@@ -54,6 +46,8 @@ pub fn warp(src: &GrayView<'_>, h: &Homography, width: usize, height: usize) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::error::Error;
+    use crate::gray_view::MAX_IMAGE_SIDE;
 
     /// 4x3 ramp: value 10 x + 50 y.
     const RAMP: [u8; 12] = [0, 10, 20, 30, 50, 60, 70, 80, 100, 110, 120, 130];

@@ -26,16 +26,10 @@ pub enum EvalError {
     #[error("cannot decode the embedded photo: {0}")]
     Embedded(image::ImageError),
 
-    /// A file or folder could not be read.
-    #[error("cannot read {path}: {source}", path = .path.display())]
-    Read {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-
-    /// A file could not be created or written.
-    #[error("cannot write {path}: {source}", path = .path.display())]
-    Write {
+    /// A file or folder could not be read, or a file created or written.
+    #[error("cannot {access} {path}: {source}", path = .path.display())]
+    File {
+        access: Access,
         path: PathBuf,
         source: std::io::Error,
     },
@@ -84,6 +78,22 @@ pub enum EvalError {
     Chart { path: PathBuf, reason: String },
 }
 
+/// What was being done with a file when it failed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Access {
+    Read,
+    Write,
+}
+
+impl std::fmt::Display for Access {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Access::Read => "read",
+            Access::Write => "write",
+        })
+    }
+}
+
 /// Names the file an I/O failure concerns.
 pub trait IoContext<T> {
     /// The error of reading `path`.
@@ -94,14 +104,16 @@ pub trait IoContext<T> {
 
 impl<T> IoContext<T> for std::io::Result<T> {
     fn reading(self, path: &Path) -> Result<T, EvalError> {
-        self.map_err(|source| EvalError::Read {
+        self.map_err(|source| EvalError::File {
+            access: Access::Read,
             path: path.to_path_buf(),
             source,
         })
     }
 
     fn writing(self, path: &Path) -> Result<T, EvalError> {
-        self.map_err(|source| EvalError::Write {
+        self.map_err(|source| EvalError::File {
+            access: Access::Write,
             path: path.to_path_buf(),
             source,
         })

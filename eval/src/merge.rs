@@ -262,7 +262,13 @@ mod tests {
         ));
 
         std::fs::remove_file(&summary).unwrap();
-        assert!(matches!(read(), Err(EvalError::Read { .. })));
+        assert!(matches!(
+            read(),
+            Err(EvalError::File {
+                access: crate::error::Access::Read,
+                ..
+            })
+        ));
         std::fs::remove_dir_all(&f.dir).ok();
     }
 }

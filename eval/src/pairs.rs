@@ -382,7 +382,10 @@ mod tests {
         ));
         assert!(matches!(
             read_homography(Path::new("/nonexistent/H1to2p")),
-            Err(EvalError::Read { .. })
+            Err(EvalError::File {
+                access: crate::error::Access::Read,
+                ..
+            })
         ));
     }
 }

@@ -6,6 +6,27 @@ use crate::error::{Error, Result};
 /// keeps `side * 2^16` well inside `i32` on the GPU.
 pub const MAX_IMAGE_SIDE: usize = 32_767;
 
+/// Refuses sides above [`MAX_IMAGE_SIDE`] ([`Error::ImageTooLarge`]), so no size can overflow or
+/// exhaust memory.
+pub(crate) fn check_max_side(width: usize, height: usize) -> Result<()> {
+    if width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+        return Err(Error::ImageTooLarge {
+            width,
+            height,
+            max: MAX_IMAGE_SIDE,
+        });
+    }
+    Ok(())
+}
+
+/// Refuses the sides no image can have: 0 ([`Error::EmptyImage`]) or above [`MAX_IMAGE_SIDE`].
+pub(crate) fn check_sides(width: usize, height: usize) -> Result<()> {
+    if width == 0 || height == 0 {
+        return Err(Error::EmptyImage { width, height });
+    }
+    check_max_side(width, height)
+}
+
 /// A borrowed 8-bit gray image: `height` rows of `width` pixels, row `y` starting at byte `y * stride`.
 ///
 /// Construction checks every size, so code that holds a `GrayView` can index it without further checks.
@@ -26,18 +47,9 @@ pub struct GrayView<'a> {
 impl<'a> GrayView<'a> {
     /// Wraps `data` as a `width` x `height` image whose rows start `stride` bytes apart.
     pub fn new(data: &'a [u8], width: usize, height: usize, stride: usize) -> Result<Self> {
-        if width == 0 || height == 0 {
-            return Err(Error::EmptyImage { width, height });
-        }
+        check_sides(width, height)?;
         if stride < width {
             return Err(Error::StrideTooSmall { width, stride });
-        }
-        if width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
-            return Err(Error::ImageTooLarge {
-                width,
-                height,
-                max: MAX_IMAGE_SIDE,
-            });
         }
         let needed = stride
             .checked_mul(height - 1)

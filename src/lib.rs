@@ -38,6 +38,7 @@ pub mod cuda;
 #[cfg(feature = "image")]
 #[cfg_attr(docsrs, doc(cfg(feature = "image")))]
 pub mod decode;
+pub mod homography;
 pub mod prefetch;
 pub mod synthetic;
 

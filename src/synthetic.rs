@@ -7,20 +7,8 @@
 //! # Ok::<(), clatch::Error>(())
 //! ```
 
-use crate::error::{Error, Result};
-use crate::gray_view::MAX_IMAGE_SIDE;
-
-/// Refuses sides a [`crate::GrayView`] could not hold, so no size can overflow or exhaust memory.
-fn check_size(width: usize, height: usize) -> Result<()> {
-    if width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
-        return Err(Error::ImageTooLarge {
-            width,
-            height,
-            max: MAX_IMAGE_SIDE,
-        });
-    }
-    Ok(())
-}
+use crate::error::Result;
+use crate::gray_view::check_max_side;
 
 /// A small, fast, reproducible generator (SplitMix64).
 #[derive(Clone, Debug)]
@@ -48,18 +36,18 @@ impl SplitMix64 {
 }
 
 /// Uniform random pixels, row-major `width * height`. Sides above [`crate::MAX_IMAGE_SIDE`] are
-/// [`Error::ImageTooLarge`].
+/// [`Error::ImageTooLarge`](crate::Error::ImageTooLarge).
 pub fn noise(width: usize, height: usize, seed: u64) -> Result<Vec<u8>> {
-    check_size(width, height)?;
+    check_max_side(width, height)?;
     let mut rng = SplitMix64::new(seed);
     Ok((0..width * height).map(|_| rng.next_u64() as u8).collect())
 }
 
 /// Overlapping axis-aligned rectangles of random gray levels on a mid-gray background, with a little
 /// noise: many FAST corners of varied strength, and textured enough for descriptors to differ. Sides
-/// above [`crate::MAX_IMAGE_SIDE`] are [`Error::ImageTooLarge`].
+/// above [`crate::MAX_IMAGE_SIDE`] are [`Error::ImageTooLarge`](crate::Error::ImageTooLarge).
 pub fn rectangles(width: usize, height: usize, seed: u64) -> Result<Vec<u8>> {
-    check_size(width, height)?;
+    check_max_side(width, height)?;
     let mut rng = SplitMix64::new(seed);
     let mut img = vec![128u8; width * height];
     let count = (width * height / 900).max(4);

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Collects one benchmark run's figures into a CSV the chart reads (`examples/bench_chart.rs`).
+"""Collects one benchmark run's figures into a CSV the chart reads (`eval/examples/bench_chart.rs`).
 
 Reads, from one run directory: bench_match.txt (`cargo bench --features cuda --bench gpu_match`),
 bench_describe.txt (`--bench gpu`), cpu_clatch.txt (`examples/cpu_describe time` on the dumped image and

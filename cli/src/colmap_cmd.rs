@@ -526,8 +526,8 @@ mod tests {
 
     #[test]
     fn colmap_keeps_8192_keypoints_unless_told() {
-        let backend = crate::BackendArgs {
-            backend: crate::BackendChoice::Cpu,
+        let backend = clatch_cli::flags::BackendArgs {
+            backend: clatch_cli::flags::BackendChoice::Cpu,
             device: 0,
         };
         let budget = |extra: &[&str]| {

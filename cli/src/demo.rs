@@ -2,23 +2,17 @@
 
 use std::path::Path;
 
+use clatch::GrayView;
+use clatch::homography::warp;
+use clatch_cli::photo::{SOURCE, demo_homography, embedded_photo};
 use image::GrayImage;
 
 use crate::draw::{check_picture_path, draw_matches, save_picture};
 use crate::error::CliError;
-use crate::homography::demo_homography;
 use crate::pipeline::{self, PairRun, Settings};
 use crate::progress::Progress;
 use crate::report::{self, Evaluation};
-use crate::warp::warp;
 use crate::{DemoArgs, settings};
-
-/// `assets/astronaut.png`: 512x512 gray.
-pub const ASTRONAUT_PNG: &[u8] = include_bytes!("../../assets/astronaut.png");
-
-/// Where the embedded photo comes from.
-pub const SOURCE: &str = "photo of NASA astronaut Eileen Collins, NASA Great Images database, \
-                          public domain (scikit-image's `astronaut`)";
 
 /// Name used for the embedded photo in messages.
 const NAME_A: &str = "astronaut.png (embedded)";
@@ -39,12 +33,10 @@ pub struct DemoRun {
 
 /// Decodes the embedded photo.
 pub fn embedded_image() -> Result<GrayImage, CliError> {
-    let decoded = image::load_from_memory_with_format(ASTRONAUT_PNG, image::ImageFormat::Png)
-        .map_err(|source| CliError::Embedded {
-            name: NAME_A,
-            source,
-        })?;
-    Ok(clatch::decode::gray_from_dynamic(&decoded))
+    embedded_photo().map_err(|source| CliError::Embedded {
+        name: NAME_A,
+        source,
+    })
 }
 
 /// Progress stages of [`run_demo`].
@@ -60,7 +52,9 @@ pub fn run_demo(
     let original = embedded_image()?;
     let (w, h) = original.dimensions();
     let homography = demo_homography(w as usize, h as usize);
-    let warped = warp(&original, &homography, w, h).expect("the demo homography is invertible");
+    let view = GrayView::try_from(&original)?;
+    let pixels = warp(&view, &homography, w as usize, h as usize)?;
+    let warped = GrayImage::from_raw(w, h, pixels).expect("warp returns width x height pixels");
     progress.done();
 
     let run = pipeline::match_pair(
@@ -138,12 +132,6 @@ pub fn main(args: &DemoArgs) -> Result<(), CliError> {
 mod tests {
     use super::*;
     use clatch::{Backend, ExtractorConfig, MatchConfig};
-
-    #[test]
-    fn embedded_photo_decodes() {
-        let img = embedded_image().unwrap();
-        assert_eq!(img.dimensions(), (512, 512));
-    }
 
     #[test]
     fn demo_matches_agree_with_the_true_homography() {

@@ -72,13 +72,6 @@ pub enum CliError {
     #[error("cannot write {path}: {reason}", path = .path.display())]
     OutputPath { path: PathBuf, reason: String },
 
-    /// An image could not be encoded or saved.
-    #[error("cannot save image {path}: {source}", path = .path.display())]
-    Encode {
-        path: PathBuf,
-        source: image::ImageError,
-    },
-
     /// An output picture path whose extension names no format this build can write.
     #[error("cannot save a picture as {path}: {reason}", path = .path.display())]
     PictureFormat { path: PathBuf, reason: String },
@@ -142,38 +135,9 @@ pub enum CliError {
     #[error("bad homography file {path}: {reason}", path = .path.display())]
     Homography { path: PathBuf, reason: String },
 
-    /// An evaluation input that is missing or incomplete (a sequence folder without its images, ...).
-    #[error("evaluation input {path}: {reason}", path = .path.display())]
-    EvalInput { path: PathBuf, reason: String },
-
-    /// Two things that must have the same size do not (a warp and its source, a merged result and
-    /// the pair it claims to describe).
-    #[error("size mismatch for {what}: expected {expected}, found {found}")]
-    SizeMismatch {
-        what: String,
-        expected: String,
-        found: String,
-    },
-
-    /// A results file (CSV) from another tool that cannot be read as evaluation results.
-    #[error("bad results file {path}, line {line}: {reason}", path = .path.display())]
-    ResultsFormat {
-        path: PathBuf,
-        line: usize,
-        reason: String,
-    },
-
-    /// An external script (the OpenCV evaluation) could not run or failed.
-    #[error("{command} failed: {reason}")]
-    Script { command: String, reason: String },
-
     /// Options that cannot be given together.
     #[error("{options}: {reason}")]
     OptionConflict { options: String, reason: String },
-
-    /// A chart could not be drawn.
-    #[error("cannot draw chart {path}: {reason}", path = .path.display())]
-    Chart { path: PathBuf, reason: String },
 }
 
 impl CliError {

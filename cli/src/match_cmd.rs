@@ -7,12 +7,12 @@ use clatch::{KeyPoint, Match};
 
 use crate::draw::{MatchClass, check_picture_path, draw_matches, stage_picture};
 use crate::error::CliError;
-use crate::homography::Homography;
 use crate::input::{check_detectable, load_gray};
 use crate::output::{Staged, check_distinct, check_writable};
 use crate::pipeline;
 use crate::progress::Progress;
 use crate::report;
+use crate::text_input::read_homography;
 use crate::{MatchArgs, settings};
 
 /// Writes matches as CSV: `query,train,distance,xq,yq,xt,yt`.
@@ -44,7 +44,7 @@ pub fn main(args: &MatchArgs) -> Result<(), CliError> {
     let homography = args
         .homography
         .as_deref()
-        .map(Homography::from_file)
+        .map(read_homography)
         .transpose()?;
 
     let progress = Progress::new(2 + pipeline::PAIR_STAGES + 1);

@@ -33,7 +33,8 @@ impl Progress {
         progress
     }
 
-    /// A bar that never draws (tests, and work that reports progress of its own).
+    /// A bar that never draws, for tests.
+    #[cfg(test)]
     pub fn hidden() -> Self {
         Self(ProgressBar::hidden())
     }

@@ -3,10 +3,12 @@
 use std::fmt::Write as _;
 use std::time::Duration;
 
+use clatch::homography::Homography;
 use clatch::{Backend, KeyPoint, Match, MatchConfig};
 
+use clatch_cli::flags::describe_matching;
+
 use crate::draw::MatchClass;
-use crate::homography::Homography;
 use crate::pipeline::PairRun;
 
 /// How well matches agree with a ground-truth homography.
@@ -35,15 +37,6 @@ impl Evaluation {
     }
 }
 
-/// Distance between `h(query keypoint)` and the train keypoint; infinite if `h` sends the query
-/// keypoint to infinity.
-pub fn reprojection_error(h: &Homography, query: &KeyPoint, train: &KeyPoint) -> f64 {
-    match h.apply(query.x as f64, query.y as f64) {
-        Some((u, v)) => (u - train.x as f64).hypot(v - train.y as f64),
-        None => f64::INFINITY,
-    }
-}
-
 /// Classifies each match: inlier iff its reprojection error under `h` (mapping query pixels to train
 /// pixels) is at most `tolerance` pixels.
 pub fn evaluate(
@@ -57,7 +50,7 @@ pub fn evaluate(
     let classes = matches
         .iter()
         .map(|m| {
-            let e = reprojection_error(h, &query[m.query as usize], &train[m.train as usize]);
+            let e = h.transfer_error(&query[m.query as usize], &train[m.train as usize]);
             if e <= tolerance {
                 errors.push(e);
                 MatchClass::Inlier
@@ -118,24 +111,6 @@ pub fn decoding(decoding: &clatch::prefetch::Prefetched) -> String {
         decoding.threads,
         ms(decoding.waited)
     )
-}
-
-/// The matcher settings in words, e.g. `ratio 0.8, cross-check`.
-pub fn describe_matching(config: &MatchConfig) -> String {
-    let mut parts = Vec::new();
-    match config.ratio {
-        Some(r) => parts.push(format!("ratio {r}")),
-        None => parts.push("no ratio test".into()),
-    }
-    parts.push(if config.cross_check {
-        "cross-check".into()
-    } else {
-        "no cross-check".into()
-    });
-    if let Some(d) = config.max_distance {
-        parts.push(format!("max distance {d}"));
-    }
-    parts.join(", ")
 }
 
 /// The summary table of a pair run: sizes, keypoints, stage times, matches and (with ground truth)
@@ -281,7 +256,18 @@ mod tests {
     #[test]
     fn a_point_sent_to_infinity_is_an_outlier() {
         let h = Homography::perspective(0.5, 0.0);
-        let e = reprojection_error(&h, &KeyPoint::new(-2.0, 0.0), &KeyPoint::new(0.0, 0.0));
-        assert!(e.is_infinite());
+        let infinite = Match {
+            query: 0,
+            train: 0,
+            distance: 0,
+        };
+        let e = evaluate(
+            &[infinite],
+            &[KeyPoint::new(-2.0, 0.0)],
+            &[KeyPoint::new(0.0, 0.0)],
+            &h,
+            1e9,
+        );
+        assert_eq!(e.classes, [MatchClass::Outlier]);
     }
 }

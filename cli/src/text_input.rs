@@ -4,6 +4,8 @@
 use std::io::Read;
 use std::path::Path;
 
+use clatch::homography::Homography;
+
 use crate::error::CliError;
 
 /// Largest text input: a 3x3 matrix, even as OpenCV XML with comments, is far smaller.
@@ -42,12 +44,48 @@ pub fn read_text(path: &Path, what: &'static str) -> Result<String, CliError> {
     Ok(text.strip_prefix(BOM).map(str::to_owned).unwrap_or(text))
 }
 
+/// A homography file: nine numbers (the Oxford format) or OpenCV FileStorage XML, read as
+/// [`read_text`] reads and parsed by the library.
+pub fn read_homography(path: &Path) -> Result<Homography, CliError> {
+    read_text(path, "homography")?
+        .parse()
+        .map_err(
+            |e: clatch::homography::ParseHomographyError| CliError::Homography {
+                path: path.to_path_buf(),
+                reason: e.to_string(),
+            },
+        )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn temp(dir: &crate::test_dir::TestDir, name: &str) -> std::path::PathBuf {
         dir.join(name)
+    }
+
+    #[test]
+    fn homography_files_of_both_formats_are_read_and_bad_ones_named() {
+        let dir = crate::test_dir::TestDir::new("text-homography");
+        let (xml, txt, bad) = (dir.join("h.xml"), dir.join("H1to3p"), dir.join("bad"));
+        std::fs::write(
+            &xml,
+            "<?xml version=\"1.0\"?>\n<opencv_storage><H13 type_id=\"opencv-matrix\">\
+             <rows>3</rows><cols>3</cols><dt>d</dt><data>2. 0. 15. 0. 2. -4. 0. 0. 1.</data>\
+             </H13></opencv_storage>\n",
+        )
+        .unwrap();
+        std::fs::write(&txt, "2 0 15\n0 2 -4\n0 0 1\n").unwrap();
+        std::fs::write(&bad, "<opencv_storage><rows>3</rows></opencv_storage>").unwrap();
+        let from_xml = read_homography(&xml).unwrap();
+        assert_eq!(from_xml, read_homography(&txt).unwrap());
+        assert_eq!(from_xml.apply(1.0, 3.0), Some((17.0, 2.0)));
+        let e = read_homography(&bad).unwrap_err();
+        assert!(matches!(e, CliError::Homography { .. }), "{e}");
+        assert!(e.to_string().contains("bad"), "{e}");
+        let e = read_homography(&dir.join("missing")).unwrap_err();
+        assert!(matches!(e, CliError::Read { .. }), "{e}");
     }
 
     #[test]

@@ -1,9 +1,9 @@
-//! The tables of `clatch eval`, as aligned text (stdout) and as Markdown (EVALUATION.md).
+//! The tables of `clatch-eval`, as aligned text (stdout) and as Markdown (EVALUATION.md).
 
 use std::fmt::Write as _;
 
-use crate::eval::metrics::RatioPoint;
-use crate::eval::results::PairResult;
+use crate::metrics::RatioPoint;
+use crate::results::PairResult;
 
 /// A table of strings; the first column is left-aligned, the others right-aligned.
 #[derive(Clone, Debug, PartialEq)]

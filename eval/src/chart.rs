@@ -1,4 +1,4 @@
-//! The charts of `clatch eval`, drawn with plotters' pure-Rust bitmap backend and an embedded DejaVu
+//! The charts of `clatch-eval`, drawn with plotters' pure-Rust bitmap backend and an embedded DejaVu
 //! font (ab_glyph), so nothing depends on system fonts or libraries; saved as PNG by the `image` crate.
 
 use std::path::Path;
@@ -8,8 +8,8 @@ use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
-use crate::error::CliError;
-use crate::eval::metrics::RatioPoint;
+use crate::error::{EvalError, write_file};
+use crate::metrics::RatioPoint;
 
 /// One panel of precision-recall curves: a title and one curve a method.
 pub struct PrPanel {
@@ -137,8 +137,8 @@ fn save_panels(
     path: &Path,
     count: usize,
     draw: impl Fn(&Area, usize) -> Result<(), String>,
-) -> Result<(), CliError> {
-    let chart_error = |reason: String| CliError::Chart {
+) -> Result<(), EvalError> {
+    let chart_error = |reason: String| EvalError::Chart {
         path: path.to_path_buf(),
         reason,
     };
@@ -156,7 +156,7 @@ fn save_panels(
     let picture = image::RgbImage::from_raw(width, height, buffer)
         .ok_or_else(|| chart_error("buffer size".into()))?;
     // Charts are committed to the repository: spend time on compression, not bytes.
-    let encode_error = |source| CliError::Encode {
+    let encode_error = |source| EvalError::Encode {
         path: path.to_path_buf(),
         source,
     };
@@ -164,7 +164,7 @@ fn save_panels(
     let encoder =
         PngEncoder::new_with_quality(&mut encoded, CompressionType::Best, FilterType::Adaptive);
     picture.write_with_encoder(encoder).map_err(encode_error)?;
-    crate::output::write_file(path, |w| std::io::Write::write_all(w, &encoded))
+    write_file(path, &encoded)
 }
 
 /// The colour of each method, by its place in `methods`.
@@ -173,7 +173,7 @@ fn palette(methods: &[String]) -> impl Fn(&str) -> RGBColor + '_ {
 }
 
 /// Saves precision-recall panels side by side as a PNG.
-pub fn pr_chart(path: &Path, methods: &[String], panels: &[PrPanel]) -> Result<(), CliError> {
+pub fn pr_chart(path: &Path, methods: &[String], panels: &[PrPanel]) -> Result<(), EvalError> {
     let colour_of = palette(methods);
     save_panels(path, panels.len(), |area, i| {
         let panel = &panels[i];
@@ -195,7 +195,11 @@ pub fn pr_chart(path: &Path, methods: &[String], panels: &[PrPanel]) -> Result<(
 }
 
 /// Saves parameter-sweep panels side by side as a PNG.
-pub fn sweep_chart(path: &Path, methods: &[String], panels: &[SweepPanel]) -> Result<(), CliError> {
+pub fn sweep_chart(
+    path: &Path,
+    methods: &[String],
+    panels: &[SweepPanel],
+) -> Result<(), EvalError> {
     let colour_of = palette(methods);
     save_panels(path, panels.len(), |area, i| {
         let panel = &panels[i];

@@ -1,5 +1,5 @@
-//! The correctness rule of `clatch eval` and the figures built on it (see EVALUATION.md, which
-//! states the same definitions; `tools/eval_opencv.py` implements them again for OpenCV).
+//! The correctness rule of `clatch-eval` and the figures built on it (see EVALUATION.md, which
+//! states the same definitions; `scripts/eval_opencv.py` implements them again for OpenCV).
 //!
 //! - A match (a, b) is **correct** iff `|H(a) - b| <= tolerance` pixels, `H` mapping image A's pixels
 //!   to image B's (a point that `H` sends to infinity is never correct).
@@ -12,10 +12,8 @@
 //!   `(d1 as f32) < r * (d2 as f32)` (the library's rule). Precision(r) = correct kept / kept;
 //!   recall(r) = correct kept / correct candidates.
 
+use clatch::homography::Homography;
 use clatch::{KeyPoint, KnnMatches, Match};
-
-use crate::homography::Homography;
-use crate::report::reprojection_error;
 
 /// The ground truth of one pair: the true map from A to B and the two image sizes.
 #[derive(Clone, Debug)]
@@ -58,7 +56,7 @@ impl PairTruth {
 
     /// Whether matching A's keypoint `a` to B's keypoint `b` is correct.
     pub fn is_correct(&self, a: &KeyPoint, b: &KeyPoint) -> bool {
-        reprojection_error(&self.h, a, b) <= self.tolerance
+        self.h.transfer_error(a, b) <= self.tolerance
     }
 
     /// How many keypoints of A and of B lie in the overlap.

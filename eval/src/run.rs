@@ -1,18 +1,27 @@
 //! Running clatch on one pair and turning its features and matches into [`PairResult`]s.
 
+use std::path::Path;
+
 use clap::ValueEnum;
-use clatch::decode::DecodeLimits;
-use clatch::{Match, Matcher, OpencvLatch};
+use clatch::{Backend, Extractor, ExtractorConfig, Features, GrayView, MatchConfig, OpencvLatch};
+use clatch::{Match, Matcher};
 use image::GrayImage;
 
-use crate::error::CliError;
-use crate::eval::metrics::{PairTruth, candidates, ratio_curve};
-use crate::eval::pairs::EvalPair;
-use crate::eval::results::PairResult;
-use crate::homography::Homography;
-use crate::input::load_gray;
-use crate::pipeline::{self, PairRun, Settings};
-use crate::progress::Progress;
+use crate::error::{EvalError, ImageContext};
+use crate::metrics::{PairTruth, candidates, ratio_curve};
+use crate::pairs::{EvalPair, read_gray, read_homography};
+use crate::results::PairResult;
+
+/// What every clatch column shares, from the command line.
+#[derive(Clone, Debug)]
+pub struct Setup {
+    /// Where the work runs.
+    pub backend: Backend,
+    /// Detector and descriptor settings.
+    pub extractor: ExtractorConfig,
+    /// Which matches are kept.
+    pub matching: MatchConfig,
+}
 
 /// The clatch configurations evaluated; each is one column of the tables and one curve of the chart.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -25,8 +34,8 @@ pub enum ClatchMethod {
 }
 
 /// `cv2.xfeatures2d.LATCH_create(bytes=64, rotationInvariance=True, half_ssd_size=3, sigma=2.0)`,
-/// OpenCV's defaults and the configuration of the OpenCV LATCH column of `tools/eval_opencv.py`.
-pub fn opencv_default_latch() -> Result<OpencvLatch, CliError> {
+/// OpenCV's defaults and the configuration of the OpenCV LATCH column of `scripts/eval_opencv.py`.
+pub fn opencv_default_latch() -> Result<OpencvLatch, EvalError> {
     Ok(OpencvLatch::new(64, true, 3, 2.0)?)
 }
 
@@ -39,23 +48,23 @@ impl ClatchMethod {
         }
     }
 
-    /// The settings this configuration runs with, given the ones from the command line.
-    pub fn settings(self, from_flags: &Settings) -> Result<Settings, CliError> {
+    /// The detector and descriptor settings this column runs with, and the OpenCV-compatible LATCH
+    /// that describes its keypoints instead of CLATCH, if any.
+    pub fn extraction(
+        self,
+        setup: &Setup,
+    ) -> Result<(ExtractorConfig, Option<OpencvLatch>), EvalError> {
         Ok(match self {
-            ClatchMethod::Clatch => Settings {
-                opencv_latch: None,
-                ..from_flags.clone()
-            },
+            ClatchMethod::Clatch => (setup.extractor.clone(), None),
             // Full-resolution keypoints: OpenCV-compatible LATCH describes no other level (an
             // explicit --pyramid keeps this method out, see methods_to_run).
-            ClatchMethod::ClatchOpencv => Settings {
-                opencv_latch: Some(opencv_default_latch()?),
-                extractor: clatch::ExtractorConfig {
+            ClatchMethod::ClatchOpencv => (
+                ExtractorConfig {
                     pyramid: None,
-                    ..from_flags.extractor.clone()
+                    ..setup.extractor.clone()
                 },
-                ..from_flags.clone()
-            },
+                Some(opencv_default_latch()?),
+            ),
         })
     }
 }
@@ -69,7 +78,7 @@ pub const DEFAULT_METHODS: [ClatchMethod; 2] = [ClatchMethod::Clatch, ClatchMeth
 pub fn methods_to_run(
     asked: &[ClatchMethod],
     pyramid: bool,
-) -> Result<(Vec<ClatchMethod>, Option<String>), CliError> {
+) -> Result<(Vec<ClatchMethod>, Option<String>), EvalError> {
     let opencv = ClatchMethod::ClatchOpencv;
     if asked.is_empty() {
         if !pyramid {
@@ -87,7 +96,7 @@ pub fn methods_to_run(
         return Ok((kept, Some(note)));
     }
     if pyramid && asked.contains(&opencv) {
-        return Err(CliError::OptionConflict {
+        return Err(EvalError::OptionConflict {
             options: "--method clatch-opencv with --pyramid".into(),
             reason: "OpenCV-compatible LATCH describes full-resolution keypoints only, not those \
                      of the other pyramid levels; drop --pyramid or that --method"
@@ -117,15 +126,12 @@ pub struct LoadedPair {
 }
 
 /// Reads a pair's images and homography.
-pub fn load_pair(pair: &EvalPair, tolerance: f64) -> Result<LoadedPair, CliError> {
-    let h = Homography::from_file(&pair.homography)?;
-    let limits = DecodeLimits::default();
-    let (a, b) = (
-        load_gray(&pair.image_a, &limits)?,
-        load_gray(&pair.image_b, &limits)?,
-    );
+pub fn load_pair(pair: &EvalPair, tolerance: f64) -> Result<LoadedPair, EvalError> {
+    let h = read_homography(&pair.homography)?;
+    let (a, b) = (read_gray(&pair.image_a)?, read_gray(&pair.image_b)?);
+    // Parsing refused singular matrices already.
     let truth = PairTruth::new(h, a.dimensions(), b.dimensions(), tolerance).ok_or_else(|| {
-        CliError::Homography {
+        EvalError::Homography {
             path: pair.homography.clone(),
             reason: "the matrix is singular".into(),
         }
@@ -138,24 +144,75 @@ pub fn load_pair(pair: &EvalPair, tolerance: f64) -> Result<LoadedPair, CliError
     })
 }
 
+/// What one column found on one pair.
+#[derive(Clone, Debug)]
+pub struct ColumnRun {
+    /// Keypoints and descriptors of image A.
+    pub a: Features,
+    /// Keypoints and descriptors of image B.
+    pub b: Features,
+    /// The configured matcher's matches, A's keypoint in `query`, B's in `train`.
+    pub matches: Vec<Match>,
+}
+
+/// Detects and describes one image: CLATCH on every level, or `latch` on the detector's keypoints.
+fn features(
+    extractor: &Extractor,
+    latch: Option<&OpencvLatch>,
+    img: &GrayImage,
+    path: &Path,
+) -> Result<Features, EvalError> {
+    let view = GrayView::try_from(img).in_image(path)?;
+    let features = match latch {
+        None => extractor.detect_and_describe(&view),
+        Some(latch) => extractor
+            .detect(&view)
+            .and_then(|keypoints| extractor.describe_opencv(latch, &view, &keypoints)),
+    };
+    features.in_image(path)
+}
+
+/// Detects, describes and matches one loaded pair as `method` does.
+pub fn run_column(
+    method: ClatchMethod,
+    setup: &Setup,
+    loaded: &LoadedPair,
+) -> Result<ColumnRun, EvalError> {
+    let (config, latch) = method.extraction(setup)?;
+    let extractor = Extractor::new(setup.backend, config)?;
+    let pair = &loaded.pair;
+    let a = features(&extractor, latch.as_ref(), &loaded.a, &pair.image_a)?;
+    let b = features(&extractor, latch.as_ref(), &loaded.b, &pair.image_b)?;
+    // The matcher refuses a gallery smaller than the neighbours it compares (two for the ratio
+    // test); such a pair simply has no match.
+    let needed = if setup.matching.ratio.is_some() { 2 } else { 1 };
+    let matches = if a.descriptors.is_empty() || b.descriptors.len() < needed {
+        Vec::new()
+    } else {
+        Matcher::new(setup.backend, setup.matching.clone())?
+            .match_descriptors(&a.descriptors, &b.descriptors)?
+    };
+    Ok(ColumnRun { a, b, matches })
+}
+
 /// The configured matches of a run (from the library) and its ratio-test curve (from 2-NN lists).
 pub fn evaluate_run(
     method: &str,
     loaded: &LoadedPair,
-    run: &PairRun,
-    settings: &Settings,
+    run: &ColumnRun,
+    setup: &Setup,
     ratios: &[f32],
-) -> Result<PairResult, CliError> {
-    let (kps_a, kps_b) = (&run.a.features.keypoints, &run.b.features.keypoints);
+) -> Result<PairResult, EvalError> {
+    let (kps_a, kps_b) = (&run.a.keypoints, &run.b.keypoints);
     let truth = &loaded.truth;
     let correct = |m: &Match| truth.is_correct(&kps_a[m.query as usize], &kps_b[m.train as usize]);
-    let config = &settings.matching;
-    let (qa, tb) = (&run.a.features.descriptors, &run.b.features.descriptors);
+    let config = &setup.matching;
+    let (qa, tb) = (&run.a.descriptors, &run.b.descriptors);
 
     let curve_candidates = if qa.is_empty() || tb.len() < 2 {
         Vec::new()
     } else {
-        let matcher = Matcher::new(settings.backend, config.clone())?;
+        let matcher = Matcher::new(setup.backend, config.clone())?;
         let knn = matcher.knn(qa, tb, 2)?;
         // Cross-check: the query must be the nearest query of its train descriptor.
         let reverse = if config.cross_check {
@@ -187,36 +244,29 @@ pub fn evaluate_run(
     })
 }
 
-/// Detects, describes and matches one loaded pair with `method`.
+/// Detects, describes and matches one loaded pair with `method`, and judges it.
 pub fn evaluate_pair(
     method: ClatchMethod,
-    from_flags: &Settings,
+    setup: &Setup,
     loaded: &LoadedPair,
     ratios: &[f32],
-) -> Result<PairResult, CliError> {
-    let settings = method.settings(from_flags)?;
-    let run = pipeline::match_pair(
-        &settings,
-        (&loaded.a, loaded.pair.image_a.as_path()),
-        (&loaded.b, loaded.pair.image_b.as_path()),
-        &Progress::hidden(),
-    )?;
-    evaluate_run(method.label(), loaded, &run, &settings, ratios)
+) -> Result<PairResult, EvalError> {
+    let run = run_column(method, setup, loaded)?;
+    evaluate_run(method.label(), loaded, &run, setup, ratios)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eval::metrics::ratio_grid;
-    use crate::eval::pairs::{SyntheticSource, write_synthetic};
-    use clatch::{Backend, DescriptorWidth, Extractor, ExtractorConfig, GrayView, MatchConfig};
+    use crate::metrics::ratio_grid;
+    use crate::pairs::{SyntheticSource, write_synthetic};
+    use clatch::DescriptorWidth;
 
-    fn settings(matching: MatchConfig) -> Settings {
-        Settings {
+    fn setup(matching: MatchConfig) -> Setup {
+        Setup {
             backend: Backend::Cpu,
             extractor: ExtractorConfig::default(),
             matching,
-            opencv_latch: None,
         }
     }
 
@@ -226,7 +276,7 @@ mod tests {
             std::env::temp_dir().join(format!("clatch-eval-run-{}-{tag}", std::process::id()));
         let source = SyntheticSource {
             name: "astronaut".into(),
-            image: crate::demo::embedded_image().unwrap(),
+            image: clatch_cli::photo::embedded_photo().unwrap(),
         };
         let pairs = write_synthetic(&source, &dir).unwrap();
         (dir, pairs)
@@ -235,7 +285,7 @@ mod tests {
     #[test]
     fn identity_pair_is_all_correct_and_rotation_pair_mostly() {
         let (dir, pairs) = astronaut_pairs("identity");
-        let s = settings(MatchConfig::default());
+        let s = setup(MatchConfig::default());
         let grid = ratio_grid();
 
         let same = load_pair(&pairs[0], 3.0).unwrap();
@@ -268,29 +318,20 @@ mod tests {
     #[test]
     fn opencv_column_describes_clatch_keypoints_with_opencv_latch() {
         let (dir, pairs) = astronaut_pairs("opencv");
-        let s = settings(MatchConfig::default());
+        let s = setup(MatchConfig::default());
         let grid = ratio_grid();
         let method = ClatchMethod::ClatchOpencv;
         assert_eq!(method.label(), "clatch (OpenCV-compatible)");
-        let opencv = method.settings(&s).unwrap();
-        assert_eq!(
-            opencv.opencv_latch,
-            Some(OpencvLatch::new(64, true, 3, 2.0).unwrap())
-        );
-        assert_eq!(
-            ClatchMethod::Clatch.settings(&opencv).unwrap().opencv_latch,
-            None
-        );
+        let (config, latch) = method.extraction(&s).unwrap();
+        assert_eq!(latch, Some(OpencvLatch::new(64, true, 3, 2.0).unwrap()));
+        assert_eq!(config.pyramid, None);
+        assert!(s.extractor.pyramid.is_some(), "the default has a pyramid");
+        let (clatch_config, no_latch) = ClatchMethod::Clatch.extraction(&s).unwrap();
+        assert_eq!((clatch_config, no_latch), (s.extractor.clone(), None));
 
         let rot = load_pair(&pairs[2], 3.0).unwrap();
         assert_eq!(rot.pair.name, "astronaut rot 30");
-        let run = pipeline::match_pair(
-            &opencv,
-            (&rot.a, rot.pair.image_a.as_path()),
-            (&rot.b, rot.pair.image_b.as_path()),
-            &Progress::hidden(),
-        )
-        .unwrap();
+        let run = run_column(method, &s, &rot).unwrap();
         // The keypoints are the detector's (with its angles); the descriptors are the library's
         // OpenCV-compatible ones for them, not CLATCH's.
         let extractor = Extractor::new(
@@ -305,25 +346,19 @@ mod tests {
             let view = GrayView::try_from(img).unwrap();
             let detected = extractor.detect(&view).unwrap();
             assert!(detected.iter().any(|k| k.angle != 0.0));
-            let latch = opencv.opencv_latch.as_ref().unwrap();
+            let latch = latch.as_ref().unwrap();
             let expected = extractor.describe_opencv(latch, &view, &detected).unwrap();
             assert!(!expected.keypoints.is_empty());
-            assert_eq!(got.features, expected);
-            assert_eq!(got.features.descriptors.width(), DescriptorWidth::FULL);
+            assert_eq!(*got, expected);
+            assert_eq!(got.descriptors.width(), DescriptorWidth::FULL);
             let clatch = extractor.describe(&view, &detected).unwrap();
-            assert_ne!(got.features, clatch, "CLATCH descriptors");
+            assert_ne!(*got, clatch, "CLATCH descriptors");
         }
 
         // Its figures: labelled, matched by the configured matcher, judged by the homography.
-        let r = evaluate_run(method.label(), &rot, &run, &opencv, &grid).unwrap();
+        let r = evaluate_run(method.label(), &rot, &run, &s, &grid).unwrap();
         assert_eq!(r.method, "clatch (OpenCV-compatible)");
-        assert_eq!(
-            r.keypoints,
-            (
-                run.a.features.keypoints.len(),
-                run.b.features.keypoints.len()
-            )
-        );
+        assert_eq!(r.keypoints, (run.a.keypoints.len(), run.b.keypoints.len()));
         assert!(r.matches > 0 && r.correct > 0, "{r:?}");
         let at_08 = r.curve.iter().find(|p| p.ratio == 0.8).unwrap();
         assert_eq!((at_08.kept, at_08.correct_kept), (r.matches, r.correct));
@@ -357,7 +392,7 @@ mod tests {
         );
         let e = methods_to_run(&[Clatch, ClatchOpencv], true).unwrap_err();
         assert!(
-            matches!(e, CliError::OptionConflict { .. }) && e.to_string().contains("--pyramid"),
+            matches!(e, EvalError::OptionConflict { .. }) && e.to_string().contains("--pyramid"),
             "{e}"
         );
     }
@@ -371,7 +406,7 @@ mod tests {
             max_distance: Some(120),
         };
         let loaded = load_pair(&pairs[15], 3.0).unwrap();
-        let r = evaluate_pair(ClatchMethod::Clatch, &settings(config), &loaded, &[0.9]).unwrap();
+        let r = evaluate_pair(ClatchMethod::Clatch, &setup(config), &loaded, &[0.9]).unwrap();
         assert_eq!(
             (r.curve[0].kept, r.curve[0].correct_kept),
             (r.matches, r.correct)

@@ -2,7 +2,7 @@
 """OpenCV ORB keypoints + OpenCV LATCH descriptors, handed to COLMAP 3.8 exactly as `clatch colmap`
 hands its own: the baseline of EVALUATION.md's COLMAP table.
 
-    python3 tools/colmap_opencv_baseline.py IMAGES_DIR K_FILE OUT_DIR [--features N] [--ratio 0.8]
+    python3 eval/scripts/colmap_opencv_baseline.py IMAGES_DIR K_FILE OUT_DIR [--features N] [--ratio 0.8]
         [--descriptor latch|orb]
 
 Per image: ORB (nfeatures=N, OpenCV defaults otherwise: 8 levels, scale 1.2, FAST 20), LATCH (OpenCV

@@ -4,9 +4,8 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::error::CliError;
-use crate::eval::pairs::EvalPair;
-use crate::homography::Homography;
+use crate::error::{EvalError, IoContext};
+use crate::pairs::{EvalPair, read_homography};
 
 /// Image extensions a sequence may use, in the order they are looked for.
 pub const IMAGE_EXTENSIONS: [&str; 4] = ["ppm", "pgm", "png", "jpg"];
@@ -94,27 +93,23 @@ pub fn detect_layout(dir: &Path) -> Option<Layout> {
 
 /// The name of a sequence folder: its own name, with the `oxford_` prefix of the Oxford download's
 /// folders dropped so that `oxford_graf` keeps its pairs' historical names (`graf 1-2`).
-pub fn sequence_name(dir: &Path) -> Result<String, CliError> {
+pub fn sequence_name(dir: &Path) -> Result<String, EvalError> {
     let folder = match dir.file_name() {
         Some(name) => name.to_os_string(),
         // `.` or `..`: the name of the folder they stand for.
         None => std::fs::canonicalize(dir)
-            .map_err(|source| CliError::Read {
-                path: dir.to_path_buf(),
-                source,
-            })?
+            .reading(dir)?
             .file_name()
             .map(|n| n.to_os_string())
             .unwrap_or_default(),
     };
     let folder = folder.to_string_lossy();
     let name = folder.strip_prefix("oxford_").unwrap_or(&folder);
-    let bad = |c: char| c == ',' || c == '"' || c.is_control();
-    if name.is_empty() || name.chars().any(bad) {
-        return Err(CliError::EvalInput {
+    if name.is_empty() || name.chars().any(char::is_control) {
+        return Err(EvalError::Input {
             path: dir.to_path_buf(),
             reason: "a sequence is named by its folder, and this folder's name is empty or holds \
-                     a comma, quote or control character; rename it"
+                     a control character; rename it"
                 .into(),
         });
     }
@@ -122,9 +117,9 @@ pub fn sequence_name(dir: &Path) -> Result<String, CliError> {
 }
 
 /// Image 1 against every image k that has a homography `1 to k`, in the order of k.
-pub fn sequence_pairs(dir: &Path, layout: Layout) -> Result<Vec<EvalPair>, CliError> {
+pub fn sequence_pairs(dir: &Path, layout: Layout) -> Result<Vec<EvalPair>, EvalError> {
     let name = sequence_name(dir)?;
-    let missing = |path: PathBuf, what: &str| CliError::EvalInput {
+    let missing = |path: PathBuf, what: &str| EvalError::Input {
         path,
         reason: format!("{what} not found ({layout:?} layout)"),
     };
@@ -138,16 +133,9 @@ pub fn sequence_pairs(dir: &Path, layout: Layout) -> Result<Vec<EvalPair>, CliEr
         })
     };
     let image_a = image(1)?;
-    let entries = std::fs::read_dir(dir).map_err(|source| CliError::Read {
-        path: dir.to_path_buf(),
-        source,
-    })?;
     let mut indices = Vec::new();
-    for entry in entries {
-        let entry = entry.map_err(|source| CliError::Read {
-            path: dir.to_path_buf(),
-            source,
-        })?;
+    for entry in std::fs::read_dir(dir).reading(dir)? {
+        let entry = entry.reading(dir)?;
         if let Some(k) = entry
             .file_name()
             .to_str()
@@ -168,7 +156,7 @@ pub fn sequence_pairs(dir: &Path, layout: Layout) -> Result<Vec<EvalPair>, CliEr
         .map(|k| {
             let homography = dir.join(layout.homography_name(k));
             // Read now so that a malformed file stops the run before any work, naming the file.
-            Homography::from_file(&homography)?;
+            read_homography(&homography)?;
             Ok(EvalPair {
                 name: format!("{name} 1-{k}"),
                 group: layout.group(&name),
@@ -183,9 +171,9 @@ pub fn sequence_pairs(dir: &Path, layout: Layout) -> Result<Vec<EvalPair>, CliEr
 
 /// The pairs of `data` if it is a sequence folder, else of each sequence folder inside it (sorted by
 /// name); the second list names the subfolders skipped because they hold no first image.
-pub fn sequences_under(data: &Path) -> Result<(Vec<EvalPair>, Vec<PathBuf>), CliError> {
+pub fn sequences_under(data: &Path) -> Result<(Vec<EvalPair>, Vec<PathBuf>), EvalError> {
     if !data.is_dir() {
-        return Err(CliError::EvalInput {
+        return Err(EvalError::Input {
             path: data.to_path_buf(),
             reason: "data folder not found".into(),
         });
@@ -193,13 +181,9 @@ pub fn sequences_under(data: &Path) -> Result<(Vec<EvalPair>, Vec<PathBuf>), Cli
     if let Some(layout) = detect_layout(data) {
         return Ok((sequence_pairs(data, layout)?, Vec::new()));
     }
-    let read_error = |source| CliError::Read {
-        path: data.to_path_buf(),
-        source,
-    };
     let mut folders = Vec::new();
-    for entry in std::fs::read_dir(data).map_err(read_error)? {
-        let path = entry.map_err(read_error)?.path();
+    for entry in std::fs::read_dir(data).reading(data)? {
+        let path = entry.reading(data)?.path();
         let hidden = path
             .file_name()
             .is_some_and(|n| n.to_string_lossy().starts_with('.'));
@@ -216,7 +200,7 @@ pub fn sequences_under(data: &Path) -> Result<(Vec<EvalPair>, Vec<PathBuf>), Cli
         }
     }
     if pairs.is_empty() {
-        return Err(CliError::EvalInput {
+        return Err(EvalError::Input {
             path: data.to_path_buf(),
             reason: "no homography sequence here or in its subfolders (looked for img1.* with \
                      H1to2p... (Oxford) and 1.* with H_1_2... (HPatches))"
@@ -318,7 +302,7 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let e = sequences_under(&root).unwrap_err();
         assert!(
-            matches!(e, CliError::EvalInput { .. })
+            matches!(e, EvalError::Input { .. })
                 && e.to_string().contains("no homography sequence"),
             "{e}"
         );
@@ -333,7 +317,7 @@ mod tests {
         std::fs::write(dir.join("H1to3p"), "1 0 0\n0 one 0\n0 0 1\n").unwrap();
         let e = sequences_under(&root).unwrap_err();
         assert!(
-            matches!(&e, CliError::Homography { path, .. } if path.ends_with("H1to3p")),
+            matches!(&e, EvalError::Homography { path, .. } if path.ends_with("H1to3p")),
             "{e}"
         );
         std::fs::write(dir.join("H1to3p"), IDENTITY).unwrap();
@@ -343,13 +327,17 @@ mod tests {
 
         assert!(matches!(
             sequences_under(&root.join("nope")),
-            Err(CliError::EvalInput { .. })
+            Err(EvalError::Input { .. })
         ));
+        // A comma is fine (the files are proper CSV); a control character is not.
         let comma = root.join("a,b");
         write_sequence(&comma, Layout::Hpatches, 2, "ppm");
+        assert_eq!(sequences_under(&comma).unwrap().0[0].name, "a,b 1-2");
+        let tab = root.join("a\tb");
+        write_sequence(&tab, Layout::Hpatches, 2, "ppm");
         assert!(matches!(
-            sequences_under(&comma),
-            Err(CliError::EvalInput { path, .. }) if path == comma
+            sequences_under(&tab),
+            Err(EvalError::Input { path, .. }) if path == tab
         ));
         std::fs::remove_dir_all(&root).ok();
     }

@@ -2,7 +2,7 @@
 //! `panel,series,x,y` CSV (`tools/collect.py` writes one from a benchmark run).
 //!
 //! ```sh
-//! cargo run --release --example bench_chart -- docs/bench/RUN/figures.csv docs/bench/RUN/throughput.png
+//! cargo run --release -p clatch-eval --example bench_chart -- docs/bench/RUN/figures.csv docs/bench/RUN/throughput.png
 //! ```
 //!
 //! Log-log panels side by side. Lines `#panel,NAME,TITLE,X LABEL,Y LABEL` name the panels and their

@@ -1,18 +1,18 @@
 #!/usr/bin/env python3
-"""OpenCV's LATCH (on ORB keypoints), ORB and SIFT on the pairs of `clatch eval`, judged by the same
-rule, written in the same format (PREFIX.summary.csv, PREFIX.pr.csv) so that `clatch eval` merges them.
+"""OpenCV's LATCH (on ORB keypoints), ORB and SIFT on the pairs of `clatch-eval`, judged by the same
+rule, written in the same format (PREFIX.summary.csv, PREFIX.pr.csv) so that `clatch-eval` merges them.
 
-The rule (EVALUATION.md, src/bin/clatch/eval/metrics.rs): a match (a, b) is correct iff
+The rule (EVALUATION.md, eval/src/metrics.rs): a match (a, b) is correct iff
 |H(a) - b| <= tolerance; a keypoint of A is in the overlap iff H(a) lies inside B, one of B iff
 H^-1(b) lies inside A; matching score = correct / min(overlap A, overlap B); candidates are the 1-NN
 matches of A's keypoints that pass the cross-check (if on); at ratio r a candidate is kept iff
 float32(d1) < float32(r) * float32(d2); precision = correct kept / kept, recall = correct kept /
 correct candidates.
 
-Usage (normally run by `clatch eval --opencv-python PYTHON`):
-    python3 tools/eval_opencv.py --manifest OUT/pairs.csv --out OUT/opencv [--inlier-px 3]
+Usage (normally run by `clatch-eval --opencv-python PYTHON`):
+    python3 eval/scripts/eval_opencv.py --manifest OUT/pairs.csv --out OUT/opencv [--inlier-px 3]
         [--max-keypoints 5000] [--ratio 0.8 | --no-ratio] [--no-cross-check]
-Needs the versions pinned in tools/requirements-eval.txt.
+Needs the versions pinned in eval/scripts/requirements.txt.
 """
 
 import argparse
@@ -25,7 +25,7 @@ import numpy as np
 
 TESTED_OPENCV = "4.12.0"
 RATIOS = [np.float32((50 + 5 * i) / 100) for i in range(11)]
-# The same headers as src/bin/clatch/eval/results.rs (a Rust test compares them).
+# The same headers as eval/src/results.rs (a Rust test compares them).
 SUMMARY_HEADER = "method,pair,group,param,width_a,height_a,width_b,height_b,keypoints_a,keypoints_b,overlap_a,overlap_b,matches,correct,correct_1nn,precision,matching_score"  # noqa: E501
 PR_HEADER = "method,pair,ratio,kept,correct_kept,correct_1nn,precision,recall"
 
@@ -168,7 +168,7 @@ def evaluate(pair, h, img_a, img_b, method, args):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--manifest", required=True, help="pairs.csv written by clatch eval")
+    parser.add_argument("--manifest", required=True, help="pairs.csv written by clatch-eval")
     parser.add_argument("--out", required=True, help="output prefix: PREFIX.summary.csv, PREFIX.pr.csv")
     parser.add_argument("--inlier-px", type=float, default=3.0)
     parser.add_argument("--max-keypoints", type=int, default=5000)
@@ -187,7 +187,7 @@ def main():
         with open(args.manifest, newline="") as f:
             pairs = list(csv.DictReader(f))
         if not pairs or set(pairs[0]) != {"pair", "group", "param", "image_a", "image_b", "homography"}:
-            raise EvalInputError(f"{args.manifest}: not a clatch eval manifest")
+            raise EvalInputError(f"{args.manifest}: not a clatch-eval manifest")
         summaries, prs = [], []
         for i, pair in enumerate(pairs):
             h = read_homography(pair["homography"])

@@ -1,18 +1,19 @@
-//! The image pairs of `clatch eval`: OpenCV's graf sample, synthetic warps (sequences on disk are in
-//! [`super::sequences`]); and the manifest (`pairs.csv`) that hands the very same files to
-//! `tools/eval_opencv.py`.
+//! The image pairs of `clatch-eval`: OpenCV's graf sample, synthetic warps (sequences on disk are in
+//! [`crate::sequences`]); and the manifest (`pairs.csv`) that hands the very same files to
+//! `scripts/eval_opencv.py`.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use clatch::GrayView;
 use clatch::decode::DecodeLimits;
+use clatch::homography::{Homography, warp};
+use clatch_cli::photo::demo_homography;
 use image::GrayImage;
+use serde::Serialize;
 
-use crate::error::CliError;
-use crate::eval::degrade::{BLUR_SIGMAS, NOISE_SIGMAS, add_noise, gaussian_blur, noise_seed};
-use crate::homography::{Homography, about_centre, demo_homography};
-use crate::input::load_gray;
-use crate::warp::warp;
+use crate::degrade::{BLUR_SIGMAS, NOISE_SIGMAS, add_noise, gaussian_blur, noise_seed};
+use crate::error::{EvalError, ImageContext, IoContext, write_file};
+use crate::results::{Shortest, write_rows};
 
 /// One pair: image A, image B and the homography mapping A's pixels to B's.
 #[derive(Clone, Debug, PartialEq)]
@@ -52,15 +53,15 @@ pub fn rotations() -> Vec<f64> {
 /// Synthetic scale factors (no rotation): 0.5 to 2.
 pub const SCALES: [f64; 10] = [0.5, 0.6, 0.7, 0.8, 0.9, 1.15, 1.3, 1.5, 1.75, 2.0];
 
-fn missing(path: &Path, what: &str) -> CliError {
-    CliError::EvalInput {
+fn missing(path: &Path, what: &str) -> EvalError {
+    EvalError::Input {
         path: path.to_path_buf(),
         reason: format!("{what} not found"),
     }
 }
 
 /// OpenCV's sample pair in `dir`: `graf1.png`, `graf3.png`, `H1to3p.xml`.
-pub fn opencv_sample_pair(dir: &Path) -> Result<EvalPair, CliError> {
+pub fn opencv_sample_pair(dir: &Path) -> Result<EvalPair, EvalError> {
     let file = |name: &str| {
         let path = dir.join(name);
         if path.is_file() {
@@ -87,8 +88,24 @@ pub struct SyntheticSource {
     pub image: GrayImage,
 }
 
+/// Reads a homography file: nine numbers (the Oxford and HPatches format) or OpenCV FileStorage XML.
+pub fn read_homography(path: &Path) -> Result<Homography, EvalError> {
+    let text = std::fs::read_to_string(path).reading(path)?;
+    text.parse().map_err(
+        |e: clatch::homography::ParseHomographyError| EvalError::Homography {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        },
+    )
+}
+
+/// Decodes an image as 8-bit gray.
+pub fn read_gray(path: &Path) -> Result<GrayImage, EvalError> {
+    Ok(clatch::decode::open_gray(path, &DecodeLimits::default())?)
+}
+
 /// Parses `NAME=PATH` or `PATH` (the name is then the file stem) and loads the image.
-pub fn synthetic_source(arg: &str) -> Result<SyntheticSource, CliError> {
+pub fn synthetic_source(arg: &str) -> Result<SyntheticSource, EvalError> {
     let (name, path) = match arg.split_once('=') {
         Some((name, path)) => (name.to_string(), PathBuf::from(path)),
         None => {
@@ -99,7 +116,7 @@ pub fn synthetic_source(arg: &str) -> Result<SyntheticSource, CliError> {
     };
     let ok = |c: char| c.is_ascii_alphanumeric() || c == '-' || c == '_';
     if name.is_empty() || !name.chars().all(ok) {
-        return Err(CliError::EvalInput {
+        return Err(EvalError::Input {
             path,
             reason: format!(
                 "synthetic source name `{name}` must be letters, digits, `-` or `_` \
@@ -108,7 +125,7 @@ pub fn synthetic_source(arg: &str) -> Result<SyntheticSource, CliError> {
         });
     }
     Ok(SyntheticSource {
-        image: load_gray(&path, &DecodeLimits::default())?,
+        image: read_gray(&path)?,
         name,
     })
 }
@@ -119,11 +136,11 @@ pub fn synthetic_warps(width: u32, height: u32) -> Vec<(String, &'static str, f6
     let (w, h) = (width as usize, height as usize);
     let mut warps = Vec::new();
     for degrees in rotations() {
-        let hom = about_centre(w, h, &Homography::rotation_scale(degrees, 1.0));
+        let hom = Homography::rotation_scale(degrees, 1.0).about_centre(w, h);
         warps.push((format!("rot {degrees}"), GROUP_ROTATION, degrees, hom));
     }
     for scale in SCALES {
-        let hom = about_centre(w, h, &Homography::rotation_scale(0.0, scale));
+        let hom = Homography::rotation_scale(0.0, scale).about_centre(w, h);
         warps.push((format!("scale {scale:.2}"), GROUP_SCALE, scale, hom));
     }
     // The demo's view (30 degrees, 0.9, slight tilt) and a strong tilt: w from 0.75 to 1.25 across
@@ -139,26 +156,17 @@ pub fn synthetic_warps(width: u32, height: u32) -> Vec<(String, &'static str, f6
         "persp strong".into(),
         GROUP_PERSPECTIVE,
         2.0,
-        about_centre(w, h, &strong),
+        strong.about_centre(w, h),
     ));
     warps
 }
 
-/// The homography in the Oxford text format, every digit kept (Rust prints the shortest decimal that
-/// reads back to the same `f64`).
-pub fn homography_text(h: &Homography) -> String {
-    let mut s = String::new();
-    for row in &h.0 {
-        let _ = writeln!(s, "{} {} {}", row[0], row[1], row[2]);
-    }
-    s
-}
-
-fn save_png(img: &GrayImage, path: &Path) -> Result<(), CliError> {
-    crate::output::write_file(path, |w| {
-        img.write_to(w, image::ImageFormat::Png)
-            .map_err(std::io::Error::other)
-    })
+fn save_png(img: &GrayImage, path: &Path) -> Result<(), EvalError> {
+    img.save_with_format(path, image::ImageFormat::Png)
+        .map_err(|source| EvalError::Encode {
+            path: path.to_path_buf(),
+            source,
+        })
 }
 
 /// The photometric views of an image: (suffix, group, parameter, B), each with A's geometry.
@@ -177,18 +185,17 @@ pub fn degraded_views(img: &GrayImage) -> Vec<(String, &'static str, f64, GrayIm
 
 /// Writes `source` and its synthetic views into `dir` (PNG images, Oxford-format homographies) and
 /// returns their pairs: the warps, then the noisy and blurred copies.
-pub fn write_synthetic(source: &SyntheticSource, dir: &Path) -> Result<Vec<EvalPair>, CliError> {
-    std::fs::create_dir_all(dir).map_err(CliError::write(dir))?;
+pub fn write_synthetic(source: &SyntheticSource, dir: &Path) -> Result<Vec<EvalPair>, EvalError> {
+    std::fs::create_dir_all(dir).writing(dir)?;
     let (width, height) = source.image.dimensions();
     let image_a = dir.join(format!("{}.png", source.name));
     save_png(&source.image, &image_a)?;
+    let view = GrayView::try_from(&source.image).in_image(&image_a)?;
     let mut views = Vec::new();
     for (suffix, group, param, hom) in synthetic_warps(width, height) {
-        let warped =
-            warp(&source.image, &hom, width, height).ok_or_else(|| CliError::EvalInput {
-                path: image_a.clone(),
-                reason: format!("warp `{suffix}` is singular"),
-            })?;
+        let pixels = warp(&view, &hom, width as usize, height as usize)?;
+        let warped = GrayImage::from_raw(width, height, pixels)
+            .expect("a warp has the asked width x height pixels");
         views.push((suffix, group, param, hom, warped));
     }
     for (suffix, group, param, degraded) in degraded_views(&source.image) {
@@ -200,10 +207,7 @@ pub fn write_synthetic(source: &SyntheticSource, dir: &Path) -> Result<Vec<EvalP
         let image_b = dir.join(format!("{file}.png"));
         save_png(&image, &image_b)?;
         let homography = dir.join(format!("{file}.H"));
-        let text = homography_text(&hom);
-        crate::output::write_file(&homography, |w| {
-            std::io::Write::write_all(w, text.as_bytes())
-        })?;
+        write_file(&homography, hom.to_string().as_bytes())?;
         pairs.push(EvalPair {
             name: format!("{} {suffix}", source.name),
             group: group.into(),
@@ -216,30 +220,35 @@ pub fn write_synthetic(source: &SyntheticSource, dir: &Path) -> Result<Vec<EvalP
     Ok(pairs)
 }
 
-/// The manifest: `pair,group,param,image_a,image_b,homography`, one pair a line, absolute paths.
-pub fn manifest(pairs: &[EvalPair]) -> Result<String, CliError> {
-    let mut s = String::from("pair,group,param,image_a,image_b,homography\n");
-    for p in pairs {
-        let mut fields = vec![p.name.clone(), p.group.clone()];
-        fields.push(p.param.map(|v| v.to_string()).unwrap_or_default());
-        for path in [&p.image_a, &p.image_b, &p.homography] {
-            let absolute = std::path::absolute(path).map_err(|source| CliError::Read {
-                path: path.clone(),
-                source,
-            })?;
-            fields.push(absolute.display().to_string());
-        }
-        if let Some(bad) = fields.iter().find(|f| f.contains([',', '"', '\n'])) {
-            return Err(CliError::EvalInput {
-                path: p.image_a.clone(),
-                reason: format!(
-                    "`{bad}` holds a comma, quote or newline; the manifest is plain CSV"
-                ),
-            });
-        }
-        let _ = writeln!(s, "{}", fields.join(","));
-    }
-    Ok(s)
+/// One line of the manifest.
+#[derive(Serialize)]
+struct ManifestRow<'a> {
+    pair: &'a str,
+    group: &'a str,
+    param: Shortest,
+    image_a: PathBuf,
+    image_b: PathBuf,
+    homography: PathBuf,
+}
+
+/// Writes the manifest to `path`: `pair,group,param,image_a,image_b,homography`, one pair a line,
+/// absolute paths.
+pub fn write_manifest(pairs: &[EvalPair], path: &Path) -> Result<(), EvalError> {
+    let absolute = |p: &Path| std::path::absolute(p).reading(p);
+    let rows = pairs
+        .iter()
+        .map(|p| {
+            Ok(ManifestRow {
+                pair: &p.name,
+                group: &p.group,
+                param: Shortest(p.param),
+                image_a: absolute(&p.image_a)?,
+                image_b: absolute(&p.image_b)?,
+                homography: absolute(&p.homography)?,
+            })
+        })
+        .collect::<Result<Vec<_>, EvalError>>()?;
+    write_rows(path, rows)
 }
 
 #[cfg(test)]
@@ -279,12 +288,6 @@ mod tests {
         );
     }
 
-    #[test]
-    fn homography_text_reads_back_exactly() {
-        let h = demo_homography(512, 512);
-        assert_eq!(Homography::parse(&homography_text(&h)).unwrap(), h);
-    }
-
     /// Image A of the synthetic pairs (the same file for all).
     fn rot_a(pairs: &[EvalPair]) -> PathBuf {
         pairs[0].image_a.clone()
@@ -316,43 +319,48 @@ mod tests {
             (blur, gaussian_blur(&source.image, 3.0)),
         ] {
             assert_eq!(pair.image_a, rot_a(&pairs));
-            assert_eq!(
-                load_gray(&pair.image_b, &DecodeLimits::default()).unwrap(),
-                expected
-            );
+            assert_eq!(read_gray(&pair.image_b).unwrap(), expected);
             assert_ne!(expected, source.image);
             assert_eq!(
-                Homography::from_file(&pair.homography).unwrap(),
+                read_homography(&pair.homography).unwrap(),
                 Homography::identity()
             );
         }
         let rot = &pairs[2];
         assert_eq!(rot.name, "ramp rot 30");
-        assert_eq!(
-            load_gray(&rot.image_a, &DecodeLimits::default()).unwrap(),
-            source.image
-        );
-        assert_eq!(
-            load_gray(&rot.image_b, &DecodeLimits::default())
-                .unwrap()
-                .dimensions(),
-            (70, 66)
-        );
-        let h = Homography::from_file(&rot.homography).unwrap();
+        assert_eq!(read_gray(&rot.image_a).unwrap(), source.image);
+        assert_eq!(read_gray(&rot.image_b).unwrap().dimensions(), (70, 66));
+        let h = read_homography(&rot.homography).unwrap();
         assert_eq!(h, synthetic_warps(70, 66)[2].3);
-        let text = manifest(&pairs).unwrap();
-        let second = text.lines().nth(1).unwrap();
-        assert!(
-            second.starts_with("ramp rot 0,synthetic-rotation,0,/"),
-            "{second}"
+        // The demo's view, exactly: the homography file holds every digit.
+        let demo = pairs.iter().find(|p| p.name == "ramp persp demo").unwrap();
+        assert_eq!(
+            read_homography(&demo.homography).unwrap(),
+            demo_homography(70, 66)
         );
-        std::fs::remove_dir_all(&dir).ok();
 
-        let bad = EvalPair {
-            name: "a,b".into(),
+        // The manifest: proper CSV, so a name with a comma or a quote reads back whole.
+        let quoted = EvalPair {
+            name: "a,\"b\"".into(),
             ..pairs[0].clone()
         };
-        assert!(matches!(manifest(&[bad]), Err(CliError::EvalInput { .. })));
+        let manifest_path = dir.join("pairs.csv");
+        write_manifest(&[pairs[0].clone(), quoted], &manifest_path).unwrap();
+        let text = std::fs::read_to_string(&manifest_path).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[0], "pair,group,param,image_a,image_b,homography");
+        assert!(
+            lines[1].starts_with("ramp rot 0,synthetic-rotation,0,/"),
+            "{}",
+            lines[1]
+        );
+        let mut reader = csv::Reader::from_path(&manifest_path).unwrap();
+        let names: Vec<String> = reader
+            .records()
+            .map(|r| r.unwrap()[0].to_string())
+            .collect();
+        assert_eq!(names, ["ramp rot 0", "a,\"b\""]);
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]
@@ -360,17 +368,24 @@ mod tests {
         let dir = temp_dir("sample");
         assert!(matches!(
             opencv_sample_pair(&dir),
-            Err(CliError::EvalInput { .. })
+            Err(EvalError::Input { .. })
         ));
         std::fs::remove_dir_all(&dir).ok();
 
         assert!(matches!(
             synthetic_source("bad name=x.png"),
-            Err(CliError::EvalInput { .. })
+            Err(EvalError::Input { .. })
         ));
         assert!(matches!(
             synthetic_source("/nonexistent/clatch.png"),
-            Err(CliError::Decode(clatch::decode::DecodeError::Io { .. }))
+            Err(EvalError::Decode(clatch::decode::DecodeError::Io { .. }))
+        ));
+        assert!(matches!(
+            read_homography(Path::new("/nonexistent/H1to2p")),
+            Err(EvalError::File {
+                access: crate::error::Access::Read,
+                ..
+            })
         ));
     }
 }

@@ -1,11 +1,35 @@
-//! `clatch eval --data` on homography sequences built here: one in the Oxford layout, one in the
+//! `clatch-eval --data` on homography sequences built here: one in the Oxford layout, one in the
 //! HPatches layout, read as a folder of sequences.
 
-mod common;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 
-use std::path::Path;
+/// A fresh folder for one test.
+fn workdir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("clatch-eval-seq-{}-{name}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
 
-use common::{clatch, photo, str, workdir};
+/// Runs `clatch-eval ARGS...` to its end.
+fn clatch_eval(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_clatch-eval"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Asserts a clean refusal: exit status 1 (not a panic's 101) and `needle` in stderr.
+fn assert_refused(out: &Output, needle: &str) {
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{e}");
+    assert!(e.contains(needle), "expected {needle:?} in: {e}");
+}
+
+fn str(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
 
 /// Shifts by (dx, dy): the homography B = A moved right and down.
 fn shift_text(dx: u32, dy: u32) -> String {
@@ -15,7 +39,7 @@ fn shift_text(dx: u32, dy: u32) -> String {
 /// Images 1..=3 of one photo shifted by 0, 4 and 8 pixels, with the homographies from image 1.
 fn write_sequence(dir: &Path, image_name: impl Fn(u32) -> String, h_name: impl Fn(u32) -> String) {
     std::fs::create_dir_all(dir).unwrap();
-    let base = photo(200, 160, 0);
+    let base = clatch_cli::photo::embedded_photo().unwrap();
     for k in 1..=3u32 {
         let d = 4 * (k - 1);
         let shifted = image::GrayImage::from_fn(200, 160, |x, y| {
@@ -43,7 +67,7 @@ fn rows(path: &Path) -> Vec<Vec<String>> {
 
 #[test]
 fn eval_reads_oxford_and_hpatches_sequences_named_by_folder() {
-    let dir = workdir("eval-seq", "layouts");
+    let dir = workdir("layouts");
     let data = dir.join("data");
     write_sequence(
         &data.join("oxford_tiny"),
@@ -57,8 +81,7 @@ fn eval_reads_oxford_and_hpatches_sequences_named_by_folder() {
     );
     std::fs::create_dir_all(data.join("not_a_sequence")).unwrap();
     let out = dir.join("out");
-    let run = clatch(&[
-        "eval",
+    let run = clatch_eval(&[
         "--no-synthetic",
         "--data",
         str(&data),
@@ -67,7 +90,11 @@ fn eval_reads_oxford_and_hpatches_sequences_named_by_folder() {
         "-o",
         str(&out),
     ]);
-    assert!(run.status.success(), "{}", common::stderr(&run));
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(stdout.contains("skipped"), "{stdout}");
 
@@ -105,8 +132,7 @@ fn eval_reads_oxford_and_hpatches_sequences_named_by_folder() {
     );
 
     // The same sequence given twice: pair names would clash.
-    let twice = clatch(&[
-        "eval",
+    let twice = clatch_eval(&[
         "--no-synthetic",
         "--data",
         str(&data.join("v_tiny")),
@@ -117,18 +143,17 @@ fn eval_reads_oxford_and_hpatches_sequences_named_by_folder() {
         "-o",
         str(&dir.join("out2")),
     ]);
-    common::assert_refused(&twice, "two pairs are named `v_tiny 1-2`");
+    assert_refused(&twice, "two pairs are named `v_tiny 1-2`");
     std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
 fn pyramid_runs_with_the_default_methods_and_refuses_the_opencv_column_when_asked() {
-    let dir = workdir("eval-seq", "pyramid");
+    let dir = workdir("pyramid");
     let data = dir.join("v_tiny");
     write_sequence(&data, |k| format!("{k}.png"), |k| format!("H_1_{k}"));
     let out = dir.join("out");
-    let run = clatch(&[
-        "eval",
+    let run = clatch_eval(&[
         "--no-synthetic",
         "--data",
         str(&data),
@@ -137,7 +162,11 @@ fn pyramid_runs_with_the_default_methods_and_refuses_the_opencv_column_when_aske
         "-o",
         str(&out),
     ]);
-    assert!(run.status.success(), "{}", common::stderr(&run));
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(
         stdout.contains("clatch (OpenCV-compatible) left out"),
@@ -149,8 +178,7 @@ fn pyramid_runs_with_the_default_methods_and_refuses_the_opencv_column_when_aske
         .collect();
     assert_eq!(methods, ["clatch", "clatch"]);
 
-    let asked = clatch(&[
-        "eval",
+    let asked = clatch_eval(&[
         "--no-synthetic",
         "--data",
         str(&data),
@@ -161,7 +189,7 @@ fn pyramid_runs_with_the_default_methods_and_refuses_the_opencv_column_when_aske
         "-o",
         str(&dir.join("out2")),
     ]);
-    common::assert_refused(&asked, "--method clatch-opencv with --pyramid: ");
+    assert_refused(&asked, "--method clatch-opencv with --pyramid: ");
     // Refused before any output is written.
     assert!(!dir.join("out2").exists());
     std::fs::remove_dir_all(&dir).ok();

@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
-"""Per-group totals of `clatch eval` runs against OpenCV's ORB (and LATCH) from the same pairs.
+"""Per-group totals of `clatch-eval` runs against OpenCV's ORB (and LATCH) from the same pairs.
 
-    python3 tools/eval_groups.py OPENCV_SUMMARY.csv NAME=RUN_DIR [NAME=RUN_DIR ...]
+    python3 eval/scripts/eval_groups.py OPENCV_SUMMARY.csv NAME=RUN_DIR [NAME=RUN_DIR ...]
 
 For every pair group (Oxford sequences, OpenCV's graf sample, synthetic rotation / scale /
 perspective), prints Σ correct matches, the mean matching score and the precision (correct / matches)
 of ORB and of each run's `clatch` column, and each run's correct matches as a ratio to ORB's; the last
-line gives the totals over all groups. RUN_DIR is an `--out` folder of `clatch eval` (its
+line gives the totals over all groups. RUN_DIR is an `--out` folder of `clatch-eval` (its
 `clatch.summary.csv` is read).
 """
 import collections

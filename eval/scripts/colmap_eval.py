@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Camera-centre and rotation error of a COLMAP model against Strecha-style ground-truth cameras.
 
-    python3 tools/colmap_eval.py MODEL_DIR GT_DIR
+    python3 eval/scripts/colmap_eval.py MODEL_DIR GT_DIR
 
 MODEL_DIR is a COLMAP model (sparse/N, binary or text; converted with `colmap model_converter
 --output_type TXT` when binary). GT_DIR holds one `NAME.camera` per image (Strecha et al. CVPR 2008

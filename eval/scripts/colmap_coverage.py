@@ -2,7 +2,7 @@
 """How keypoints spread over each image of a COLMAP database, and how well each image is tied to the
 others after COLMAP's geometric verification: what decides whether the mapper can register it.
 
-    python3 tools/colmap_coverage.py DATABASE [GRID]
+    python3 eval/scripts/colmap_coverage.py DATABASE [GRID]
 
 Per image: keypoints, cells of a GRID x GRID division (default 8) holding at least one keypoint,
 the share of keypoints in the busiest eighth of the cells, and the two largest verified inlier counts

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # COLMAP 3.8's own CPU SIFT pipeline on a folder of photos with a known PINHOLE K, timing each stage:
 # the reference that `clatch colmap` is compared with in EVALUATION.md.
-#   tools/colmap_sift_baseline.sh IMAGES_DIR K_FILE OUT_DIR
+#   eval/scripts/colmap_sift_baseline.sh IMAGES_DIR K_FILE OUT_DIR
 # Writes OUT_DIR/database.db, OUT_DIR/sparse/N and OUT_DIR/*.log; prints the stage times and
 # model_analyzer's figures. SIFT must run with use_gpu 0 on a machine without a display or GPU.
 set -euo pipefail

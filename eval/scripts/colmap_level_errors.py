@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Reprojection error of a COLMAP model's observations, grouped by the keypoint's scale in the database.
 
-    python3 tools/colmap_level_errors.py DATABASE MODEL_DIR
+    python3 eval/scripts/colmap_level_errors.py DATABASE MODEL_DIR
 
 `clatch colmap` writes each keypoint's scale as size / 2, with size = keypoint size x factor^level on a
 pyramid, so the distinct scales are the pyramid levels (OpenCV ORB's sizes likewise). Per scale: the

@@ -1,0 +1,356 @@
+//! The options `clatch` and its evaluation harness (`clatch-eval`) share: the backend, the detector
+//! and descriptor, the sub-pixel positions, the matcher and the ground-truth check, each with its
+//! mapping onto the library's configuration, so the names and defaults are written once.
+
+use clap::{Args, ValueEnum};
+use clatch::{Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, ExtractorConfig};
+use clatch::{MatchConfig, Pyramid, Subpixel};
+
+/// Which backend runs detection, description and matching.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BackendChoice {
+    /// CUDA when compiled in and a device is usable, else the CPU.
+    Auto,
+    /// The rayon CPU backend.
+    Cpu,
+    /// The CUDA backend (an error if it cannot run here).
+    Cuda,
+}
+
+/// Backend selection.
+#[derive(Debug, Args)]
+pub struct BackendArgs {
+    /// Compute backend.
+    #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
+    pub backend: BackendChoice,
+    /// CUDA device ordinal (with --backend cuda).
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub device: usize,
+}
+
+/// Detector and descriptor settings.
+#[derive(Debug, Args)]
+pub struct DetectArgs {
+    /// FAST threshold (1..=254): nine contiguous circle pixels must differ from the centre by more.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u8).range(1..=254))]
+    pub threshold: u8,
+    /// Keep at most this many keypoints per image, strongest first (default 5000, the library's, and
+    /// 8192 for `colmap`, COLMAP's own budget of SIFT features per image).
+    #[arg(long, value_name = "N", value_parser = parse_positive)]
+    pub max_keypoints: Option<usize>,
+    /// Side in pixels of the window each detected keypoint is described over (the 64x64 samples are
+    /// spread over it): 1 to 1024. Default 40, and 64 with --single-scale.
+    #[arg(long, value_name = "PIXELS", value_parser = parse_keypoint_size)]
+    pub keypoint_size: Option<f32>,
+    /// Descriptor width in bits: a multiple of 8 from 8 to 512.
+    #[arg(long, default_value_t = 512, value_parser = parse_bits)]
+    pub bits: usize,
+    /// Detect on a scale pyramid of LEVELS levels (full resolution included), each FACTOR (in
+    /// [1.05, 2], default 2) smaller than the one before; each keypoint is described on its own level.
+    /// Default 8:1.2 (the library's default); see --single-scale.
+    #[arg(long, value_name = "LEVELS[:FACTOR]", value_parser = parse_pyramid)]
+    pub pyramid: Option<Pyramid>,
+    /// The single-scale speed preset: full resolution only, 64-pixel windows, the strongest keypoints
+    /// anywhere (the defaults of clatch before 0.2). Fewer correct matches under scale and viewpoint
+    /// change.
+    #[arg(long, conflicts_with_all = ["pyramid", "level_budget"])]
+    pub single_scale: bool,
+    /// Spread keypoints over a GRID x GRID division of each image (1: the strongest anywhere; default
+    /// 1, and 8 for `colmap`, so that textured corners of a photo cannot take every keypoint).
+    #[arg(long, value_name = "GRID", value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub grid: Option<u32>,
+    /// How --max-keypoints is shared among pyramid levels: `global` (the strongest of all levels) or
+    /// `geometric` (ORB's shares, each level's in proportion to its scale; the default).
+    #[arg(long, value_enum)]
+    pub level_budget: Option<LevelBudgetArg>,
+    /// What orders corners when the strongest are kept: `fast` (the FAST score) or `harris` (ORB's
+    /// Harris response over the strongest 2 x --max-keypoints).
+    #[arg(long, value_enum, default_value_t = RankingArg::Fast)]
+    pub ranking: RankingArg,
+    /// Smooth the image the descriptor samples (each pyramid level's, before its keypoints are
+    /// described; detection still sees the unsmoothed image) with an integer binomial kernel.
+    /// Default: the library's (`none`).
+    #[arg(long, value_enum)]
+    pub smoothing: Option<SmoothingArg>,
+}
+
+/// `--smoothing`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SmoothingArg {
+    /// No smoothing.
+    None,
+    /// [1 2 1] on both axes (3x3).
+    Binomial3,
+    /// [1 4 6 4 1] on both axes (5x5, about a Gaussian of sigma 1 pixel).
+    Binomial5,
+}
+
+/// `--subpixel` (every command but `colmap`, which adds its `corner` method).
+#[derive(Debug, Args)]
+pub struct SubpixelArgs {
+    /// Sub-pixel keypoint positions: `none` (whole pixels of each keypoint's pyramid level) or `score`
+    /// (per axis, the peak of the parabola through the FAST scores of the keypoint and its 4
+    /// neighbours, on every level; descriptors do not change). Default `score`, and `none` with
+    /// --single-scale.
+    #[arg(long, value_enum)]
+    pub subpixel: Option<SubpixelArg>,
+}
+
+/// `--subpixel`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SubpixelArg {
+    /// Whole pixels.
+    None,
+    /// The peak of the FAST score, per axis.
+    Score,
+}
+
+impl SubpixelArgs {
+    /// The library's setting, when given.
+    pub fn library(&self) -> Option<Subpixel> {
+        self.subpixel.map(|s| match s {
+            SubpixelArg::None => Subpixel::None,
+            SubpixelArg::Score => Subpixel::Score,
+        })
+    }
+}
+
+/// `--ranking`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum RankingArg {
+    /// The FAST score.
+    Fast,
+    /// The Harris response, as ORB ranks.
+    Harris,
+}
+
+/// `--level-budget`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum LevelBudgetArg {
+    /// The strongest keypoints of all levels together.
+    Global,
+    /// ORB's geometric shares per level.
+    Geometric,
+}
+
+/// Which matches are kept.
+#[derive(Debug, Args)]
+pub struct MatchingArgs {
+    /// Lowe's ratio test: keep a match only if best < RATIO x second best (0 < RATIO <= 1).
+    #[arg(long, default_value_t = 0.8, value_parser = parse_ratio)]
+    pub ratio: f32,
+    /// Turn the ratio test off.
+    #[arg(long, conflicts_with = "ratio")]
+    pub no_ratio: bool,
+    /// Keep matches that are not mutual nearest neighbours.
+    #[arg(long)]
+    pub no_cross_check: bool,
+    /// Drop matches farther than this many bits.
+    #[arg(long, value_name = "BITS")]
+    pub max_distance: Option<u32>,
+}
+
+/// How matches are checked against a ground-truth homography.
+#[derive(Debug, Args)]
+pub struct CheckArgs {
+    /// A match is an inlier if its reprojection error is at most this many pixels.
+    #[arg(long, default_value_t = 3.0, value_name = "PIXELS", value_parser = parse_tolerance)]
+    pub inlier_px: f64,
+}
+
+fn parse_positive(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(0) => Err("must be at least 1".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
+fn parse_bits(s: &str) -> Result<usize, String> {
+    let bits = s.parse::<usize>().map_err(|e| e.to_string())?;
+    DescriptorWidth::from_bits(bits)
+        .map(DescriptorWidth::bits)
+        .map_err(|_| "must be a multiple of 8 between 8 and 512".into())
+}
+
+/// Smallest pyramid factor: closer levels are near-identical copies whose corners duplicate each other's
+/// (at 1.05 every level of an image the detector accepts is at least 4 pixels smaller than the last).
+pub const MIN_PYRAMID_FACTOR: f32 = 1.05;
+
+/// `LEVELS` or `LEVELS:FACTOR`; the ranges are checked with the keypoint size by the library, and the
+/// factor against [`MIN_PYRAMID_FACTOR`].
+fn parse_pyramid(s: &str) -> Result<Pyramid, String> {
+    let (levels, factor) = s.split_once(':').unwrap_or((s, "2"));
+    let levels = levels
+        .parse::<usize>()
+        .map_err(|e| format!("LEVELS: {e}"))?;
+    let scale_factor = factor.parse::<f32>().map_err(|e| format!("FACTOR: {e}"))?;
+    if levels > 1 && scale_factor.is_finite() && scale_factor < MIN_PYRAMID_FACTOR {
+        return Err(format!(
+            "FACTOR {scale_factor} is below {MIN_PYRAMID_FACTOR}: levels that close are near-identical \
+             copies of each other"
+        ));
+    }
+    let pyramid = Pyramid {
+        levels,
+        scale_factor,
+    };
+    pyramid
+        .validate(clatch::KeyPoint::DEFAULT_SIZE)
+        .map_err(|e| e.to_string())?;
+    Ok(pyramid)
+}
+
+fn parse_keypoint_size(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && (1.0..=1024.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err("must be a number of pixels from 1 to 1024".into())
+    }
+}
+
+fn parse_ratio(s: &str) -> Result<f32, String> {
+    let ratio = s.parse::<f32>().map_err(|e| e.to_string())?;
+    if ratio.is_finite() && ratio > 0.0 && ratio <= 1.0 {
+        Ok(ratio)
+    } else {
+        Err("must be a number in (0, 1]".into())
+    }
+}
+
+fn parse_tolerance(s: &str) -> Result<f64, String> {
+    let px = s.parse::<f64>().map_err(|e| e.to_string())?;
+    if px.is_finite() && px >= 0.0 {
+        Ok(px)
+    } else {
+        Err("must be a finite number of pixels, at least 0".into())
+    }
+}
+
+impl BackendArgs {
+    /// The backend asked for (`auto`: CUDA device 0 when usable, else the CPU), not yet checked.
+    fn chosen(&self) -> Backend {
+        match self.backend {
+            BackendChoice::Auto => Backend::auto(),
+            BackendChoice::Cpu => Backend::Cpu,
+            BackendChoice::Cuda => Backend::Cuda {
+                device: self.device,
+            },
+        }
+    }
+
+    /// The backend asked for; `cuda` gives the library's typed error when it cannot exist here.
+    pub fn resolve(&self) -> clatch::Result<Backend> {
+        let backend = self.chosen();
+        backend.ensure_available()?;
+        Ok(backend)
+    }
+
+    /// The backend asked for, its set-up started on a thread of its own ([`Backend::start`]) so that
+    /// it overlaps checking and decoding the images; what is known at once (a build without CUDA, no
+    /// driver) is an error here.
+    pub fn start(&self) -> clatch::Result<clatch::BackendStart> {
+        self.chosen().start()
+    }
+}
+
+impl DetectArgs {
+    /// Detector and descriptor configuration: the library's default (or the single-scale preset)
+    /// with the flags given on top.
+    pub fn config(&self) -> clatch::Result<ExtractorConfig> {
+        self.config_from(if self.single_scale {
+            ExtractorConfig::single_scale()
+        } else {
+            ExtractorConfig::default()
+        })
+    }
+
+    /// [`DetectArgs::config`] for OpenCV-compatible LATCH, which describes full-resolution keypoints
+    /// only: the single-scale preset unless --pyramid is given (which the caller then refuses).
+    pub fn config_full_resolution(&self) -> clatch::Result<ExtractorConfig> {
+        if self.pyramid.is_some() {
+            return self.config();
+        }
+        self.config_from(ExtractorConfig::single_scale())
+    }
+
+    fn config_from(&self, base: ExtractorConfig) -> clatch::Result<ExtractorConfig> {
+        Ok(ExtractorConfig {
+            detector: DetectorConfig {
+                threshold: self.threshold,
+                max_keypoints: self.max_keypoints.unwrap_or(base.detector.max_keypoints),
+                keypoint_size: self.keypoint_size.unwrap_or(base.detector.keypoint_size),
+                grid: self.grid.unwrap_or(1) as usize,
+                level_budget: match self.level_budget {
+                    None => base.detector.level_budget,
+                    Some(LevelBudgetArg::Global) => clatch::LevelBudget::Global,
+                    Some(LevelBudgetArg::Geometric) => clatch::LevelBudget::Geometric,
+                },
+                ranking: match self.ranking {
+                    RankingArg::Fast => clatch::Ranking::Fast,
+                    RankingArg::Harris => clatch::Ranking::Harris,
+                },
+                subpixel: base.detector.subpixel,
+            },
+            descriptor: DescriptorConfig {
+                width: DescriptorWidth::from_bits(self.bits)?,
+                smoothing: match self.smoothing {
+                    None => base.descriptor.smoothing,
+                    Some(SmoothingArg::None) => clatch::Smoothing::None,
+                    Some(SmoothingArg::Binomial3) => clatch::Smoothing::Binomial3,
+                    Some(SmoothingArg::Binomial5) => clatch::Smoothing::Binomial5,
+                },
+                ..base.descriptor
+            },
+            pyramid: self.pyramid.or(base.pyramid),
+        })
+    }
+}
+
+impl MatchingArgs {
+    /// Matcher configuration.
+    pub fn config(&self) -> MatchConfig {
+        MatchConfig {
+            ratio: (!self.no_ratio).then_some(self.ratio),
+            cross_check: !self.no_cross_check,
+            max_distance: self.max_distance,
+        }
+    }
+}
+
+/// The matcher settings in words, e.g. `ratio 0.8, cross-check`.
+pub fn describe_matching(config: &MatchConfig) -> String {
+    let mut parts = Vec::new();
+    match config.ratio {
+        Some(r) => parts.push(format!("ratio {r}")),
+        None => parts.push("no ratio test".into()),
+    }
+    parts.push(if config.cross_check {
+        "cross-check".into()
+    } else {
+        "no cross-check".into()
+    });
+    if let Some(d) = config.max_distance {
+        parts.push(format!("max distance {d}"));
+    }
+    parts.join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[cfg(not(feature = "cuda"))]
+    #[test]
+    fn cuda_without_the_feature_is_a_typed_error() {
+        let args = BackendArgs {
+            backend: BackendChoice::Cuda,
+            device: 0,
+        };
+        assert!(matches!(
+            args.resolve(),
+            Err(clatch::Error::BackendUnavailable { .. })
+        ));
+    }
+}

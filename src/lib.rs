@@ -53,7 +53,7 @@ pub use describe::opencv::OpencvLatch;
 pub use describe::{DescriptorConfig, PatchWeights, SkipReason, Skipped, Smoothing, WINDOW};
 pub use descriptor::{Descriptor, DescriptorSet, DescriptorWidth};
 pub use detect::{DetectorConfig, LevelBudget, Ranking, Subpixel, fast_score};
-pub use error::{Error, Result};
+pub use error::{Error, ErrorKind, Result};
 pub use facade::{DescriptorCollection, DevicePool, Extractor, ExtractorConfig, Matcher};
 pub use features::Features;
 pub use gray_view::{AsGrayView, GrayView, MAX_IMAGE_SIDE};

@@ -22,6 +22,7 @@ mod error;
 mod facade;
 mod features;
 mod keypoint;
+mod names;
 mod parallel;
 
 #[cfg(feature = "colmap")]
@@ -59,6 +60,7 @@ pub use features::Features;
 pub use gray_view::{AsGrayView, GrayView, MAX_IMAGE_SIDE};
 pub use keypoint::KeyPoint;
 pub use matching::{KnnMatches, Match, MatchConfig};
+pub use names::{NamedOption, ParseNameError};
 pub use pyramid::Pyramid;
 
 #[cfg(feature = "cuda")]

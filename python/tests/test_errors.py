@@ -111,6 +111,18 @@ def test_bad_extractor_settings(backend, keywords):
     assert info.value.kind in {"InvalidConfig", "InvalidDescriptorWidth", "WeightsLength", "WeightsAllZero", "WeightsOverflow"}
 
 
+def test_option_and_backend_names_are_the_library_s(backend):
+    e = raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Extractor(backend, smoothing="gauss"))
+    assert str(e) == 'smoothing must be one of "none", "binomial3", "binomial5", got "gauss"'
+    e = raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Extractor(backend, level_budget="orb"))
+    assert str(e) == 'level_budget must be one of "global", "geometric", got "orb"'
+    e = raises(clatch.InvalidInputError, "InvalidBackend", lambda: clatch.Matcher("gpu"))
+    assert str(e) == 'backend must be one of "auto", "cpu", "cuda", "cuda:N", got "gpu"'
+    chosen = {"level_budget": "global", "ranking": "harris", "subpixel": "none", "smoothing": "binomial5"}
+    config = clatch.Extractor(backend, **chosen).config
+    assert {k: config[k] for k in chosen} == chosen
+
+
 @pytest.mark.parametrize("keywords", [{"ratio": 0.0}, {"ratio": 1.5}, {"ratio": float("nan")}, {"ratio": -0.5}, {"max_distance": -1}])
 def test_bad_matcher_settings(backend, keywords):
     raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Matcher(backend, **keywords))

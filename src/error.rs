@@ -383,7 +383,10 @@ mod tests {
                 expected: 64,
                 got: 63,
             },
-            Error::WeightsOverflow { sum: 1 << 40, max: 1 << 31 },
+            Error::WeightsOverflow {
+                sum: 1 << 40,
+                max: 1 << 31,
+            },
             Error::WeightsAllZero,
             Error::InvalidConfig {
                 field: "ratio",

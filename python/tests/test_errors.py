@@ -111,6 +111,20 @@ def test_bad_extractor_settings(backend, keywords):
     assert info.value.kind in {"InvalidConfig", "InvalidDescriptorWidth", "WeightsLength", "WeightsAllZero", "WeightsOverflow"}
 
 
+@pytest.mark.parametrize(
+    "keywords,kind",
+    [
+        ({"threshold": 0}, "InvalidConfig"),
+        ({"bits": 100}, "InvalidDescriptorWidth"),
+        ({"weights": [1] * 63}, "WeightsLength"),
+        ({"weights": [0] * 64}, "WeightsAllZero"),
+        ({"weights": [1 << 30] * 64}, "WeightsOverflow"),
+    ],
+)
+def test_settings_errors_carry_the_library_error_kind(backend, keywords, kind):
+    raises(clatch.InvalidInputError, kind, lambda: clatch.Extractor(backend, **keywords))
+
+
 def test_option_and_backend_names_are_the_library_s(backend):
     e = raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Extractor(backend, smoothing="gauss"))
     assert str(e) == 'smoothing must be one of "none", "binomial3", "binomial5", got "gauss"'

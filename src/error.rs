@@ -172,7 +172,7 @@ pub enum Error {
 /// Shorthand for `Result<T, clatch::Error>`.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
-/// Which [`Error`] variant an error is, without its fields: for telling errors apart by class in
+/// Which [`enum@Error`] variant an error is, without its fields: for telling errors apart by class in
 /// code, logs or bindings ([`Error::kind`]). `Display` writes the variant's name (`ImageTooSmall`),
 /// as [`ErrorKind::name`] gives it.
 ///

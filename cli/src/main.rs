@@ -34,10 +34,10 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand};
 use clatch::decode::DecodeLimits;
 use clatch::{Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, ExtractorConfig};
-use clatch::{MatchConfig, OpencvLatch, Pyramid, Subpixel};
+use clatch::{LevelBudget, MatchConfig, OpencvLatch, Pyramid, Ranking, Smoothing, Subpixel};
 
 use crate::error::CliError;
-use crate::names::{BackendFlag, BackendParser, Named};
+use crate::names::BackendFlag;
 use crate::pipeline::Settings;
 
 /// FAST keypoints, CLATCH binary descriptors and brute-force Hamming matching.
@@ -347,7 +347,7 @@ impl InputArgs {
 #[derive(Debug, Args)]
 pub struct BackendArgs {
     /// Compute backend.
-    #[arg(long, default_value = "auto", value_parser = BackendParser)]
+    #[arg(long, default_value = "auto", value_parser = names::backend())]
     pub backend: BackendFlag,
     /// CUDA device ordinal (with --backend cuda).
     #[arg(long, default_value_t = 0, value_name = "N")]
@@ -387,17 +387,17 @@ pub struct DetectArgs {
     pub grid: Option<u32>,
     /// How --max-keypoints is shared among pyramid levels: `global` (the strongest of all levels) or
     /// `geometric` (ORB's shares, each level's in proportion to its scale; the default).
-    #[arg(long, value_parser = Named::<clatch::LevelBudget>::new())]
-    pub level_budget: Option<clatch::LevelBudget>,
+    #[arg(long, value_parser = names::named::<LevelBudget>())]
+    pub level_budget: Option<LevelBudget>,
     /// What orders corners when the strongest are kept: `fast` (the FAST score) or `harris` (ORB's
     /// Harris response over the strongest 2 x --max-keypoints).
-    #[arg(long, value_parser = Named::<clatch::Ranking>::new(), default_value_t = clatch::Ranking::Fast)]
-    pub ranking: clatch::Ranking,
+    #[arg(long, value_parser = names::named::<Ranking>(), default_value_t = Ranking::Fast)]
+    pub ranking: Ranking,
     /// Smooth the image the descriptor samples (each pyramid level's, before its keypoints are
     /// described; detection still sees the unsmoothed image) with an integer binomial kernel.
     /// Default: the library's (`none`).
-    #[arg(long, value_parser = Named::<clatch::Smoothing>::new())]
-    pub smoothing: Option<clatch::Smoothing>,
+    #[arg(long, value_parser = names::named::<Smoothing>())]
+    pub smoothing: Option<Smoothing>,
 }
 
 /// `--subpixel` (every command but `colmap`, which adds its `corner` method).
@@ -407,7 +407,7 @@ pub struct SubpixelArgs {
     /// (per axis, the peak of the parabola through the FAST scores of the keypoint and its 4
     /// neighbours, on every level; descriptors do not change). Default `score`, and `none` with
     /// --single-scale.
-    #[arg(long, value_parser = Named::<Subpixel>::new())]
+    #[arg(long, value_parser = names::named::<Subpixel>())]
     pub subpixel: Option<Subpixel>,
 }
 

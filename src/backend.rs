@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 use crate::cuda::SetUpSteps;
 
 use crate::error::{Error, Result};
+use crate::names::ParseNameError;
 
 /// The compute backend of an [`crate::Extractor`] or [`crate::Matcher`].
 ///
@@ -192,6 +193,63 @@ fn cuda_driver_present(device: usize) -> Result<()> {
     cuda_available(device)
 }
 
+/// The names [`Backend`]'s `FromStr` accepts, as its error lists them.
+const BACKEND_NAMES: &[&str] = &["auto", "cpu", "cuda", "cuda:N"];
+
+impl Backend {
+    /// The name `FromStr` reads back as this backend: `cpu`, or `cuda:N` for device N. (`Display`
+    /// writes the CPU's thread count besides: `cpu (16 threads)`.)
+    ///
+    /// ```
+    /// use clatch::Backend;
+    ///
+    /// assert_eq!(Backend::Cpu.name(), "cpu");
+    /// let gpu = Backend::Cuda { device: 1 };
+    /// assert_eq!(gpu.name(), "cuda:1");
+    /// assert_eq!(gpu.name().parse::<Backend>()?, gpu);
+    /// # Ok::<(), clatch::ParseNameError>(())
+    /// ```
+    pub fn name(&self) -> String {
+        match self {
+            Backend::Cpu => "cpu".into(),
+            Backend::Cuda { device } => format!("cuda:{device}"),
+        }
+    }
+}
+
+/// Reads a backend by name: `cpu`; `cuda` (device 0) or `cuda:N` (device N, in decimal digits); or
+/// `auto`, which is [`Backend::auto`] and so checks the device while it is parsed. Anything else
+/// (other case, spaces) is a [`ParseNameError`] listing these names.
+///
+/// ```
+/// use clatch::Backend;
+///
+/// assert_eq!("cpu".parse::<Backend>()?, Backend::Cpu);
+/// assert_eq!("cuda".parse::<Backend>()?, Backend::Cuda { device: 0 });
+/// assert_eq!("cuda:2".parse::<Backend>()?, Backend::Cuda { device: 2 });
+/// let error = "gpu".parse::<Backend>().unwrap_err();
+/// assert_eq!(error.accepted(), ["auto", "cpu", "cuda", "cuda:N"]);
+/// # Ok::<(), clatch::ParseNameError>(())
+/// ```
+impl std::str::FromStr for Backend {
+    type Err = ParseNameError;
+
+    fn from_str(name: &str) -> std::result::Result<Self, ParseNameError> {
+        let ordinal = |d: &&str| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit());
+        match name {
+            "auto" => Ok(Backend::auto()),
+            "cpu" => Ok(Backend::Cpu),
+            "cuda" => Ok(Backend::Cuda { device: 0 }),
+            _ => name
+                .strip_prefix("cuda:")
+                .filter(ordinal)
+                .and_then(|d| d.parse().ok())
+                .map(|device| Backend::Cuda { device })
+                .ok_or_else(|| ParseNameError::new("backend", name, BACKEND_NAMES.to_vec())),
+        }
+    }
+}
+
 impl Default for Backend {
     fn default() -> Self {
         Self::auto()
@@ -227,6 +285,40 @@ mod tests {
         };
         drop(start);
         assert!(done.load(Ordering::SeqCst), "the set-up was still running");
+    }
+
+    #[test]
+    fn backend_names_read_back() {
+        for backend in [
+            Backend::Cpu,
+            Backend::Cuda { device: 0 },
+            Backend::Cuda { device: 17 },
+        ] {
+            assert_eq!(backend.name().parse::<Backend>(), Ok(backend));
+        }
+        assert_eq!("cuda".parse::<Backend>(), Ok(Backend::Cuda { device: 0 }));
+        assert!(matches!(
+            "auto".parse::<Backend>(),
+            Ok(Backend::Cpu | Backend::Cuda { device: 0 })
+        ));
+        for wrong in [
+            "",
+            "gpu",
+            "CPU",
+            "cpu ",
+            " cuda",
+            "cuda:",
+            "cuda:x",
+            "cuda:-1",
+            "cuda:+1",
+            "cuda:1.0",
+            "cuda:99999999999999999999999",
+            "cuda0",
+        ] {
+            let error = wrong.parse::<Backend>().unwrap_err();
+            assert_eq!((error.option(), error.given()), ("backend", wrong));
+            assert_eq!(error.accepted(), BACKEND_NAMES);
+        }
     }
 
     #[test]

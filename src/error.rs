@@ -171,3 +171,314 @@ pub enum Error {
 
 /// Shorthand for `Result<T, clatch::Error>`.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Which [`enum@Error`] variant an error is, without its fields: for telling errors apart by class in
+/// code, logs or bindings ([`Error::kind`]). `Display` writes the variant's name (`ImageTooSmall`),
+/// as [`ErrorKind::name`] gives it.
+///
+/// ```
+/// use clatch::{DescriptorWidth, ErrorKind};
+///
+/// let error = DescriptorWidth::from_bits(100).unwrap_err();
+/// assert_eq!(error.kind(), ErrorKind::InvalidDescriptorWidth);
+/// assert_eq!(error.kind().to_string(), "InvalidDescriptorWidth");
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum ErrorKind {
+    /// [`Error::EmptyImage`]: the image has no pixels.
+    EmptyImage,
+    /// [`Error::StrideTooSmall`]: the row stride is smaller than the width.
+    StrideTooSmall,
+    /// [`Error::BufferTooSmall`]: the pixel buffer is too short for the image.
+    BufferTooSmall,
+    /// [`Error::ImageTooSmall`]: the image cannot hold one descriptor window.
+    ImageTooSmall,
+    /// [`Error::ImageTooLarge`]: the image is larger than the sampling arithmetic allows.
+    ImageTooLarge,
+    /// [`Error::InvalidKeyPoint`]: a keypoint field is not finite or out of range.
+    InvalidKeyPoint,
+    /// [`Error::InvalidDescriptorWidth`]: a width that is not 8·n bits with n in 1..=64.
+    InvalidDescriptorWidth,
+    /// [`Error::DescriptorWidthMismatch`]: query and gallery descriptors have different widths.
+    DescriptorWidthMismatch,
+    /// [`Error::PairOutOfRange`]: a pair names a set that is not there.
+    PairOutOfRange,
+    /// [`Error::NoWorkers`]: a device pool was given no workers.
+    NoWorkers,
+    /// [`Error::Worker`]: a device pool worker failed; the worker's own error is its `source`.
+    Worker,
+    /// [`Error::DescriptorBufferLength`]: a buffer that is not a whole number of descriptors.
+    DescriptorBufferLength,
+    /// [`Error::EmptyGallery`]: matching against a gallery with no descriptors.
+    EmptyGallery,
+    /// [`Error::InvalidK`]: k = 0 or k larger than the gallery.
+    InvalidK,
+    /// [`Error::KTooLargeForBackend`]: more neighbours than the backend returns per query.
+    KTooLargeForBackend,
+    /// [`Error::WeightsLength`]: patch weights of the wrong length.
+    WeightsLength,
+    /// [`Error::WeightsOverflow`]: patch weights that could overflow the SSD accumulator.
+    WeightsOverflow,
+    /// [`Error::WeightsAllZero`]: every patch weight is zero.
+    WeightsAllZero,
+    /// [`Error::InvalidConfig`]: a configuration value out of its range.
+    InvalidConfig,
+    /// `Error::Cuda` (a build with the `cuda` feature): a CUDA driver call or kernel launch failed.
+    /// The kind exists in every build, so that code matching on kinds needs no `cfg`.
+    Cuda,
+    /// [`Error::DeviceOutOfMemory`]: the device ran out of memory.
+    DeviceOutOfMemory,
+    /// [`Error::BackendUnavailable`]: the requested backend cannot run here.
+    BackendUnavailable,
+    /// [`Error::Internal`]: a broken internal invariant (a bug in clatch).
+    Internal,
+}
+
+impl ErrorKind {
+    /// The variant's name, as written in the source: `"ImageTooSmall"`, `"Cuda"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ErrorKind::EmptyImage => "EmptyImage",
+            ErrorKind::StrideTooSmall => "StrideTooSmall",
+            ErrorKind::BufferTooSmall => "BufferTooSmall",
+            ErrorKind::ImageTooSmall => "ImageTooSmall",
+            ErrorKind::ImageTooLarge => "ImageTooLarge",
+            ErrorKind::InvalidKeyPoint => "InvalidKeyPoint",
+            ErrorKind::InvalidDescriptorWidth => "InvalidDescriptorWidth",
+            ErrorKind::DescriptorWidthMismatch => "DescriptorWidthMismatch",
+            ErrorKind::PairOutOfRange => "PairOutOfRange",
+            ErrorKind::NoWorkers => "NoWorkers",
+            ErrorKind::Worker => "Worker",
+            ErrorKind::DescriptorBufferLength => "DescriptorBufferLength",
+            ErrorKind::EmptyGallery => "EmptyGallery",
+            ErrorKind::InvalidK => "InvalidK",
+            ErrorKind::KTooLargeForBackend => "KTooLargeForBackend",
+            ErrorKind::WeightsLength => "WeightsLength",
+            ErrorKind::WeightsOverflow => "WeightsOverflow",
+            ErrorKind::WeightsAllZero => "WeightsAllZero",
+            ErrorKind::InvalidConfig => "InvalidConfig",
+            ErrorKind::Cuda => "Cuda",
+            ErrorKind::DeviceOutOfMemory => "DeviceOutOfMemory",
+            ErrorKind::BackendUnavailable => "BackendUnavailable",
+            ErrorKind::Internal => "Internal",
+        }
+    }
+}
+
+/// Writes [`ErrorKind::name`].
+impl std::fmt::Display for ErrorKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl Error {
+    /// Which variant this error is ([`ErrorKind`]). A device pool worker's error is
+    /// [`ErrorKind::Worker`]; the kind of what the worker hit is its source's.
+    ///
+    /// ```
+    /// use clatch::{ErrorKind, GrayView};
+    ///
+    /// let error = GrayView::new(&[0u8; 10], 4, 4, 4).unwrap_err();
+    /// assert_eq!(error.kind(), ErrorKind::BufferTooSmall);
+    /// ```
+    pub fn kind(&self) -> ErrorKind {
+        match self {
+            Error::EmptyImage { .. } => ErrorKind::EmptyImage,
+            Error::StrideTooSmall { .. } => ErrorKind::StrideTooSmall,
+            Error::BufferTooSmall { .. } => ErrorKind::BufferTooSmall,
+            Error::ImageTooSmall { .. } => ErrorKind::ImageTooSmall,
+            Error::ImageTooLarge { .. } => ErrorKind::ImageTooLarge,
+            Error::InvalidKeyPoint { .. } => ErrorKind::InvalidKeyPoint,
+            Error::InvalidDescriptorWidth { .. } => ErrorKind::InvalidDescriptorWidth,
+            Error::DescriptorWidthMismatch { .. } => ErrorKind::DescriptorWidthMismatch,
+            Error::PairOutOfRange { .. } => ErrorKind::PairOutOfRange,
+            Error::NoWorkers => ErrorKind::NoWorkers,
+            Error::Worker { .. } => ErrorKind::Worker,
+            Error::DescriptorBufferLength { .. } => ErrorKind::DescriptorBufferLength,
+            Error::EmptyGallery => ErrorKind::EmptyGallery,
+            Error::InvalidK { .. } => ErrorKind::InvalidK,
+            Error::KTooLargeForBackend { .. } => ErrorKind::KTooLargeForBackend,
+            Error::WeightsLength { .. } => ErrorKind::WeightsLength,
+            Error::WeightsOverflow { .. } => ErrorKind::WeightsOverflow,
+            Error::WeightsAllZero => ErrorKind::WeightsAllZero,
+            Error::InvalidConfig { .. } => ErrorKind::InvalidConfig,
+            #[cfg(feature = "cuda")]
+            Error::Cuda { .. } => ErrorKind::Cuda,
+            Error::DeviceOutOfMemory { .. } => ErrorKind::DeviceOutOfMemory,
+            Error::BackendUnavailable { .. } => ErrorKind::BackendUnavailable,
+            Error::Internal { .. } => ErrorKind::Internal,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One error of every variant.
+    fn one_of_each() -> Vec<Error> {
+        #[cfg_attr(not(feature = "cuda"), allow(unused_mut))]
+        let mut errors = vec![
+            Error::EmptyImage {
+                width: 0,
+                height: 5,
+            },
+            Error::StrideTooSmall {
+                width: 8,
+                stride: 4,
+            },
+            Error::BufferTooSmall {
+                width: 8,
+                height: 8,
+                stride: 8,
+                needed: 64,
+                got: 10,
+            },
+            Error::ImageTooSmall {
+                width: 10,
+                height: 10,
+                min: 64,
+            },
+            Error::ImageTooLarge {
+                width: 1 << 20,
+                height: 1,
+                max: 1 << 15,
+            },
+            Error::InvalidKeyPoint {
+                index: 3,
+                field: "x",
+                value: f32::NAN,
+                reason: "not finite",
+            },
+            Error::InvalidDescriptorWidth { bits: 100 },
+            Error::DescriptorWidthMismatch {
+                query_bits: 256,
+                train_bits: 512,
+            },
+            Error::PairOutOfRange {
+                pair: 0,
+                index: 9,
+                sets: 2,
+            },
+            Error::NoWorkers,
+            Error::Worker {
+                worker: 1,
+                backend: "cuda:1".into(),
+                source: Box::new(Error::EmptyGallery),
+            },
+            Error::DescriptorBufferLength {
+                words: 9,
+                words_per_descriptor: 8,
+            },
+            Error::EmptyGallery,
+            Error::InvalidK { k: 0, gallery: 4 },
+            Error::KTooLargeForBackend {
+                k: 9,
+                max: 8,
+                backend: "cuda:0".into(),
+            },
+            Error::WeightsLength {
+                expected: 64,
+                got: 63,
+            },
+            Error::WeightsOverflow {
+                sum: 1 << 40,
+                max: 1 << 31,
+            },
+            Error::WeightsAllZero,
+            Error::InvalidConfig {
+                field: "ratio",
+                value: "2".into(),
+                reason: "must be finite and in (0, 1]",
+            },
+            Error::DeviceOutOfMemory {
+                operation: "upload".into(),
+                bytes: 1 << 30,
+            },
+            Error::BackendUnavailable {
+                backend: "cuda:0".into(),
+                reason: "no driver".into(),
+            },
+            Error::Internal {
+                operation: "a test",
+                message: "on purpose".into(),
+            },
+        ];
+        #[cfg(feature = "cuda")]
+        errors.push(Error::Cuda {
+            operation: "a test".into(),
+            source: cudarc::driver::DriverError(
+                cudarc::driver::sys::cudaError_enum::CUDA_ERROR_INVALID_VALUE,
+            ),
+        });
+        errors
+    }
+
+    #[test]
+    fn every_variant_has_the_kind_of_its_name() {
+        let errors = one_of_each();
+        let expected = [
+            ErrorKind::EmptyImage,
+            ErrorKind::StrideTooSmall,
+            ErrorKind::BufferTooSmall,
+            ErrorKind::ImageTooSmall,
+            ErrorKind::ImageTooLarge,
+            ErrorKind::InvalidKeyPoint,
+            ErrorKind::InvalidDescriptorWidth,
+            ErrorKind::DescriptorWidthMismatch,
+            ErrorKind::PairOutOfRange,
+            ErrorKind::NoWorkers,
+            ErrorKind::Worker,
+            ErrorKind::DescriptorBufferLength,
+            ErrorKind::EmptyGallery,
+            ErrorKind::InvalidK,
+            ErrorKind::KTooLargeForBackend,
+            ErrorKind::WeightsLength,
+            ErrorKind::WeightsOverflow,
+            ErrorKind::WeightsAllZero,
+            ErrorKind::InvalidConfig,
+            ErrorKind::DeviceOutOfMemory,
+            ErrorKind::BackendUnavailable,
+            ErrorKind::Internal,
+            #[cfg(feature = "cuda")]
+            ErrorKind::Cuda,
+        ];
+        assert_eq!(errors.len(), expected.len());
+        for (error, kind) in errors.iter().zip(expected) {
+            assert_eq!(error.kind(), kind, "{error:?}");
+            // The name is the variant's, as its Debug form begins (what bindings showed before).
+            let debug = format!("{error:?}");
+            let variant = debug.split([' ', '{', '(']).next().unwrap_or_default();
+            assert_eq!(kind.name(), variant, "{error:?}");
+            assert_eq!(kind.to_string(), variant);
+        }
+        let mut names: Vec<_> = expected.iter().map(|k| k.name()).collect();
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), expected.len(), "two kinds share a name");
+    }
+
+    #[test]
+    fn the_cuda_kind_exists_in_every_build() {
+        assert_eq!(ErrorKind::Cuda.to_string(), "Cuda");
+    }
+
+    #[test]
+    fn a_worker_error_is_of_kind_worker_and_its_source_keeps_its_own() {
+        let error = Error::Worker {
+            worker: 0,
+            backend: "cpu".into(),
+            source: Box::new(Error::DeviceOutOfMemory {
+                operation: "upload".into(),
+                bytes: 8,
+            }),
+        };
+        assert_eq!(error.kind(), ErrorKind::Worker);
+        let Error::Worker { source, .. } = &error else {
+            unreachable!("built as a worker error")
+        };
+        assert_eq!(source.kind(), ErrorKind::DeviceOutOfMemory);
+    }
+}

@@ -25,6 +25,7 @@ mod features;
 mod in_flight;
 mod keypoint;
 mod matcher;
+mod names;
 mod parallel;
 
 #[cfg(feature = "colmap")]
@@ -59,13 +60,14 @@ pub use describe::opencv::OpencvLatch;
 pub use describe::{DescriptorConfig, PatchWeights, SkipReason, Skipped, Smoothing, WINDOW};
 pub use descriptor::{Descriptor, DescriptorSet, DescriptorWidth};
 pub use detect::{DetectorConfig, LevelBudget, Ranking, Subpixel, fast_score};
-pub use error::{Error, Result};
+pub use error::{Error, ErrorKind, Result};
 pub use extract::{Extractor, ExtractorConfig};
 pub use features::Features;
 pub use gray_view::{AsGrayView, GrayView, MAX_IMAGE_SIDE};
 pub use keypoint::KeyPoint;
 pub use matcher::Matcher;
 pub use matching::{KnnMatches, Match, MatchConfig};
+pub use names::{NamedOption, ParseNameError};
 pub use pyramid::Pyramid;
 
 #[cfg(feature = "cuda")]

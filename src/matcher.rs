@@ -90,8 +90,7 @@ impl Matcher {
         query: &DescriptorSet,
         train: &DescriptorSet,
     ) -> Result<Vec<Match>> {
-        let k = if self.config.ratio.is_some() { 2 } else { 1 };
-        matching::check_sets(query, train, k)?;
+        matching::check_sets(query, train, self.config.neighbours_needed())?;
         match self.backend {
             Backend::Cpu => Ok(matching::cpu::match_descriptors(query, train, &self.config)),
             Backend::Cuda { device } => {
@@ -109,8 +108,7 @@ impl Matcher {
         query: &DescriptorSet,
         train: &DescriptorSet,
     ) -> Result<PendingMatches> {
-        let k = if self.config.ratio.is_some() { 2 } else { 1 };
-        matching::check_sets(query, train, k)?;
+        matching::check_sets(query, train, self.config.neighbours_needed())?;
         match self.backend {
             Backend::Cuda { device } => {
                 stream.check_device(device)?;

@@ -527,7 +527,7 @@ mod tests {
     #[test]
     fn colmap_keeps_8192_keypoints_unless_told() {
         let backend = clatch_cli::flags::BackendArgs {
-            backend: clatch_cli::flags::BackendChoice::Cpu,
+            backend: clatch_cli::names::BackendFlag::named(clatch::Backend::Cpu),
             device: 0,
         };
         let budget = |extra: &[&str]| {

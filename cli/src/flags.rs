@@ -2,27 +2,18 @@
 //! and descriptor, the sub-pixel positions, the matcher and the ground-truth check, each with its
 //! mapping onto the library's configuration, so the names and defaults are written once.
 
-use clap::{Args, ValueEnum};
+use clap::Args;
 use clatch::{Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, ExtractorConfig};
-use clatch::{MatchConfig, Pyramid, Subpixel};
+use clatch::{LevelBudget, MatchConfig, Pyramid, Ranking, Smoothing, Subpixel};
 
-/// Which backend runs detection, description and matching.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum BackendChoice {
-    /// CUDA when compiled in and a device is usable, else the CPU.
-    Auto,
-    /// The rayon CPU backend.
-    Cpu,
-    /// The CUDA backend (an error if it cannot run here).
-    Cuda,
-}
+use crate::names::{self, BackendFlag};
 
 /// Backend selection.
 #[derive(Debug, Args)]
 pub struct BackendArgs {
     /// Compute backend.
-    #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
-    pub backend: BackendChoice,
+    #[arg(long, default_value = "auto", value_parser = names::backend())]
+    pub backend: BackendFlag,
     /// CUDA device ordinal (with --backend cuda).
     #[arg(long, default_value_t = 0, value_name = "N")]
     pub device: usize,
@@ -61,28 +52,17 @@ pub struct DetectArgs {
     pub grid: Option<u32>,
     /// How --max-keypoints is shared among pyramid levels: `global` (the strongest of all levels) or
     /// `geometric` (ORB's shares, each level's in proportion to its scale; the default).
-    #[arg(long, value_enum)]
-    pub level_budget: Option<LevelBudgetArg>,
+    #[arg(long, value_parser = names::named::<LevelBudget>())]
+    pub level_budget: Option<LevelBudget>,
     /// What orders corners when the strongest are kept: `fast` (the FAST score) or `harris` (ORB's
     /// Harris response over the strongest 2 x --max-keypoints).
-    #[arg(long, value_enum, default_value_t = RankingArg::Fast)]
-    pub ranking: RankingArg,
+    #[arg(long, value_parser = names::named::<Ranking>(), default_value_t = Ranking::Fast)]
+    pub ranking: Ranking,
     /// Smooth the image the descriptor samples (each pyramid level's, before its keypoints are
     /// described; detection still sees the unsmoothed image) with an integer binomial kernel.
     /// Default: the library's (`none`).
-    #[arg(long, value_enum)]
-    pub smoothing: Option<SmoothingArg>,
-}
-
-/// `--smoothing`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum SmoothingArg {
-    /// No smoothing.
-    None,
-    /// [1 2 1] on both axes (3x3).
-    Binomial3,
-    /// [1 4 6 4 1] on both axes (5x5, about a Gaussian of sigma 1 pixel).
-    Binomial5,
+    #[arg(long, value_parser = names::named::<Smoothing>())]
+    pub smoothing: Option<Smoothing>,
 }
 
 /// `--subpixel` (every command but `colmap`, which adds its `corner` method).
@@ -92,45 +72,15 @@ pub struct SubpixelArgs {
     /// (per axis, the peak of the parabola through the FAST scores of the keypoint and its 4
     /// neighbours, on every level; descriptors do not change). Default `score`, and `none` with
     /// --single-scale.
-    #[arg(long, value_enum)]
-    pub subpixel: Option<SubpixelArg>,
-}
-
-/// `--subpixel`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum SubpixelArg {
-    /// Whole pixels.
-    None,
-    /// The peak of the FAST score, per axis.
-    Score,
+    #[arg(long, value_parser = names::named::<Subpixel>())]
+    pub subpixel: Option<Subpixel>,
 }
 
 impl SubpixelArgs {
     /// The library's setting, when given.
     pub fn library(&self) -> Option<Subpixel> {
-        self.subpixel.map(|s| match s {
-            SubpixelArg::None => Subpixel::None,
-            SubpixelArg::Score => Subpixel::Score,
-        })
+        self.subpixel
     }
-}
-
-/// `--ranking`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum RankingArg {
-    /// The FAST score.
-    Fast,
-    /// The Harris response, as ORB ranks.
-    Harris,
-}
-
-/// `--level-budget`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum LevelBudgetArg {
-    /// The strongest keypoints of all levels together.
-    Global,
-    /// ORB's geometric shares per level.
-    Geometric,
 }
 
 /// Which matches are kept.
@@ -231,13 +181,7 @@ fn parse_tolerance(s: &str) -> Result<f64, String> {
 impl BackendArgs {
     /// The backend asked for (`auto`: CUDA device 0 when usable, else the CPU), not yet checked.
     fn chosen(&self) -> Backend {
-        match self.backend {
-            BackendChoice::Auto => Backend::auto(),
-            BackendChoice::Cpu => Backend::Cpu,
-            BackendChoice::Cuda => Backend::Cuda {
-                device: self.device,
-            },
-        }
+        self.backend.backend(self.device)
     }
 
     /// The backend asked for; `cuda` gives the library's typed error when it cannot exist here.
@@ -282,25 +226,13 @@ impl DetectArgs {
                 max_keypoints: self.max_keypoints.unwrap_or(base.detector.max_keypoints),
                 keypoint_size: self.keypoint_size.unwrap_or(base.detector.keypoint_size),
                 grid: self.grid.unwrap_or(1) as usize,
-                level_budget: match self.level_budget {
-                    None => base.detector.level_budget,
-                    Some(LevelBudgetArg::Global) => clatch::LevelBudget::Global,
-                    Some(LevelBudgetArg::Geometric) => clatch::LevelBudget::Geometric,
-                },
-                ranking: match self.ranking {
-                    RankingArg::Fast => clatch::Ranking::Fast,
-                    RankingArg::Harris => clatch::Ranking::Harris,
-                },
+                level_budget: self.level_budget.unwrap_or(base.detector.level_budget),
+                ranking: self.ranking,
                 subpixel: base.detector.subpixel,
             },
             descriptor: DescriptorConfig {
                 width: DescriptorWidth::from_bits(self.bits)?,
-                smoothing: match self.smoothing {
-                    None => base.descriptor.smoothing,
-                    Some(SmoothingArg::None) => clatch::Smoothing::None,
-                    Some(SmoothingArg::Binomial3) => clatch::Smoothing::Binomial3,
-                    Some(SmoothingArg::Binomial5) => clatch::Smoothing::Binomial5,
-                },
+                smoothing: self.smoothing.unwrap_or(base.descriptor.smoothing),
                 ..base.descriptor
             },
             pyramid: self.pyramid.or(base.pyramid),
@@ -345,7 +277,7 @@ mod tests {
     #[test]
     fn cuda_without_the_feature_is_a_typed_error() {
         let args = BackendArgs {
-            backend: BackendChoice::Cuda,
+            backend: BackendFlag::named(Backend::Cuda { device: 0 }),
             device: 0,
         };
         assert!(matches!(

@@ -3,4 +3,5 @@
 //! API; the tool itself is `src/main.rs`.
 
 pub mod flags;
+pub mod names;
 pub mod photo;

@@ -333,7 +333,8 @@ mod tests {
     use super::*;
     use clap::CommandFactory;
     use clatch::Pyramid;
-    use clatch_cli::flags::{BackendChoice, MIN_PYRAMID_FACTOR};
+    use clatch_cli::flags::MIN_PYRAMID_FACTOR;
+    use clatch_cli::names::BackendFlag;
 
     #[test]
     fn cli_definition_is_consistent() {
@@ -536,7 +537,7 @@ mod tests {
         );
         assert_eq!(detector(colmap(&["--subpixel", "none"])), Subpixel::None);
         let backend = BackendArgs {
-            backend: BackendChoice::Cpu,
+            backend: BackendFlag::named(clatch::Backend::Cpu),
             device: 0,
         };
         let Command::Demo(demo) = Cli::try_parse_from(["clatch", "demo"]).unwrap().command else {

@@ -160,11 +160,7 @@ pub fn match_pair(
     progress.stage("matching descriptors");
     let (qa, tb) = (&a.features.descriptors, &b.features.descriptors);
     // The ratio test needs two gallery descriptors; with fewer there is nothing to match.
-    let needed = if settings.matching.ratio.is_some() {
-        2
-    } else {
-        1
-    };
+    let needed = settings.matching.neighbours_needed();
     let skipped = if qa.is_empty() {
         Some(format!("{} has no keypoints", name_a.display()))
     } else if tb.len() < needed {

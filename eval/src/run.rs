@@ -183,10 +183,12 @@ pub fn run_column(
     let pair = &loaded.pair;
     let a = features(&extractor, latch.as_ref(), &loaded.a, &pair.image_a)?;
     let b = features(&extractor, latch.as_ref(), &loaded.b, &pair.image_b)?;
-    // The matcher refuses a gallery smaller than the neighbours it compares (two for the ratio
-    // test); such a pair simply has no match.
-    let needed = if setup.matching.ratio.is_some() { 2 } else { 1 };
-    let matches = if a.descriptors.is_empty() || b.descriptors.len() < needed {
+    // The matcher refuses a pair it cannot match (no query, or fewer gallery descriptors than the
+    // neighbours it compares); such a pair simply has no match.
+    let matches = if !setup
+        .matching
+        .can_match(a.descriptors.len(), b.descriptors.len())
+    {
         Vec::new()
     } else {
         Matcher::new(setup.backend, setup.matching.clone())?

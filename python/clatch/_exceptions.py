@@ -58,4 +58,5 @@ class DatabaseError(ClatchError, OSError):
 
 class ClusterError(ClatchError, RuntimeError):
     """Work spread over a Ray cluster could not finish (``clatch.ray``): actors died more often than
-    allowed, or a task failed with an error that is not clatch's own."""
+    allowed (``kind == "ActorsDied"``), or a task failed with an error that is not clatch's own
+    (``kind == "TaskFailed"``)."""

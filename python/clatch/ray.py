@@ -194,9 +194,11 @@ class _Pool:
         self.actors[slot] = None
         self.lost += 1
         if self.lost > self.max_failures:
-            raise ClusterError(
+            error = ClusterError(
                 f"{self.lost} Ray actors died, more than max_actor_failures={self.max_failures}"
             )
+            error.kind = "ActorsDied"
+            raise error
         self._add()
 
     def _get(self, get: Callable[[Any], Any], refs: Any) -> Any:
@@ -207,7 +209,9 @@ class _Pool:
             cause = getattr(e, "cause", None)
             if isinstance(cause, ClatchError):
                 raise cause from None
-            raise ClusterError(f"a clatch task failed on the cluster: {e}") from e
+            error = ClusterError(f"a clatch task failed on the cluster: {e}")
+            error.kind = "TaskFailed"
+            raise error from e
 
     def run(
         self, count: int, submit: Callable[[Any, int], Tuple[Any, Any]]

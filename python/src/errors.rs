@@ -124,10 +124,10 @@ fn class_of(e: &clatch::Error) -> Class {
     }
 }
 
-/// A library error as its Python exception, with the error's `Display` message.
+/// A library error as its Python exception, with the error's `Display` message and its
+/// [`clatch::Error::kind`] as `kind`.
 pub fn from_clatch(py: Python<'_>, e: clatch::Error) -> PyErr {
-    let debug = format!("{e:?}");
-    raise(py, class_of(&e), variant_name(&debug), e.to_string())
+    raise(py, class_of(&e), e.kind().name(), e.to_string())
 }
 
 /// An image decoding error (`clatch.imread`) as an `ImageReadError`.

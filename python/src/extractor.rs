@@ -1,14 +1,11 @@
 //! `clatch.Extractor`: detection and description.
 
-use clatch::{
-    DescriptorWidth, ExtractorConfig, GrayView, LevelBudget, PatchWeights, Pyramid, Ranking,
-    Smoothing, Subpixel,
-};
+use clatch::{DescriptorWidth, ExtractorConfig, GrayView, NamedOption, PatchWeights, Pyramid};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyList, PyTuple};
 
 use crate::arrays::{ImageInput, descriptors_out, keypoints_in, keypoints_out};
-use crate::backend::{backend_error, backend_name, parse_backend};
+use crate::backend::{backend_error, parse_backend};
 use crate::errors::{OrRaise, compute, invalid_input};
 
 /// Finds FAST keypoints and computes their 512-bit CLATCH descriptors.
@@ -63,41 +60,12 @@ fn int_in(py: Python<'_>, field: &'static str, value: i64, lo: i64, hi: i64) -> 
     .or_raise(py)
 }
 
-/// One of `choices` (name, value) named by `value`, or an `InvalidInputError`.
-fn choice<T: Copy>(py: Python<'_>, field: &str, value: &str, choices: &[(&str, T)]) -> PyResult<T> {
-    choices
-        .iter()
-        .find(|(name, _)| *name == value)
-        .map(|&(_, v)| v)
-        .ok_or_else(|| {
-            let names: Vec<_> = choices.iter().map(|(n, _)| format!("{n:?}")).collect();
-            invalid_input(
-                py,
-                "InvalidConfig",
-                format!("{field} must be one of {}, got {value:?}", names.join(", ")),
-            )
-        })
-}
-
-const LEVEL_BUDGETS: &[(&str, LevelBudget)] = &[
-    ("geometric", LevelBudget::Geometric),
-    ("global", LevelBudget::Global),
-];
-const RANKINGS: &[(&str, Ranking)] = &[("fast", Ranking::Fast), ("harris", Ranking::Harris)];
-const SUBPIXELS: &[(&str, Subpixel)] = &[("score", Subpixel::Score), ("none", Subpixel::None)];
-const SMOOTHINGS: &[(&str, Smoothing)] = &[
-    ("none", Smoothing::None),
-    ("binomial3", Smoothing::Binomial3),
-    ("binomial5", Smoothing::Binomial5),
-];
-
-/// The name of `value` among `choices`.
-fn name_of<T: PartialEq>(value: &T, choices: &[(&'static str, T)]) -> &'static str {
-    choices
-        .iter()
-        .find(|(_, v)| v == value)
-        .map(|(n, _)| *n)
-        .unwrap_or("unknown")
+/// The value of option `T` named `value` (the library's names), or an `InvalidInputError` (kind
+/// `InvalidConfig`) that lists them.
+fn named<T: NamedOption>(py: Python<'_>, value: &str) -> PyResult<T> {
+    value
+        .parse()
+        .map_err(|e: clatch::ParseNameError| invalid_input(py, "InvalidConfig", e.to_string()))
 }
 
 /// The Python float that prints as `value` does (`1.2`, not `1.2000000476837158`): the shortest
@@ -206,13 +174,13 @@ impl Extractor {
             detector.grid = int_in(py, "grid", g, 0, i64::from(u16::MAX))? as usize;
         }
         if let Some(b) = level_budget {
-            detector.level_budget = choice(py, "level_budget", b, LEVEL_BUDGETS)?;
+            detector.level_budget = named(py, b)?;
         }
         if let Some(r) = ranking {
-            detector.ranking = choice(py, "ranking", r, RANKINGS)?;
+            detector.ranking = named(py, r)?;
         }
         if let Some(s) = subpixel {
-            detector.subpixel = choice(py, "subpixel", s, SUBPIXELS)?;
+            detector.subpixel = named(py, s)?;
         }
         if let Some(p) = pyramid {
             config.pyramid = parse_pyramid(p)?;
@@ -223,7 +191,7 @@ impl Extractor {
             descriptor.width = DescriptorWidth::from_bits(b).or_raise(py)?;
         }
         if let Some(s) = smoothing {
-            descriptor.smoothing = choice(py, "smoothing", s, SMOOTHINGS)?;
+            descriptor.smoothing = named(py, s)?;
         }
         if let Some(w) = weights {
             let w: Vec<u32> = w
@@ -239,7 +207,7 @@ impl Extractor {
     /// The backend: ``"cpu"`` or ``"cuda:N"``.
     #[getter]
     fn backend(&self) -> String {
-        backend_name(self.inner.backend())
+        self.inner.backend().name()
     }
 
     /// The settings in effect, as the constructor's keywords (``Extractor(backend, **config)``
@@ -252,18 +220,15 @@ impl Extractor {
         d.set_item("max_keypoints", c.detector.max_keypoints)?;
         d.set_item("keypoint_size", shortest(c.detector.keypoint_size))?;
         d.set_item("grid", c.detector.grid)?;
-        d.set_item(
-            "level_budget",
-            name_of(&c.detector.level_budget, LEVEL_BUDGETS),
-        )?;
-        d.set_item("ranking", name_of(&c.detector.ranking, RANKINGS))?;
-        d.set_item("subpixel", name_of(&c.detector.subpixel, SUBPIXELS))?;
+        d.set_item("level_budget", c.detector.level_budget.name())?;
+        d.set_item("ranking", c.detector.ranking.name())?;
+        d.set_item("subpixel", c.detector.subpixel.name())?;
         match c.pyramid {
             Some(p) => d.set_item("pyramid", (p.levels, shortest(p.scale_factor)))?,
             None => d.set_item("pyramid", false)?,
         }
         d.set_item("bits", c.descriptor.width.bits())?;
-        d.set_item("smoothing", name_of(&c.descriptor.smoothing, SMOOTHINGS))?;
+        d.set_item("smoothing", c.descriptor.smoothing.name())?;
         d.set_item("weights", PyList::new(py, c.descriptor.weights.as_array())?)?;
         Ok(d)
     }

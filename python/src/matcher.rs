@@ -8,7 +8,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyList;
 
 use crate::arrays::{descriptors_in, matches_out};
-use crate::backend::{backend_error, backend_name, parse_backend};
+use crate::backend::{backend_error, parse_backend};
 use crate::errors::{OrRaise, compute, invalid_input};
 use crate::extractor::shortest;
 
@@ -125,7 +125,7 @@ impl Matcher {
     /// The backend: ``"cpu"`` or ``"cuda:N"``.
     #[getter]
     fn backend(&self) -> String {
-        backend_name(self.inner.backend())
+        self.inner.backend().name()
     }
 
     /// Lowe's ratio (``None``: no ratio test).

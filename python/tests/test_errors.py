@@ -111,6 +111,32 @@ def test_bad_extractor_settings(backend, keywords):
     assert info.value.kind in {"InvalidConfig", "InvalidDescriptorWidth", "WeightsLength", "WeightsAllZero", "WeightsOverflow"}
 
 
+@pytest.mark.parametrize(
+    "keywords,kind",
+    [
+        ({"threshold": 0}, "InvalidConfig"),
+        ({"bits": 100}, "InvalidDescriptorWidth"),
+        ({"weights": [1] * 63}, "WeightsLength"),
+        ({"weights": [0] * 64}, "WeightsAllZero"),
+        ({"weights": [1 << 30] * 64}, "WeightsOverflow"),
+    ],
+)
+def test_settings_errors_carry_the_library_error_kind(backend, keywords, kind):
+    raises(clatch.InvalidInputError, kind, lambda: clatch.Extractor(backend, **keywords))
+
+
+def test_option_and_backend_names_are_the_library_s(backend):
+    e = raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Extractor(backend, smoothing="gauss"))
+    assert str(e) == 'smoothing must be one of "none", "binomial3", "binomial5", got "gauss"'
+    e = raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Extractor(backend, level_budget="orb"))
+    assert str(e) == 'level_budget must be one of "global", "geometric", got "orb"'
+    e = raises(clatch.InvalidInputError, "InvalidBackend", lambda: clatch.Matcher("gpu"))
+    assert str(e) == 'backend must be one of "auto", "cpu", "cuda", "cuda:N", got "gpu"'
+    chosen = {"level_budget": "global", "ranking": "harris", "subpixel": "none", "smoothing": "binomial5"}
+    config = clatch.Extractor(backend, **chosen).config
+    assert {k: config[k] for k in chosen} == chosen
+
+
 @pytest.mark.parametrize("keywords", [{"ratio": 0.0}, {"ratio": 1.5}, {"ratio": float("nan")}, {"ratio": -0.5}, {"max_distance": -1}])
 def test_bad_matcher_settings(backend, keywords):
     raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Matcher(backend, **keywords))

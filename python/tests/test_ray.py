@@ -181,10 +181,11 @@ def test_a_photo_that_fails_on_an_actor_raises_its_own_error(cluster, backend, f
 
 
 def test_more_deaths_than_allowed_is_a_cluster_error(cluster, backend, folder, tmp_path):
-    with pytest.raises(clatch.ClusterError, match="max_actor_failures=0"):
+    with pytest.raises(clatch.ClusterError, match="max_actor_failures=0") as e:
         clatch.ray.match_folder(
             folder, tmp_path / "out.db", backend=backend, num_actors=2, block_size=BLOCK, max_actor_failures=0, _exit_after=("match", 0)
         )
+    assert e.value.kind == "ActorsDied"
     assert not (tmp_path / "out.db").exists()
 
 

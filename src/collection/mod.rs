@@ -290,8 +290,7 @@ impl DescriptorCollection {
 /// One pair on the CPU, as [`Matcher::match_pairs`] treats it: no matches without queries or with
 /// too small a gallery.
 fn match_on_host(query: &DescriptorSet, train: &DescriptorSet, config: &MatchConfig) -> Vec<Match> {
-    let needed = if config.ratio.is_some() { 2 } else { 1 };
-    if query.is_empty() || train.len() < needed {
+    if !config.can_match(query.len(), train.len()) {
         return Vec::new();
     }
     matching::cpu::match_descriptors(query, train, config)

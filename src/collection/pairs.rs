@@ -87,12 +87,10 @@ impl Matcher {
         }
     }
 
-    /// Whether pair `(a, b)` (in range) is matched at all: it has a query, and a gallery large enough
-    /// for the configured test (two descriptors for the ratio test, else one). Other pairs get no
-    /// matches.
+    /// Whether pair `(a, b)` (in range) is matched at all ([`crate::MatchConfig::can_match`]).
+    /// Other pairs get no matches.
     pub(super) fn matchable(&self, sets: &[&DescriptorSet], (a, b): (usize, usize)) -> bool {
-        let needed = if self.config().ratio.is_some() { 2 } else { 1 };
-        !sets[a].is_empty() && sets[b].len() >= needed
+        self.config().can_match(sets[a].len(), sets[b].len())
     }
 
     /// Every pair's indices in range and every set of one width.

@@ -134,3 +134,65 @@ pub fn check_sets(query: &DescriptorSet, train: &DescriptorSet, k: usize) -> Res
     }
     Ok(())
 }
+
+impl MatchConfig {
+    /// How many nearest neighbours of each query these rules look at: 2 with the ratio test (it
+    /// compares the best with the second best), else 1. A gallery needs at least this many
+    /// descriptors to be matched against.
+    ///
+    /// ```
+    /// use clatch::MatchConfig;
+    ///
+    /// assert_eq!(MatchConfig::default().neighbours_needed(), 2);
+    /// let no_ratio = MatchConfig { ratio: None, ..MatchConfig::default() };
+    /// assert_eq!(no_ratio.neighbours_needed(), 1);
+    /// ```
+    pub fn neighbours_needed(&self) -> usize {
+        if self.ratio.is_some() { 2 } else { 1 }
+    }
+
+    /// Whether a query set of `query_len` descriptors against a gallery of `train_len` has anything
+    /// to match under these rules: a query, and at least [`MatchConfig::neighbours_needed`] gallery
+    /// descriptors. The many-pairs calls ([`crate::Matcher::match_pairs`],
+    /// [`crate::DescriptorCollection`], [`crate::DevicePool`]) give a pair that cannot match no
+    /// matches; [`crate::Matcher::match_descriptors`] gives an empty query set no matches and reports
+    /// too small a gallery ([`crate::Error::EmptyGallery`], [`crate::Error::InvalidK`]).
+    ///
+    /// ```
+    /// use clatch::MatchConfig;
+    ///
+    /// let config = MatchConfig::default(); // with the ratio test
+    /// assert!(config.can_match(10, 2));
+    /// assert!(!config.can_match(10, 1) && !config.can_match(0, 50));
+    /// ```
+    pub fn can_match(&self, query_len: usize, train_len: usize) -> bool {
+        query_len > 0 && train_len >= self.neighbours_needed()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_ratio_test_needs_two_neighbours_and_a_pair_a_query() {
+        let ratio = MatchConfig::default();
+        let plain = MatchConfig {
+            ratio: None,
+            cross_check: false,
+            max_distance: Some(40),
+        };
+        assert_eq!((ratio.neighbours_needed(), plain.neighbours_needed()), (2, 1));
+        for (query, train, with_ratio, without) in [
+            (0, 0, false, false),
+            (0, 5, false, false),
+            (1, 0, false, false),
+            (1, 1, false, true),
+            (1, 2, true, true),
+            (7, 300, true, true),
+        ] {
+            assert_eq!(ratio.can_match(query, train), with_ratio, "{query}x{train}");
+            assert_eq!(plain.can_match(query, train), without, "{query}x{train}");
+        }
+    }
+}

@@ -252,7 +252,7 @@ impl Slot {
                 ))?;
         }
 
-        let k = if run.config.ratio.is_some() { 2 } else { 1 };
+        let k = run.config.neighbours_needed();
         let n_tasks = tasks.len() as u32;
         let use_ratio = run.config.ratio.is_some() as i32;
         let ratio = run.config.ratio.unwrap_or(0.0);
@@ -396,7 +396,6 @@ impl Run<'_> {
         use crate::cuda::header::{CLATCH_MATCH_ROW_PAD, CLATCH_PAIRS_ROW_ALIGN};
         let pad = CLATCH_MATCH_ROW_PAD as usize;
         let align = CLATCH_PAIRS_ROW_ALIGN as usize;
-        let needed = if self.config.ratio.is_some() { 2 } else { 1 };
         let inside = |row: usize, n: usize, len: usize, per_row: usize| {
             row.is_multiple_of(align) && (row + n + pad) * per_row <= len
         };
@@ -405,8 +404,7 @@ impl Run<'_> {
                 && inside(rows.train_row, rows.train_rows, s.train.len(), s.bits)
         });
         crate::cuda::invariant(
-            rows.query_rows >= 1
-                && rows.train_rows >= needed
+            self.config.can_match(rows.query_rows, rows.train_rows)
                 && rows.query_rows <= u32::MAX as usize
                 && rows.train_rows <= u32::MAX as usize
                 && inside(

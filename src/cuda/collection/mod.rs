@@ -252,12 +252,6 @@ impl DeviceCollection {
         }
     }
 
-    /// Whether a pair has device work: queries, and a gallery large enough for the test.
-    fn matchable(query_rows: usize, train_rows: usize, config: &MatchConfig) -> bool {
-        let needed = if config.ratio.is_some() { 2 } else { 1 };
-        query_rows > 0 && train_rows >= needed
-    }
-
     /// Matches `pairs` of held sets (ids in range, checked by the caller) with `config`, as
     /// `match_descriptors(set a, set b)` for each `(a, b)`, a pair without queries or with too small a
     /// gallery getting none; `each(p, matches)` for every pair `p`, in order, as blocks complete.
@@ -283,7 +277,8 @@ impl DeviceCollection {
             .iter()
             .map(|&(a, b)| {
                 let (query, train) = (self.place(a)?, self.place(b)?);
-                Ok(Self::matchable(query.rows, train.rows, config)
+                Ok(config
+                    .can_match(query.rows, train.rows)
                     .then(|| self.rows_of(query, train)))
             })
             .collect::<Result<Vec<_>>>()?;
@@ -331,7 +326,8 @@ impl DeviceCollection {
             .iter()
             .map(|&id| {
                 let train = self.place(id)?;
-                Ok(Self::matchable(query.len(), train.rows, config)
+                Ok(config
+                    .can_match(query.len(), train.rows)
                     .then(|| self.rows_of(query_place, train)))
             })
             .collect::<Result<Vec<_>>>()?;
@@ -348,7 +344,7 @@ impl DeviceCollection {
         (budget, family): (Budget, Option<MatchKernel>),
         each: &mut dyn FnMut(usize, Vec<Match>),
     ) -> Result<()> {
-        let k = if config.ratio.is_some() { 2 } else { 1 };
+        let k = config.neighbours_needed();
         let family = match family {
             Some(f) => self.dev.check_match_kernel(f, k)?,
             None => self.dev.match_kernel(k),

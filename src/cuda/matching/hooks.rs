@@ -60,8 +60,7 @@ pub fn match_descriptors_on(
     config: &MatchConfig,
     kernel: MatchKernel,
 ) -> Result<Vec<Match>> {
-    let k = if config.ratio.is_some() { 2 } else { 1 };
-    crate::matching::check_sets(query, train, k)?;
+    crate::matching::check_sets(query, train, config.neighbours_needed())?;
     check_rows(query, "query descriptors")?;
     check_rows(train, "gallery descriptors")?;
     if query.is_empty() {
@@ -83,9 +82,9 @@ pub fn time_match_kernels(
     kernel: Option<MatchKernel>,
     (warmup, repeats): (usize, usize),
 ) -> Result<Vec<f32>> {
-    let k = if config.ratio.is_some() { 2 } else { 1 };
+    let k = config.neighbours_needed();
     crate::matching::check_sets(query, train, k)?;
-    if query.is_empty() || train.len() < k {
+    if !config.can_match(query.len(), train.len()) {
         return Err(Error::InvalidK {
             k,
             gallery: train.len(),

@@ -425,7 +425,7 @@ impl MatchJob {
         kernel: Option<MatchKernel>,
     ) -> Result<Self> {
         let (nq, nt, words) = (query.len(), train.len(), query.width().words());
-        let k = if config.ratio.is_some() { 2 } else { 1 };
+        let k = config.neighbours_needed();
         let blocks = nq.div_ceil(SELECT_THREADS);
         Ok(Self {
             query: upload(&stream, query, "query descriptor upload")?,

@@ -268,7 +268,7 @@ fn match_with(
     train: &DescriptorSet,
     config: &MatchConfig,
 ) -> Vec<Match> {
-    let k = if config.ratio.is_some() { 2 } else { 1 };
+    let k = config.neighbours_needed();
     if config.cross_check {
         let (neighbours, reverse) = knn_and_reverse(query, train, k);
         select(&neighbours, Some(&reverse), config)
@@ -396,8 +396,8 @@ mod tests {
                     assert_eq!(neighbours, expected, "knn_and_reverse, {at}, k {k}");
                     assert_eq!(reverse, nearest_query_of_each_train(&query, &train), "reverse, {at}");
                 }
-                for config in configs.iter().filter(|c| nt >= 2 || c.ratio.is_none()) {
-                    let k = if config.ratio.is_some() { 2 } else { 1 };
+                for config in configs.iter().filter(|c| nt >= c.neighbours_needed()) {
+                    let k = config.neighbours_needed();
                     let reverse = nearest_query_of_each_train(&query, &train);
                     let expected = select(
                         &knn_scalar(&query, &train, k),

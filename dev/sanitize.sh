@@ -16,7 +16,8 @@
 # Environment: BINARIES (prebuilt binaries, as for dev/gpu_suite.sh), OUT (default target/sanitize), TOOLS (default all four), SAN_TIMEOUT (seconds one
 # binary may run under one tool, default 3600), RACECHECK_SCALE (default sanitizer; `full` for the
 # normal workload), SEQUENTIAL=1 (the tools one after another instead of side by side, for a GPU with
-# little memory).
+# little memory), JOBS=N (every tool-and-binary run as its own job, N at a time: all binaries side by
+# side, which is what lets the whole set finish within minutes on a large GPU and many cores).
 #
 # Logs: $OUT/TOOL/NAME.txt (each run's whole output), $OUT/summary.txt (one line a run, printed last).
 # A run passes when the binary exits 0 and the tool reports no error (racecheck: no hazard). The one
@@ -82,14 +83,12 @@ one() {
     [ "$oom" -gt 0 ] && note=" ($oom of them out-of-memory answers to a deliberate request)"
     printf '%-8s %-9s %s (CLATCH_TEST_SCALE=%s) rc=%s %ss: %s | %s%s\n' "$verdict" "$tool" "$name" \
         "$scale" "$rc" "$secs" "${result:-no test result}" "${summary:-no sanitizer summary}" "$note" \
-        >> "$OUT/$tool/summary.txt"
+        >> "$OUT/$tool/summary.$name"
 }
 
 # sequence TOOL: every binary under the tool, one after another.
 sequence() {
     local tool=$1
-    mkdir -p "$OUT/$tool"
-    : > "$OUT/$tool/summary.txt"
     for name in "${names[@]}"; do one "$tool" "$name"; done
 }
 
@@ -103,11 +102,30 @@ sequence() {
     echo "commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown), $(date -u +%Y-%m-%dT%H:%MZ)"
 } > "$OUT/summary.txt"
 for tool in $TOOLS; do
-    if [ "${SEQUENTIAL:-0}" = 1 ]; then sequence "$tool"; else sequence "$tool" & fi
+    mkdir -p "$OUT/$tool"
+    rm -f "$OUT/$tool"/summary.*
 done
-wait
+if [ -n "${JOBS:-}" ]; then
+    # Every (tool, binary) pair as its own job, JOBS at a time.
+    running=0
+    for name in "${names[@]}"; do
+        for tool in $TOOLS; do
+            one "$tool" "$name" &
+            running=$(( running + 1 ))
+            if [ "$running" -ge "$JOBS" ]; then wait -n; running=$(( running - 1 )); fi
+        done
+    done
+    wait
+else
+    for tool in $TOOLS; do
+        if [ "${SEQUENTIAL:-0}" = 1 ]; then sequence "$tool"; else sequence "$tool" & fi
+    done
+    wait
+fi
 bad=0
 for tool in $TOOLS; do
+    cat "$OUT/$tool"/summary.* > "$OUT/$tool/summary.txt" 2>/dev/null
+    for name in "${names[@]}"; do rm -f "$OUT/$tool/summary.$name"; done
     cat "$OUT/$tool/summary.txt" >> "$OUT/summary.txt"
     bad=$(( bad + $(grep -vc '^ok ' "$OUT/$tool/summary.txt") ))
 done

@@ -235,6 +235,11 @@ fn images_keypoints_and_configurations() {
             assert_eq!(image.get_row(y).is_some(), y < height);
             let _ = clatch::fast_score(&image, x, y);
         }
+        // Coordinates at the far end of `usize` are outside, not wrapped round into the image.
+        for far in [usize::MAX, usize::MAX - 2, usize::MAX / 2 + 1] {
+            assert_eq!(clatch::fast_score(&image, far, 3), None);
+            assert_eq!(clatch::fast_score(&image, 3, far), None);
+        }
         let config = random_config(&mut rng);
         let Some(extractor) = tally.call(
             || describe(&format!("Extractor::new({config:?})")),
@@ -370,6 +375,11 @@ fn descriptor_sets_and_matching_against_the_references() {
             assert_eq!(knn.as_slice(), naive_knn(&query, &train, k), "case {case}");
             assert_eq!(knn.len(), query.len());
             assert_eq!(knn.neighbours(knn.len()), None);
+            // An index whose product with k wraps round is past the end, not query 0 again.
+            if k > 1 {
+                assert_eq!(knn.neighbours(usize::MAX / k + 1), None, "k = {k}");
+            }
+            assert_eq!(knn.neighbours(usize::MAX), None);
         }
         if let Some(matches) = tally.call(
             || format!("case {case}: match_descriptors"),

@@ -261,7 +261,11 @@ impl DetectorConfig {
 /// # Ok::<(), clatch::Error>(())
 /// ```
 pub fn fast_score(image: &GrayView, x: usize, y: usize) -> Option<i32> {
-    let inside = x >= 3 && y >= 3 && x + 3 < image.width() && y + 3 < image.height();
+    // Subtracted, not added: a coordinate near `usize::MAX` must not wrap round into the image.
+    let inside = x >= 3
+        && y >= 3
+        && x < image.width().saturating_sub(3)
+        && y < image.height().saturating_sub(3);
     inside.then(|| cpu::fast_score(image, x, y))
 }
 

@@ -87,7 +87,9 @@ impl KnnMatches {
 
     /// The neighbours of query `q`, nearest first; `None` past the last query.
     pub fn neighbours(&self, q: usize) -> Option<&[Match]> {
-        self.matches.get(q * self.k..(q + 1) * self.k)
+        // Checked: a huge `q` must not wrap round to an early query's neighbours.
+        let start = q.checked_mul(self.k)?;
+        self.matches.get(start..start.checked_add(self.k)?)
     }
 
     /// Iterates over the queries' neighbour lists.

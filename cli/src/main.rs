@@ -23,6 +23,7 @@ mod subpixel;
 #[cfg(test)]
 mod test_dir;
 mod text_input;
+mod threads;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -313,6 +314,9 @@ pub fn settings_on(
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Some(warning) = threads::cap_pool() {
+        eprintln!("clatch: warning: {warning}");
+    }
     let result = match cli.command {
         Command::Demo(args) => demo::main(&args),
         Command::Match(args) => match_cmd::main(&args),

@@ -260,3 +260,41 @@ fn a_palette_png_with_indices_past_its_palette_is_refused() {
     let out = clatch(&["extract", str(&bad), "-o", str(&prefix)]);
     assert_refused(&out, "past the end of its 3-colour palette");
 }
+
+/// `RAYON_NUM_THREADS` far above the machine's cores is capped with a warning, not obeyed (3000
+/// threads made a 70 ms run take minutes and, under a memory limit, die).
+#[test]
+fn a_huge_thread_count_is_capped() {
+    let dir = workdir("hostile", "threads");
+    let image = dir.join("a.png");
+    photo(160, 120, 0).save(&image).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_clatch"))
+        .args([
+            "extract",
+            str(&image),
+            "-o",
+            str(&dir.join("a")),
+            "--backend",
+            "cpu",
+        ])
+        .env("RAYON_NUM_THREADS", "3000")
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("RAYON_NUM_THREADS=3000 is more than"),
+        "{stderr}"
+    );
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads: usize = stdout
+        .split("cpu (")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no backend line in: {stdout}"));
+    assert!(threads <= 4 * cores, "{threads} threads on {cores} cores");
+}

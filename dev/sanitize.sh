@@ -13,7 +13,8 @@
 #     bash dev/sanitize.sh NAME...          only these binaries (cuda_match, backend, clatch_unit, ...)
 #     TOOLS="memcheck racecheck" bash dev/sanitize.sh cuda_detect
 #
-# Environment: BINARIES (prebuilt binaries, as for dev/gpu_suite.sh), OUT (default target/sanitize), TOOLS (default all four), SAN_TIMEOUT (seconds one
+# Environment: BINARIES (prebuilt binaries, as for dev/gpu_suite.sh), OUT (default target/sanitize),
+# SCALE (the workload of memcheck, initcheck and synccheck: default full, or sanitizer), TOOLS (default all four), SAN_TIMEOUT (seconds one
 # binary may run under one tool, default 3600), RACECHECK_SCALE (default sanitizer; `full` for the
 # normal workload), SEQUENTIAL=1 (the tools one after another instead of side by side, for a GPU with
 # little memory), JOBS=N (every tool-and-binary run as its own job, N at a time: all binaries side by
@@ -56,7 +57,7 @@ done
 one() {
     local tool=$1 name=$2
     local path; path=$(awk -v n="$name" '$1 == n { print $2 }' "$list")
-    local scale=full
+    local scale=${SCALE:-full}
     [ "$tool" = racecheck ] && scale=${RACECHECK_SCALE:-sanitizer}
     local log="$OUT/$tool/$name.txt"
     local start; start=$(date +%s)

@@ -156,8 +156,13 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
     );
     print_set_up_steps(extractor.backend());
     println!("  {:<12}{n}", "keypoints");
-    println!("  {:<12}{:>12}", "detect", ms(extracted.detect));
-    println!("  {:<12}{:>12}", "describe", ms(extracted.describe));
+    match extracted.describe {
+        Some(describe) => {
+            println!("  {:<12}{:>12}", "detect", ms(extracted.detect));
+            println!("  {:<12}{:>12}", "describe", ms(describe));
+        }
+        None => println!("  {:<12}{:>12}", "detect+desc", ms(extracted.detect)),
+    }
     println!("  wrote       {}", csv.display());
     println!("  wrote       {}", json.display());
     println!(

@@ -36,10 +36,11 @@ pub struct Settings {
 pub struct Extracted {
     /// Keypoints and their descriptors (row `i` describes keypoint `i`).
     pub features: Features,
-    /// Wall time of detection.
+    /// Wall time of detection (with `describe` `None`: of detection and description together).
     pub detect: Duration,
-    /// Wall time of description.
-    pub describe: Duration,
+    /// Wall time of description, when it was timed apart from detection; `None` when it ran inside
+    /// detection (a pyramid describes on its levels; sub-pixel positions are found after it).
+    pub describe: Option<Duration>,
 }
 
 /// The result of matching image A (queries) against image B (gallery).
@@ -81,7 +82,7 @@ pub fn extract(
         return Ok(Extracted {
             features,
             detect,
-            describe: Duration::ZERO,
+            describe: None,
         });
     }
     extract_with(extractor, img, name, progress, |view, keypoints| {
@@ -137,7 +138,7 @@ fn extract_with(
     Ok(Extracted {
         features,
         detect,
-        describe,
+        describe: Some(describe),
     })
 }
 
@@ -235,7 +236,10 @@ mod tests {
         let view = GrayView::new(&pixels, w, h, w).unwrap();
         assert_eq!(got.features, extractor.detect_and_describe(&view).unwrap());
         assert!(got.features.keypoints.iter().any(|k| k.octave == 1));
-        assert_eq!(got.describe, Duration::ZERO);
+        assert_eq!(
+            got.describe, None,
+            "timed with detection, not reported as zero"
+        );
         let latch = clatch::OpencvLatch::default();
         assert!(matches!(
             extract_opencv(

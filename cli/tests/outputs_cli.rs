@@ -202,3 +202,34 @@ fn extract_of_several_images_writes_each_as_its_own_call_would() {
         common::stderr(&out)
     );
 }
+
+/// The report says what was timed: with the defaults (a pyramid describes inside detection) one
+/// `detect+desc` row, not a `describe` row of 0.00 ms; with a single scale, both rows.
+#[test]
+fn the_report_times_description_only_where_it_ran_apart() {
+    let dir = workdir("outputs", "timing");
+    let (image, prefix) = (dir.join("a.png"), dir.join("a"));
+    photo(320, 240, 0).save(&image).unwrap();
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "extract",
+            str(&image),
+            "-o",
+            str(&prefix),
+            "--backend",
+            "cpu",
+        ];
+        args.extend_from_slice(extra);
+        let out = clatch(&args);
+        assert!(out.status.success(), "{}", common::stderr(&out));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let defaults = run(&[]);
+    assert!(defaults.contains("detect+desc"), "{defaults}");
+    assert!(!defaults.contains("describe "), "{defaults}");
+    let single = run(&["--single-scale"]);
+    assert!(
+        single.contains("describe ") && !single.contains("detect+desc"),
+        "{single}"
+    );
+}

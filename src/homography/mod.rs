@@ -125,12 +125,13 @@ impl Homography {
             + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
     }
 
-    /// The inverse map, or `None` for a (numerically) singular matrix.
+    /// The inverse map, or `None` for a (numerically) singular matrix: a determinant of zero, or an
+    /// inverse whose product with the matrix is not the identity to within `1e-8` of the magnitudes
+    /// the product sums (the backward check, which a large translation or scale alone passes).
     pub fn inverse(&self) -> Option<Homography> {
         let m = &self.0;
         let det = self.determinant();
-        let scale = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
-        if !det.is_finite() || scale == 0.0 || det.abs() <= 1e-12 * scale.powi(3) {
+        if !det.is_finite() || det == 0.0 {
             return None;
         }
         // Adjugate (transposed cofactors) over the determinant.
@@ -142,7 +143,19 @@ impl Homography {
             [-cof(1, 2, 0, 2), cof(0, 2, 0, 2), -cof(0, 1, 0, 2)],
             [cof(1, 2, 0, 1), -cof(0, 2, 0, 1), cof(0, 1, 0, 1)],
         ];
-        Some(Homography(adj.map(|row| row.map(|v| v / det))).normalized())
+        let inv = adj.map(|row| row.map(|v| v / det));
+        for (i, row) in inv.iter().enumerate() {
+            for j in 0..3 {
+                let (sum, magnitude) = (0..3).fold((0.0f64, 0.0f64), |(s, a), k| {
+                    (s + row[k] * m[k][j], a + (row[k] * m[k][j]).abs())
+                });
+                let identity = if i == j { 1.0 } else { 0.0 };
+                if !sum.is_finite() || (sum - identity).abs() > 1e-8 * magnitude.max(1.0) {
+                    return None;
+                }
+            }
+        }
+        Some(Homography(inv).normalized())
     }
 }
 
@@ -212,6 +225,23 @@ mod tests {
         }
         let singular = Homography::from_rows([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 0.0, 1.0]]);
         assert_eq!(singular.inverse(), None);
+        assert_eq!(Homography::from_rows([[0.0; 3]; 3]).inverse(), None);
+        // A large translation or scale is not singular: the inverse maps back.
+        for shift in [1e4, 1e6, 1e9] {
+            let h = Homography::from_rows([[1.0, 0.0, shift], [0.0, 1.0, -shift], [0.0, 0.0, 1.0]]);
+            let back = h.inverse().expect("a translation inverts");
+            let (fx, fy) = h.apply(3.0, 4.0).unwrap();
+            let (x, y) = back.apply(fx, fy).unwrap();
+            assert!(
+                (x - 3.0).abs() < 1e-3 && (y - 4.0).abs() < 1e-3,
+                "{shift}: {x} {y}"
+            );
+        }
+        let tiny = Homography::from_rows([[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1.0]]);
+        assert!(
+            tiny.inverse().is_some(),
+            "a 1e-6 scale is a valid (if extreme) map"
+        );
     }
 
     #[test]

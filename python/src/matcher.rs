@@ -235,14 +235,14 @@ impl Matcher {
     #[staticmethod]
     fn all_pairs(py: Python<'_>, n: i64) -> PyResult<Bound<'_, PyAny>> {
         let n = usize::try_from(n)
-            .map_err(|_| invalid_input(py, "InvalidConfig", format!("n must be >= 0, got {n}")))?;
+            .map_err(|_| invalid_input(py, "InvalidInput", format!("n must be >= 0, got {n}")))?;
         // More pairs than any array can index is refused rather than run out of memory.
         if n.checked_mul(n.saturating_sub(1))
             .is_none_or(|twice| twice / 2 > isize::MAX as usize / 32)
         {
             return Err(invalid_input(
                 py,
-                "InvalidConfig",
+                "InvalidInput",
                 format!("n = {n} sets have too many pairs to list"),
             ));
         }

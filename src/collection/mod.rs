@@ -143,7 +143,7 @@ impl DescriptorCollection {
     /// the one `pending.wait()` would give, so every match does too.
     ///
     /// Errors: [`Error::DescriptorWidthMismatch`] when the extraction's width is not the
-    /// collection's, [`Error::InvalidConfig`] when it runs on another device; nothing is added then.
+    /// collection's, [`Error::InvalidInput`] when it runs on another device; nothing is added then.
     ///
     /// ```no_run
     /// use clatch::cuda::GpuStream;

@@ -292,7 +292,7 @@ impl Extractor {
     /// Queues detection and description of `image` on `stream` and returns at once; the result's
     /// `wait` gives exactly what [`Extractor::detect_and_describe`] gives. With one stream per image,
     /// several images are in flight at once (see [`GpuStream`]). The backend must be
-    /// `Backend::Cuda` on the stream's device ([`Error::InvalidConfig`] otherwise). With a [`Pyramid`], the levels and their detection are
+    /// `Backend::Cuda` on the stream's device ([`Error::InvalidInput`] otherwise). With a [`Pyramid`], the levels and their detection are
     /// queued; the top-N over the levels and the description on each level run in `wait`.
     ///
     /// ```no_run
@@ -339,10 +339,10 @@ impl Extractor {
                     life,
                 )
             }
-            Backend::Cpu => Err(Error::InvalidConfig {
-                field: "backend",
-                value: "cpu".into(),
-                reason: "asynchronous extraction runs on a CUDA backend",
+            Backend::Cpu => Err(Error::InvalidInput {
+                what: "stream",
+                reason: "asynchronous extraction runs on a CUDA backend; this extractor's is cpu"
+                    .into(),
             }),
         }
     }

@@ -125,10 +125,7 @@ fn main() {
             ("ratio 0.8, cross-check", MatchConfig::default()),
             (
                 "ratio 0.8, no cross-check",
-                MatchConfig {
-                    cross_check: false,
-                    ..MatchConfig::default()
-                },
+                MatchConfig::default().with_cross_check(false),
             ),
         ] {
             for &family in &families {

@@ -30,11 +30,10 @@ fn every_pair_equals_its_own_call() {
     pairs.extend([(3, 3), (5, 0), (0, 5)]);
     for config in [
         MatchConfig::default(),
-        MatchConfig {
-            ratio: None,
-            cross_check: false,
-            max_distance: Some(20),
-        },
+        MatchConfig::default()
+            .with_ratio(None)
+            .with_cross_check(false)
+            .with_max_distance(Some(20)),
     ] {
         let matcher = Matcher::new(Backend::Cpu, config.clone()).unwrap();
         let finished = Mutex::new(Vec::new());

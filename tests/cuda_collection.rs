@@ -586,10 +586,7 @@ mod gpu {
             }
         }
         // The public collection (the device's family) the same ways.
-        let config = MatchConfig {
-            cross_check: true,
-            ..MatchConfig::default()
-        };
+        let config = MatchConfig::default().with_cross_check(true);
         let cpu = matcher(Backend::Cpu, &config)?;
         let sets = tied_collection(256, &sizes, &mut rng);
         let refs: Vec<&DescriptorSet> = sets.iter().collect();

@@ -156,10 +156,7 @@ fn callbacks_may_match_again_and_threads_share_a_collection() {
     let mut rng = SplitMix64::new(32);
     let sets = tied_collection(64, &[70, 0, 1, 2, 65, 130, 9, 300], &mut rng);
     let query = &tied_collection(64, &[90], &mut rng)[0];
-    let config = MatchConfig {
-        cross_check: true,
-        ..MatchConfig::default()
-    };
+    let config = MatchConfig::default().with_cross_check(true);
     let matcher = Matcher::new(Backend::Cpu, config).unwrap();
     let c = collection(&matcher, &sets);
     let all = Matcher::all_pairs(sets.len());

@@ -209,10 +209,7 @@ fn bad_pools_and_bad_input_are_refused_before_any_work() {
         pool.match_pairs(&config, &[sets[0], &narrow], &[(0, 0)], &count),
         Err(Error::DescriptorWidthMismatch { .. })
     ));
-    let bad_ratio = MatchConfig {
-        ratio: Some(1.5),
-        ..MatchConfig::default()
-    };
+    let bad_ratio = MatchConfig::default().with_ratio(Some(1.5));
     assert!(matches!(
         pool.match_pairs(&bad_ratio, &sets, &[(0, 1)], &count),
         Err(Error::InvalidConfig { field: "ratio", .. })
@@ -226,13 +223,7 @@ fn bad_pools_and_bad_input_are_refused_before_any_work() {
         pool.detect_and_describe_batch(&ExtractorConfig::default(), &images, &count),
         Err(Error::ImageTooSmall { .. })
     ));
-    let bad_pyramid = ExtractorConfig {
-        pyramid: Some(clatch::Pyramid {
-            levels: 0,
-            scale_factor: 1.2,
-        }),
-        ..ExtractorConfig::default()
-    };
+    let bad_pyramid = ExtractorConfig::default().with_pyramid(Some(clatch::Pyramid::new(0, 1.2)));
     assert!(matches!(
         pool.detect_and_describe_batch(&bad_pyramid, &images[..1], &count),
         Err(Error::InvalidConfig { .. })

@@ -83,10 +83,7 @@ fn parse_pyramid(value: &Bound<'_, PyAny>) -> PyResult<Option<Pyramid>> {
         }
     } else if let Ok((levels, scale_factor)) = value.extract::<(i64, f32)>() {
         let levels = int_in(py, "pyramid.levels", levels, 0, i64::from(u16::MAX))? as usize;
-        return Ok(Some(Pyramid {
-            levels,
-            scale_factor,
-        }));
+        return Ok(Some(Pyramid::new(levels, scale_factor)));
     }
     Err(invalid_input(
         py,

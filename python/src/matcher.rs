@@ -113,11 +113,10 @@ impl Matcher {
             })?),
             None => None,
         };
-        let config = MatchConfig {
-            ratio,
-            cross_check,
-            max_distance,
-        };
+        let config = MatchConfig::default()
+            .with_ratio(ratio)
+            .with_cross_check(cross_check)
+            .with_max_distance(max_distance);
         let inner = clatch::Matcher::new(backend, config).map_err(|e| backend_error(py, e))?;
         Ok(Self { inner })
     }

@@ -161,8 +161,10 @@ mod gpu {
             let gpu = Extractor::new(GPU, config.clone())?;
             let cpu = Extractor::new(Backend::Cpu, config)?;
             let done = std::sync::Mutex::new(Vec::new());
-            let got = gpu.detect_and_describe_batch(&views, &|i| done.lock().unwrap().push(i))?;
-            let expected = cpu.detect_and_describe_batch(&views, &|_| {})?;
+            let got = gpu.detect_and_describe_batch_with_progress(&views, &|i| {
+                done.lock().unwrap().push(i)
+            })?;
+            let expected = cpu.detect_and_describe_batch(&views)?;
             if *done.lock().unwrap() != (0..views.len()).collect::<Vec<_>>() {
                 return Err("images not reported once each in input order".into());
             }

@@ -275,8 +275,8 @@ mod gpu {
                     c.add(&[descriptors])?;
                     c.add(&[descriptors, descriptors])?; // grows the device buffer
                     let mut found = Vec::new();
-                    c.match_all_pairs(|_, matches| found.push(matches))?;
-                    c.search(descriptors, |_, matches| found.push(matches))?;
+                    c.match_all_pairs_each(|_, matches| found.push(matches))?;
+                    c.search_each(descriptors, |_, matches| found.push(matches))?;
                     Ok(format!("{found:?}"))
                 }),
             ),

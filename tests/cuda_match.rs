@@ -597,10 +597,11 @@ mod gpu {
         let pairs = Matcher::all_pairs(sets.len());
         let mut compared = 0;
         for config in configs() {
-            let cpu = matcher(Backend::Cpu, config.clone()).match_pairs(&sets, &pairs, &|_| {})?;
+            let cpu = matcher(Backend::Cpu, config.clone()).match_pairs(&sets, &pairs)?;
             let done = std::sync::Mutex::new(Vec::new());
-            let gpu = matcher(GPU, config.clone())
-                .match_pairs(&sets, &pairs, &|p| done.lock().unwrap().push(p))?;
+            let gpu =
+                matcher(GPU, config.clone())
+                    .match_pairs_with_progress(&sets, &pairs, &|p| done.lock().unwrap().push(p))?;
             if *done.lock().unwrap() != (0..pairs.len()).collect::<Vec<_>>() {
                 return Err(format!("{config:?}: pairs not reported once each in order").into());
             }

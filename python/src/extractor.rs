@@ -293,7 +293,7 @@ impl Extractor {
             .map(|(i, image)| ImageInput::new(image, &format!("images[{i}]")))
             .collect::<PyResult<Vec<_>>>()?;
         let views = Self::views(py, &inputs)?;
-        let all = compute(py, || self.inner.detect_and_describe_batch(&views, &|_| {}))?;
+        let all = compute(py, || self.inner.detect_and_describe_batch(&views))?;
         let out = all
             .into_iter()
             .map(|f| Self::features_out(py, f))

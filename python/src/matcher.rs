@@ -222,7 +222,7 @@ impl Matcher {
             .collect::<PyResult<Vec<DescriptorSet>>>()?;
         let pairs = pairs_in(pairs, sets.len())?;
         let refs: Vec<&DescriptorSet> = sets.iter().collect();
-        let all = compute(py, || self.inner.match_pairs(&refs, &pairs, &|_| {}))?;
+        let all = compute(py, || self.inner.match_pairs(&refs, &pairs))?;
         let out: Vec<_> = all.into_iter().map(|m| matches_out(py, m)).collect();
         PyList::new(py, out)
     }

@@ -74,13 +74,7 @@ fn extraction(c: &mut Criterion) {
     group
         .measurement_time(Duration::from_secs(6))
         .sample_size(10);
-    let pyramid_3_2 = ExtractorConfig {
-        pyramid: Some(clatch::Pyramid {
-            levels: 3,
-            scale_factor: 2.0,
-        }),
-        ..ExtractorConfig::default()
-    };
+    let pyramid_3_2 = ExtractorConfig::default().with_pyramid(Some(clatch::Pyramid::new(3, 2.0)));
     for (name, config) in [
         ("single_scale preset", ExtractorConfig::single_scale()),
         ("default", ExtractorConfig::default()),

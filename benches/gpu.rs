@@ -78,10 +78,7 @@ fn main() {
                 ("7x7 mask", PatchWeights::default()),
                 ("weights 2", doubled),
             ] {
-                let config = DescriptorConfig {
-                    weights,
-                    ..DescriptorConfig::default()
-                };
+                let config = DescriptorConfig::default().with_weights(weights);
                 let times = clatch::cuda::hooks::time_describe_kernel(
                     &dev, &image, &keypoints, &config, 3, 15,
                 )

@@ -107,7 +107,7 @@ fn main() {
 
         let warm: Vec<(usize, usize)> = Matcher::all_pairs(sets.min(100));
         collection
-            .match_pairs(&warm, |_, _| {})
+            .match_pairs_each(&warm, |_, _| {})
             .expect("warm-up run");
         let pairs = Matcher::all_pairs(sets);
         let checked = [0, pairs.len() / 2, pairs.len() - 1];
@@ -118,7 +118,7 @@ fn main() {
             let mut samples = Vec::new();
             let t = Instant::now();
             collection
-                .match_all_pairs(|p, m| {
+                .match_all_pairs_each(|p, m| {
                     kept += m.len();
                     if checked.contains(&p) {
                         samples.push((p, m));

@@ -54,11 +54,9 @@ fn main() {
         // The default threshold (20) finds ~1.7k (1080p) and ~2.3k (5616x3744) corners on this image;
         // threshold 2 also fires on its +-2 noise: 11.5k and 54k survivors, cut to 20k on the large one.
         for (threshold, max_keypoints) in [(20u8, usize::MAX), (2, 20_000)] {
-            let detector = DetectorConfig {
-                threshold,
-                max_keypoints,
-                ..DetectorConfig::default()
-            };
+            let detector = DetectorConfig::default()
+                .with_threshold(threshold)
+                .with_max_keypoints(max_keypoints);
             let (times, keypoints) =
                 clatch::cuda::hooks::time_detect(&dev, &image, &detector, WARMUP, REPEATS)
                     .expect("detection kernels");
@@ -95,10 +93,7 @@ fn main() {
                 keypoints.len(),
                 detect_ms + describe_ms
             );
-            let config = ExtractorConfig {
-                detector,
-                ..ExtractorConfig::default()
-            };
+            let config = ExtractorConfig::default().with_detector(detector);
             let gpu = Extractor::new(Backend::Cuda { device: 0 }, config.clone()).unwrap();
             let cpu = Extractor::new(Backend::Cpu, config).unwrap();
             gpu.detect_and_describe(&image).unwrap();
@@ -120,13 +115,8 @@ fn main() {
     let pixels = clatch::synthetic::rectangles(w, h, 9).expect("synthetic image");
     let image = GrayView::new(&pixels, w, h, w).unwrap();
     for (levels, scale_factor) in [(1usize, 2.0f32), (3, 2.0), (8, 1.2)] {
-        let config = ExtractorConfig {
-            pyramid: Some(clatch::Pyramid {
-                levels,
-                scale_factor,
-            }),
-            ..ExtractorConfig::default()
-        };
+        let config = ExtractorConfig::default()
+            .with_pyramid(Some(clatch::Pyramid::new(levels, scale_factor)));
         let gpu = Extractor::new(Backend::Cuda { device: 0 }, config.clone()).unwrap();
         let cpu = Extractor::new(Backend::Cpu, config).unwrap();
         let found = gpu.detect_and_describe(&image).unwrap().keypoints.len();

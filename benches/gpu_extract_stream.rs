@@ -27,7 +27,7 @@ fn main() {
     use std::time::Instant;
 
     use clatch::cuda::hooks::{PinnedBytes, device_time, is_pinned_for_upload};
-    use clatch::{Backend, DetectorConfig, Error, Extractor, ExtractorConfig, GrayView};
+    use clatch::{Backend, Error, Extractor, ExtractorConfig, GrayView};
 
     let Some(dev) = common::device_or_skip() else {
         return;
@@ -40,11 +40,10 @@ fn main() {
     };
     // `base` with another threshold and keypoint cap.
     let with = |mut base: ExtractorConfig, threshold: u8, max_keypoints: usize| {
-        base.detector = DetectorConfig {
-            threshold,
-            max_keypoints,
-            ..base.detector
-        };
+        base.detector = base
+            .detector
+            .with_threshold(threshold)
+            .with_max_keypoints(max_keypoints);
         base
     };
     let single = |threshold, max| with(ExtractorConfig::single_scale(), threshold, max);

@@ -125,10 +125,7 @@ fn main() {
             ("ratio 0.8, cross-check", MatchConfig::default()),
             (
                 "ratio 0.8, no cross-check",
-                MatchConfig {
-                    cross_check: false,
-                    ..MatchConfig::default()
-                },
+                MatchConfig::default().with_cross_check(false),
             ),
         ] {
             for &family in &families {
@@ -207,9 +204,9 @@ fn main() {
                 .map(|&(a, b)| gpu.match_descriptors(sets[a], sets[b]).unwrap())
                 .collect()
         });
-        let (batched, got) = time(&mut || gpu.match_pairs(&sets, &pairs, &|_| {}).unwrap());
+        let (batched, got) = time(&mut || gpu.match_pairs(&sets, &pairs).unwrap());
         assert_eq!(got, expected, "match_pairs equals the per-pair calls");
-        let (on_cpu, cpu_result) = time(&mut || cpu.match_pairs(&sets, &pairs, &|_| {}).unwrap());
+        let (on_cpu, cpu_result) = time(&mut || cpu.match_pairs(&sets, &pairs).unwrap());
         assert_eq!(cpu_result, expected, "the CPU backend agrees");
         let per_pair = |s: f64| s * 1e6 / pairs.len() as f64;
         println!(

@@ -76,7 +76,7 @@ fn main() {
     let pairs = Matcher::all_pairs(set_count);
     let config = MatchConfig::default();
     let matcher = Matcher::new(GPU, config.clone()).unwrap();
-    let (single, lo, hi, expected) = timed(repeats, || matcher.match_pairs(&sets, &pairs, &|_| {}));
+    let (single, lo, hi, expected) = timed(repeats, || matcher.match_pairs(&sets, &pairs));
     let per_pair = |s: f64| s * 1e6 / pairs.len() as f64;
     println!(
         "match {set_count} sets of {per_set} (512 bits), {} pairs, ratio 0.8 + cross-check, median of \
@@ -89,9 +89,7 @@ fn main() {
     );
     for workers in [1, 2, 4] {
         let pool = DevicePool::new(&vec![GPU; workers]).unwrap();
-        let (wall, lo, hi, got) = timed(repeats, || {
-            pool.match_pairs(&config, &sets, &pairs, &|_| {})
-        });
+        let (wall, lo, hi, got) = timed(repeats, || pool.match_pairs(&config, &sets, &pairs));
         assert!(
             got == expected,
             "{workers} workers: results differ from one device"
@@ -116,9 +114,8 @@ fn main() {
         .collect();
     let config = ExtractorConfig::default();
     let extractor = Extractor::new(GPU, config.clone()).unwrap();
-    let (single, lo, hi, expected) = timed(repeats, || {
-        extractor.detect_and_describe_batch(&images, &|_| {})
-    });
+    let (single, lo, hi, expected) =
+        timed(repeats, || extractor.detect_and_describe_batch(&images));
     let keypoints: usize = expected.iter().map(|f| f.keypoints.len()).sum();
     let per_image = |s: f64| s * 1e3 / image_count as f64;
     println!(
@@ -135,9 +132,8 @@ fn main() {
     );
     for workers in [1, 2, 4] {
         let pool = DevicePool::new(&vec![GPU; workers]).unwrap();
-        let (wall, lo, hi, got) = timed(repeats, || {
-            pool.detect_and_describe_batch(&config, &images, &|_| {})
-        });
+        let (wall, lo, hi, got) =
+            timed(repeats, || pool.detect_and_describe_batch(&config, &images));
         assert!(
             got == expected,
             "{workers} workers: features differ from one device"

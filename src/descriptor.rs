@@ -182,6 +182,7 @@ impl DescriptorSet {
     }
 
     /// All descriptors as bytes in OpenCV LATCH's layout (`len() * width.bytes()` bytes, row-major).
+    /// [`DescriptorSet::from_opencv_bytes`] reads them back.
     pub fn to_opencv_bytes(&self) -> Vec<u8> {
         let bytes = self.width.bytes();
         let mut out = Vec::with_capacity(self.len() * bytes);
@@ -190,6 +191,42 @@ impl DescriptorSet {
             out.extend_from_slice(&d.to_opencv_bytes()[..bytes]);
         }
         out
+    }
+
+    /// The set of `width`-bit descriptors held in `bytes`, rows of `width.bytes()` bytes in OpenCV
+    /// LATCH's layout (the inverse of [`DescriptorSet::to_opencv_bytes`]; what OpenCV's `LATCH`
+    /// computes, what `clatch extract` writes to `.npy`). A length that is not a whole number of rows
+    /// is [`Error::DescriptorBytesLength`].
+    ///
+    /// ```
+    /// use clatch::{DescriptorSet, DescriptorWidth, ErrorKind};
+    ///
+    /// let width = DescriptorWidth::from_bytes(32)?;
+    /// let bytes: Vec<u8> = (0..96u8).collect(); // three rows of 32 bytes
+    /// let set = DescriptorSet::from_opencv_bytes(width, &bytes)?;
+    /// assert_eq!(set.len(), 3);
+    /// assert_eq!(set.to_opencv_bytes(), bytes);
+    /// let error = DescriptorSet::from_opencv_bytes(width, &bytes[..95]).unwrap_err();
+    /// assert_eq!(error.kind(), ErrorKind::DescriptorBytesLength);
+    /// # Ok::<(), clatch::Error>(())
+    /// ```
+    pub fn from_opencv_bytes(width: DescriptorWidth, bytes: &[u8]) -> Result<Self> {
+        let per = width.bytes();
+        if !bytes.len().is_multiple_of(per) {
+            return Err(Error::DescriptorBytesLength {
+                bytes: bytes.len(),
+                bytes_per_descriptor: per,
+            });
+        }
+        let rows: Vec<Descriptor> = bytes
+            .chunks_exact(per)
+            .map(|row| {
+                let mut full = [0u8; 64];
+                full[..per].copy_from_slice(row);
+                Descriptor::from_opencv_bytes(&full)
+            })
+            .collect();
+        Ok(Self::from_descriptors(width, &rows))
     }
 }
 
@@ -235,5 +272,57 @@ mod tests {
             Err(Error::DescriptorBufferLength { .. })
         ));
         assert_eq!(set.to_opencv_bytes().len(), 9);
+    }
+
+    #[test]
+    fn opencv_bytes_of_a_set_round_trip() {
+        for bytes_per in [1, 7, 8, 9, 32, 63, 64] {
+            let width = DescriptorWidth::from_bytes(bytes_per).unwrap();
+            let words: Vec<u64> = (0..5 * width.words() as u64)
+                .map(|i| (i + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+                .collect();
+            let set = DescriptorSet::from_words(width, words).unwrap();
+            let bytes = set.to_opencv_bytes();
+            assert_eq!(bytes.len(), 5 * bytes_per);
+            assert_eq!(
+                DescriptorSet::from_opencv_bytes(width, &bytes).unwrap(),
+                set
+            );
+            // Row by row, the one-descriptor conversion.
+            for (i, row) in bytes.chunks_exact(bytes_per).enumerate() {
+                let mut full = [0u8; 64];
+                full[..bytes_per].copy_from_slice(row);
+                let one = Descriptor::from_opencv_bytes(&full);
+                assert_eq!(
+                    set.descriptor(i).unwrap(),
+                    one,
+                    "{bytes_per} bytes, row {i}"
+                );
+            }
+        }
+        let empty = DescriptorSet::from_opencv_bytes(DescriptorWidth::FULL, &[]).unwrap();
+        assert_eq!(empty, DescriptorSet::empty(DescriptorWidth::FULL));
+    }
+
+    #[test]
+    fn opencv_bytes_of_a_partial_row_are_refused() {
+        let width = DescriptorWidth::from_bytes(32).unwrap();
+        for len in [1, 31, 33, 95] {
+            assert_eq!(
+                DescriptorSet::from_opencv_bytes(width, &vec![0xA5; len]),
+                Err(Error::DescriptorBytesLength {
+                    bytes: len,
+                    bytes_per_descriptor: 32,
+                })
+            );
+        }
+        assert_eq!(
+            Error::DescriptorBytesLength {
+                bytes: 95,
+                bytes_per_descriptor: 32
+            }
+            .to_string(),
+            "descriptor buffer of 95 bytes is not a multiple of 32 bytes per descriptor"
+        );
     }
 }

@@ -103,6 +103,16 @@ pub enum Error {
         words_per_descriptor: usize,
     },
 
+    /// A buffer of descriptor bytes ([`crate::DescriptorSet::from_opencv_bytes`]) whose length is
+    /// not a whole number of descriptors.
+    #[error(
+        "descriptor buffer of {bytes} bytes is not a multiple of {bytes_per_descriptor} bytes per descriptor"
+    )]
+    DescriptorBytesLength {
+        bytes: usize,
+        bytes_per_descriptor: usize,
+    },
+
     /// Matching against a gallery with no descriptors.
     #[error("the gallery (train set) is empty: there is nothing to match against")]
     EmptyGallery,
@@ -133,13 +143,22 @@ pub enum Error {
     #[error("patch weights are all zero")]
     WeightsAllZero,
 
-    /// A configuration value out of its range.
+    /// A configuration value out of its range: a setting of [`crate::ExtractorConfig`],
+    /// [`crate::MatchConfig`], [`crate::OpencvLatch`] or a [`crate::DevicePool`]. Inputs that are not
+    /// settings (a stream, a set, a list of keypoints) are [`Error::InvalidInput`].
     #[error("invalid configuration: {field} = {value} ({reason})")]
     InvalidConfig {
         field: &'static str,
         value: String,
         reason: &'static str,
     },
+
+    /// An argument of a call that is not a setting, and that no more specific variant describes, is
+    /// not usable here: `what` names it (`"stream"`, `"keypoints"`, ...), `reason` says why. For
+    /// example a [`crate::cuda::GpuStream`] of another device than the backend's, or more keypoints
+    /// than one launch takes.
+    #[error("invalid {what}: {reason}")]
+    InvalidInput { what: &'static str, reason: String },
 
     /// A CUDA driver call or kernel launch failed. `source` is the driver's own error: its
     /// `CUresult` code (`source.0`) and the driver's description.
@@ -210,6 +229,9 @@ pub enum ErrorKind {
     Worker,
     /// [`Error::DescriptorBufferLength`]: a buffer that is not a whole number of descriptors.
     DescriptorBufferLength,
+    /// [`Error::DescriptorBytesLength`]: descriptor bytes that are not a whole number of
+    /// descriptors.
+    DescriptorBytesLength,
     /// [`Error::EmptyGallery`]: matching against a gallery with no descriptors.
     EmptyGallery,
     /// [`Error::InvalidK`]: k = 0 or k larger than the gallery.
@@ -224,6 +246,8 @@ pub enum ErrorKind {
     WeightsAllZero,
     /// [`Error::InvalidConfig`]: a configuration value out of its range.
     InvalidConfig,
+    /// [`Error::InvalidInput`]: an argument that is not a setting is not usable.
+    InvalidInput,
     /// `Error::Cuda` (a build with the `cuda` feature): a CUDA driver call or kernel launch failed.
     /// The kind exists in every build, so that code matching on kinds needs no `cfg`.
     Cuda,
@@ -251,6 +275,7 @@ impl ErrorKind {
             ErrorKind::NoWorkers => "NoWorkers",
             ErrorKind::Worker => "Worker",
             ErrorKind::DescriptorBufferLength => "DescriptorBufferLength",
+            ErrorKind::DescriptorBytesLength => "DescriptorBytesLength",
             ErrorKind::EmptyGallery => "EmptyGallery",
             ErrorKind::InvalidK => "InvalidK",
             ErrorKind::KTooLargeForBackend => "KTooLargeForBackend",
@@ -258,6 +283,7 @@ impl ErrorKind {
             ErrorKind::WeightsOverflow => "WeightsOverflow",
             ErrorKind::WeightsAllZero => "WeightsAllZero",
             ErrorKind::InvalidConfig => "InvalidConfig",
+            ErrorKind::InvalidInput => "InvalidInput",
             ErrorKind::Cuda => "Cuda",
             ErrorKind::DeviceOutOfMemory => "DeviceOutOfMemory",
             ErrorKind::BackendUnavailable => "BackendUnavailable",
@@ -297,6 +323,7 @@ impl Error {
             Error::NoWorkers => ErrorKind::NoWorkers,
             Error::Worker { .. } => ErrorKind::Worker,
             Error::DescriptorBufferLength { .. } => ErrorKind::DescriptorBufferLength,
+            Error::DescriptorBytesLength { .. } => ErrorKind::DescriptorBytesLength,
             Error::EmptyGallery => ErrorKind::EmptyGallery,
             Error::InvalidK { .. } => ErrorKind::InvalidK,
             Error::KTooLargeForBackend { .. } => ErrorKind::KTooLargeForBackend,
@@ -304,6 +331,7 @@ impl Error {
             Error::WeightsOverflow { .. } => ErrorKind::WeightsOverflow,
             Error::WeightsAllZero => ErrorKind::WeightsAllZero,
             Error::InvalidConfig { .. } => ErrorKind::InvalidConfig,
+            Error::InvalidInput { .. } => ErrorKind::InvalidInput,
             #[cfg(feature = "cuda")]
             Error::Cuda { .. } => ErrorKind::Cuda,
             Error::DeviceOutOfMemory { .. } => ErrorKind::DeviceOutOfMemory,
@@ -372,6 +400,10 @@ mod tests {
                 words: 9,
                 words_per_descriptor: 8,
             },
+            Error::DescriptorBytesLength {
+                bytes: 65,
+                bytes_per_descriptor: 32,
+            },
             Error::EmptyGallery,
             Error::InvalidK { k: 0, gallery: 4 },
             Error::KTooLargeForBackend {
@@ -392,6 +424,10 @@ mod tests {
                 field: "ratio",
                 value: "2".into(),
                 reason: "must be finite and in (0, 1]",
+            },
+            Error::InvalidInput {
+                what: "stream",
+                reason: "it is on cuda:1, the backend on cuda:0".into(),
             },
             Error::DeviceOutOfMemory {
                 operation: "upload".into(),
@@ -432,6 +468,7 @@ mod tests {
             ErrorKind::NoWorkers,
             ErrorKind::Worker,
             ErrorKind::DescriptorBufferLength,
+            ErrorKind::DescriptorBytesLength,
             ErrorKind::EmptyGallery,
             ErrorKind::InvalidK,
             ErrorKind::KTooLargeForBackend,
@@ -439,6 +476,7 @@ mod tests {
             ErrorKind::WeightsOverflow,
             ErrorKind::WeightsAllZero,
             ErrorKind::InvalidConfig,
+            ErrorKind::InvalidInput,
             ErrorKind::DeviceOutOfMemory,
             ErrorKind::BackendUnavailable,
             ErrorKind::Internal,

@@ -12,7 +12,10 @@ use crate::keypoint::KeyPoint;
 /// described are left out of `keypoints` and listed in `skipped`, and `keypoint_index` maps each row
 /// back to its place in the caller's list. Every input keypoint appears exactly once, in
 /// `keypoint_index` or in `skipped`, both in input order.
+///
+/// `#[non_exhaustive]`: a result, read through its fields; what extraction reports may grow.
 #[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct Features {
     /// The described keypoints, one per descriptor row (detected ones strongest first).
     pub keypoints: Vec<KeyPoint>,

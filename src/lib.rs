@@ -14,6 +14,9 @@ macro_rules! internal_modules {
     )*};
 }
 
+#[macro_use]
+mod builder;
+
 internal_modules!(angle, describe, detect, gray_view, matching, pyramid);
 
 mod backend;

@@ -101,7 +101,7 @@ impl Matcher {
 
     /// Queues [`Matcher::match_descriptors`] on `stream` and returns at once; the result's `wait`
     /// gives exactly what the blocking call gives. The backend must be `Backend::Cuda` on the
-    /// stream's device ([`Error::InvalidConfig`] otherwise).
+    /// stream's device ([`Error::InvalidInput`] otherwise).
     pub fn match_descriptors_async(
         &self,
         stream: &GpuStream,
@@ -114,10 +114,10 @@ impl Matcher {
                 stream.check_device(device)?;
                 cuda::match_async(stream, query, train, &self.config)
             }
-            Backend::Cpu => Err(Error::InvalidConfig {
-                field: "backend",
-                value: "cpu".into(),
-                reason: "asynchronous matching runs on a CUDA backend",
+            Backend::Cpu => Err(Error::InvalidInput {
+                what: "stream",
+                reason: "asynchronous matching runs on a CUDA backend; this matcher's is cpu"
+                    .into(),
             }),
         }
     }

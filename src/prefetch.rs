@@ -79,8 +79,9 @@ impl<T> Drop for OnExit<'_, T> {
     }
 }
 
-/// What the consumer learns about the producers.
+/// What the consumer learns about the producers (`#[non_exhaustive]`: timings may be added).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
 pub struct Prefetched {
     /// Time spent producing, summed over the workers.
     pub produce: Duration,

@@ -48,13 +48,12 @@ fn asynchronous_calls_on_the_cpu_are_refused() {
     if let Ok(stream) = GpuStream::new(0) {
         let pixels = vec![0u8; 128 * 128];
         let image = clatch::GrayView::new(&pixels, 128, 128, 128).unwrap();
-        assert!(matches!(
-            cpu.detect_and_describe_async(&stream, &image),
-            Err(Error::InvalidConfig {
-                field: "backend",
-                ..
-            })
-        ));
+        let error = cpu.detect_and_describe_async(&stream, &image).unwrap_err();
+        assert!(
+            matches!(&error, Error::InvalidInput { what: "stream", reason } if reason.contains("cpu")),
+            "{error:?}"
+        );
+        assert_eq!(error.kind(), clatch::ErrorKind::InvalidInput);
     }
 }
 

@@ -30,16 +30,15 @@ fn every_pair_equals_its_own_call() {
     pairs.extend([(3, 3), (5, 0), (0, 5)]);
     for config in [
         MatchConfig::default(),
-        MatchConfig {
-            ratio: None,
-            cross_check: false,
-            max_distance: Some(20),
-        },
+        MatchConfig::default()
+            .with_ratio(None)
+            .with_cross_check(false)
+            .with_max_distance(Some(20)),
     ] {
         let matcher = Matcher::new(Backend::Cpu, config.clone()).unwrap();
         let finished = Mutex::new(Vec::new());
         let all = matcher
-            .match_pairs(&sets, &pairs, &|p| finished.lock().unwrap().push(p))
+            .match_pairs_with_progress(&sets, &pairs, &|p| finished.lock().unwrap().push(p))
             .unwrap();
         assert_eq!(all.len(), pairs.len());
         let mut finished = finished.into_inner().unwrap();
@@ -74,7 +73,8 @@ fn bad_pairs_are_refused_before_any_work() {
     let sets: Vec<&DescriptorSet> = owned.iter().collect();
     let matcher = Matcher::new(Backend::Cpu, MatchConfig::default()).unwrap();
     let called = Mutex::new(0);
-    let result = matcher.match_pairs(&sets, &[(0, 1), (2, 6)], &|_| *called.lock().unwrap() += 1);
+    let result = matcher
+        .match_pairs_with_progress(&sets, &[(0, 1), (2, 6)], &|_| *called.lock().unwrap() += 1);
     assert!(
         matches!(
             result,
@@ -90,11 +90,11 @@ fn bad_pairs_are_refused_before_any_work() {
     let narrow = random_set(DescriptorWidth::from_bits(8).unwrap(), 10, &mut rng);
     let mixed = [sets[0], &narrow];
     assert!(matches!(
-        matcher.match_pairs(&mixed, &[(0, 0)], &|_| {}),
+        matcher.match_pairs(&mixed, &[(0, 0)]),
         Err(Error::DescriptorWidthMismatch { .. })
     ));
     assert_eq!(
-        matcher.match_pairs(&sets, &[], &|_| {}).unwrap(),
+        matcher.match_pairs(&sets, &[]).unwrap(),
         Vec::<Vec<_>>::new()
     );
     assert_eq!(Matcher::all_pairs(0), vec![]);
@@ -116,7 +116,7 @@ fn a_batch_equals_one_call_per_image() {
         let extractor = Extractor::new(Backend::Cpu, config).unwrap();
         let finished = Mutex::new(Vec::new());
         let all = extractor
-            .detect_and_describe_batch(&images, &|i| finished.lock().unwrap().push(i))
+            .detect_and_describe_batch_with_progress(&images, &|i| finished.lock().unwrap().push(i))
             .unwrap();
         let mut finished = finished.into_inner().unwrap();
         finished.sort_unstable();
@@ -136,7 +136,8 @@ fn a_batch_equals_one_call_per_image() {
     let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default()).unwrap();
     let called = Mutex::new(0);
     assert!(matches!(
-        extractor.detect_and_describe_batch(&with_tiny, &|_| *called.lock().unwrap() += 1),
+        extractor
+            .detect_and_describe_batch_with_progress(&with_tiny, &|_| *called.lock().unwrap() += 1),
         Err(Error::ImageTooSmall { .. })
     ));
     assert_eq!(*called.lock().unwrap(), 0);

@@ -153,7 +153,7 @@ mod gpu {
     ) -> Result<Vec<Vec<Match>>, Failed> {
         let mut out = Vec::new();
         let mut order = true;
-        c.match_pairs(pairs, |i, m| {
+        c.match_pairs_each(pairs, |i, m| {
             order &= i == out.len();
             out.push(m);
         })?;
@@ -305,7 +305,7 @@ mod gpu {
                     let want: Vec<Vec<Match>> =
                         sets.iter().map(|s| expected(&cpu, query, s)).collect();
                     let mut got = Vec::new();
-                    c.search(query, |_, m| got.push(m))?;
+                    c.search_each(query, |_, m| got.push(m))?;
                     let label = |i: usize| {
                         format!("set {i} ({} rows), {} queries", sets[i].len(), query.len())
                     };
@@ -317,7 +317,7 @@ mod gpu {
                     )?;
                     let ids = [sets.len() - 1, 0, sets.len() - 1];
                     let mut listed = Vec::new();
-                    c.search_sets(query, &ids, |_, m| listed.push(m))?;
+                    c.search_sets_each(query, &ids, |_, m| listed.push(m))?;
                     let want_listed: Vec<Vec<Match>> =
                         ids.iter().map(|&i| want[i].clone()).collect();
                     compare(
@@ -393,10 +393,10 @@ mod gpu {
         pairs.extend([(3, 3), (1, 0), (0, 1), (3, 0)]);
         let mut compared = 0;
         for config in configs() {
-            let want = matcher(Backend::Cpu, &config)?.match_pairs(&refs, &pairs, &|_| {})?;
+            let want = matcher(Backend::Cpu, &config)?.match_pairs(&refs, &pairs)?;
             let done = std::sync::Mutex::new(Vec::new());
             let got = matcher(GPU, &config)?
-                .match_pairs(&refs, &pairs, &|p| done.lock().unwrap().push(p))?;
+                .match_pairs_with_progress(&refs, &pairs, &|p| done.lock().unwrap().push(p))?;
             if *done.lock().unwrap() != (0..pairs.len()).collect::<Vec<_>>() {
                 return Err(format!("{config:?}: pairs not reported once each in order").into());
             }
@@ -425,7 +425,7 @@ mod gpu {
         c.add(&refs)?;
         let pairs = Matcher::all_pairs(n);
         let mut got = Vec::new();
-        c.match_all_pairs(|_, m| got.push(m))?;
+        c.match_all_pairs_each(|_, m| got.push(m))?;
         let want: Vec<Vec<Match>> = pairs
             .iter()
             .map(|&(a, b)| expected(&cpu, &sets[a], &sets[b]))
@@ -586,10 +586,7 @@ mod gpu {
             }
         }
         // The public collection (the device's family) the same ways.
-        let config = MatchConfig {
-            cross_check: true,
-            ..MatchConfig::default()
-        };
+        let config = MatchConfig::default().with_cross_check(true);
         let cpu = matcher(Backend::Cpu, &config)?;
         let sets = tied_collection(256, &sizes, &mut rng);
         let refs: Vec<&DescriptorSet> = sets.iter().collect();
@@ -615,7 +612,7 @@ mod gpu {
         let mut inner = Vec::new();
         let outer = {
             let mut out = Vec::new();
-            c.match_pairs(&pairs, |i, m| {
+            c.match_pairs_each(&pairs, |i, m| {
                 inner.push(gpu_pairs(&c, &pairs[i..=i]).map_err(|e| format!("{e:?}")));
                 out.push(m);
             })?;
@@ -712,8 +709,8 @@ mod gpu {
                 }
             }
             let (mut device_pairs, mut host_pairs) = (Vec::new(), Vec::new());
-            on_device.match_all_pairs(|_, m| device_pairs.push(m))?;
-            on_host.match_all_pairs(|_, m| host_pairs.push(m))?;
+            on_device.match_all_pairs_each(|_, m| device_pairs.push(m))?;
+            on_host.match_all_pairs_each(|_, m| host_pairs.push(m))?;
             let kept: usize = host_pairs.iter().map(Vec::len).sum();
             differences += device_pairs
                 .iter()

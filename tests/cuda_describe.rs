@@ -56,14 +56,12 @@ mod gpu {
         weights: PatchWeights,
         smoothing: Smoothing,
     ) -> Extractor {
-        let config = ExtractorConfig {
-            descriptor: DescriptorConfig {
-                width: DescriptorWidth::from_bits(bits).unwrap(),
-                weights,
-                smoothing,
-            },
-            ..ExtractorConfig::default()
-        };
+        let config = ExtractorConfig::default().with_descriptor(
+            DescriptorConfig::default()
+                .with_width(DescriptorWidth::from_bits(bits).unwrap())
+                .with_weights(weights)
+                .with_smoothing(smoothing),
+        );
         Extractor::new(backend, config).unwrap()
     }
 

@@ -57,21 +57,17 @@ mod gpu {
     /// Single-level detection (`ExtractorConfig::single_scale`): this file checks the detector's own
     /// stages and top-N cut; pyramids, level budgets and sub-pixel positions are `cuda_pyramid`'s.
     fn config(threshold: u8, max_keypoints: usize, keypoint_size: f32) -> DetectorConfig {
-        DetectorConfig {
-            threshold,
-            max_keypoints,
-            keypoint_size,
-            ..ExtractorConfig::single_scale().detector
-        }
+        ExtractorConfig::single_scale()
+            .detector
+            .with_threshold(threshold)
+            .with_max_keypoints(max_keypoints)
+            .with_keypoint_size(keypoint_size)
     }
 
     fn detect(backend: Backend, image: &GrayView, config: &DetectorConfig) -> Vec<KeyPoint> {
         let extractor = Extractor::new(
             backend,
-            ExtractorConfig {
-                detector: config.clone(),
-                ..ExtractorConfig::single_scale()
-            },
+            ExtractorConfig::single_scale().with_detector(config.clone()),
         )
         .expect("valid configuration");
         extractor.detect(image).expect("detection runs")
@@ -576,10 +572,7 @@ mod gpu {
             if w >= 64 && h >= 64 {
                 let detected = Extractor::new(
                     Backend::Cpu,
-                    ExtractorConfig {
-                        detector: config(1, usize::MAX, 16.0),
-                        ..ExtractorConfig::single_scale()
-                    },
+                    ExtractorConfig::single_scale().with_detector(config(1, usize::MAX, 16.0)),
                 )?
                 .detect(&view)?;
                 points.extend(detected);

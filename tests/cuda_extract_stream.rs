@@ -153,11 +153,11 @@ mod gpu {
             // allocation and its pinned ones are reported.
             let warm_views = vec![warm.view(); 16];
             for _ in 0..3 {
-                gpu.detect_and_describe_batch(&warm_views, &|_| {})?;
+                gpu.detect_and_describe_batch(&warm_views)?;
             }
             let views: Vec<GrayView> = images.iter().map(Gray::view).collect();
             let (before, before_device) = (allocations(), device_allocations());
-            let got = gpu.detect_and_describe_batch(&views, &|_| {})?;
+            let got = gpu.detect_and_describe_batch(&views)?;
             let (batch, batch_device) =
                 (allocations() - before, device_allocations() - before_device);
             for (i, (g, e)) in got.iter().zip(&expected).enumerate() {
@@ -381,7 +381,7 @@ mod gpu {
                     &expected[i],
                 )?;
             }
-            let batch = gpu.detect_and_describe_batch(&pinned_views, &|_| {})?;
+            let batch = gpu.detect_and_describe_batch(&pinned_views)?;
             let mut streamed = Vec::new();
             gpu.detect_and_describe_stream(pinned_views.iter().map(Ok::<_, Error>), |_, _, f| {
                 streamed.push(f);

@@ -188,8 +188,8 @@ mod gpu {
         if !scale::sanitizer() {
             return default;
         }
-        let pyramid = default.pyramid.map(|p| clatch::Pyramid { levels: 2, ..p });
-        ExtractorConfig { pyramid, ..default }
+        let pyramid = default.pyramid.map(|p| p.with_levels(2));
+        default.with_pyramid(pyramid)
     }
 
     /// One call of the public API on the GPU, and the CPU's answer it must equal when it succeeds.
@@ -204,13 +204,7 @@ mod gpu {
     ) -> Vec<(&'static str, Call<'a>)> {
         use clatch::{MatchConfig, Matcher, OpencvLatch, Pyramid, cuda::GpuStream};
         let default = site_config();
-        let pyramid = ExtractorConfig {
-            pyramid: Some(Pyramid {
-                levels: 3,
-                scale_factor: 2.0,
-            }),
-            ..ExtractorConfig::default()
-        };
+        let pyramid = ExtractorConfig::default().with_pyramid(Some(Pyramid::new(3, 2.0)));
         let (d1, d2, d3, d4) = (default.clone(), default.clone(), default.clone(), default);
         vec![
             (
@@ -281,8 +275,8 @@ mod gpu {
                     c.add(&[descriptors])?;
                     c.add(&[descriptors, descriptors])?; // grows the device buffer
                     let mut found = Vec::new();
-                    c.match_all_pairs(|_, matches| found.push(matches))?;
-                    c.search(descriptors, |_, matches| found.push(matches))?;
+                    c.match_all_pairs_each(|_, matches| found.push(matches))?;
+                    c.search_each(descriptors, |_, matches| found.push(matches))?;
                     Ok(format!("{found:?}"))
                 }),
             ),

@@ -90,11 +90,10 @@ mod gpu {
     }
 
     fn plain() -> MatchConfig {
-        MatchConfig {
-            ratio: None,
-            cross_check: false,
-            max_distance: None,
-        }
+        MatchConfig::default()
+            .with_ratio(None)
+            .with_cross_check(false)
+            .with_max_distance(None)
     }
 
     fn describe_difference(what: &str, cpu: &KnnMatches, gpu: &KnnMatches) -> Failed {
@@ -491,10 +490,7 @@ mod gpu {
         let (query, train) = tied_sets(512, large, large, 300);
         for config in [
             MatchConfig::default(),
-            MatchConfig {
-                ratio: None,
-                ..MatchConfig::default()
-            },
+            MatchConfig::default().with_ratio(None),
         ] {
             let cpu = matcher(Backend::Cpu, config.clone()).match_descriptors(&query, &train)?;
             let dev = clatch::cuda::hooks::device(0)?;
@@ -530,11 +526,10 @@ mod gpu {
         // CLATCH_TEST_SCALE=sanitizer: four ratios, every ninth d2, and only the d1 next to the
         // boundary (and the extremes).
         for ratio in scale::thin([0.8f32, 0.75, 0.7, 0.9, 1.0, 0.3], 2) {
-            let config = MatchConfig {
-                ratio: Some(ratio),
-                cross_check: false,
-                max_distance: None,
-            };
+            let config = MatchConfig::default()
+                .with_ratio(Some(ratio))
+                .with_cross_check(false)
+                .with_max_distance(None);
             let (cpu, gpu) = (matcher(Backend::Cpu, config.clone()), matcher(GPU, config));
             for d2 in (1..=64u32).step_by(scale::pick(1, 9)) {
                 let edge = (ratio * d2 as f32) as u32;
@@ -602,10 +597,11 @@ mod gpu {
         let pairs = Matcher::all_pairs(sets.len());
         let mut compared = 0;
         for config in configs() {
-            let cpu = matcher(Backend::Cpu, config.clone()).match_pairs(&sets, &pairs, &|_| {})?;
+            let cpu = matcher(Backend::Cpu, config.clone()).match_pairs(&sets, &pairs)?;
             let done = std::sync::Mutex::new(Vec::new());
-            let gpu = matcher(GPU, config.clone())
-                .match_pairs(&sets, &pairs, &|p| done.lock().unwrap().push(p))?;
+            let gpu =
+                matcher(GPU, config.clone())
+                    .match_pairs_with_progress(&sets, &pairs, &|p| done.lock().unwrap().push(p))?;
             if *done.lock().unwrap() != (0..pairs.len()).collect::<Vec<_>>() {
                 return Err(format!("{config:?}: pairs not reported once each in order").into());
             }

@@ -60,12 +60,8 @@ mod gpu {
             let (owned, pairs) = scrambled_collection(bits, sizes, 10, &mut SplitMix64::new(seed));
             let sets: Vec<&DescriptorSet> = owned.iter().collect();
             for config in scale::thin(match_configs().into_iter().step_by(5), 2) {
-                let cpu = Matcher::new(Backend::Cpu, config.clone())?.match_pairs(
-                    &sets,
-                    &pairs,
-                    &|_| {},
-                )?;
-                let gpu = Matcher::new(GPU, config.clone())?.match_pairs(&sets, &pairs, &|_| {})?;
+                let cpu = Matcher::new(Backend::Cpu, config.clone())?.match_pairs(&sets, &pairs)?;
+                let gpu = Matcher::new(GPU, config.clone())?.match_pairs(&sets, &pairs)?;
                 if gpu != cpu {
                     return Err(format!(
                         "{bits} bits, {config:?}: one-device GPU differs from the CPU"
@@ -76,7 +72,7 @@ mod gpu {
                     for tile in scale::thin([1, 3, pairs.len() + 1], 2) {
                         let pool = DevicePool::new(&workers)?.with_tile(tile)?;
                         let reported = Mutex::new(vec![0usize; pairs.len()]);
-                        let got = pool.match_pairs(&config, &sets, &pairs, &|p| {
+                        let got = pool.match_pairs_with_progress(&config, &sets, &pairs, &|p| {
                             reported.lock().unwrap()[p] += 1
                         })?;
                         let what =
@@ -122,8 +118,7 @@ mod gpu {
         let mut keypoints = 0;
         for config in [ExtractorConfig::default(), ExtractorConfig::single_scale()] {
             let cpu = Extractor::new(Backend::Cpu, config.clone())?;
-            let gpu =
-                Extractor::new(GPU, config.clone())?.detect_and_describe_batch(&views, &|_| {})?;
+            let gpu = Extractor::new(GPU, config.clone())?.detect_and_describe_batch(&views)?;
             for (i, view) in views.iter().enumerate() {
                 if gpu[i] != cpu.detect_and_describe(view)? {
                     return Err(format!(
@@ -135,7 +130,7 @@ mod gpu {
             for workers in pools() {
                 let pool = DevicePool::new(&workers)?;
                 let reported = Mutex::new(vec![0usize; views.len()]);
-                let got = pool.detect_and_describe_batch(&config, &views, &|i| {
+                let got = pool.detect_and_describe_batch_with_progress(&config, &views, &|i| {
                     reported.lock().unwrap()[i] += 1
                 })?;
                 if !once_each(reported) {

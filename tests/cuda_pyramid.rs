@@ -73,21 +73,16 @@ mod gpu {
     fn pyramids() -> Vec<Pyramid> {
         [(5, 2.0f32), (8, 1.2), (4, 1.5), (3, 1.999), (6, 1.0001)]
             .into_iter()
-            .map(|(levels, scale_factor)| Pyramid {
-                levels,
-                scale_factor,
-            })
+            .map(|(levels, scale_factor)| Pyramid::new(levels, scale_factor))
             .collect()
     }
 
     fn extractor(backend: Backend, detector: &DetectorConfig, pyramid: Pyramid) -> Extractor {
         Extractor::new(
             backend,
-            ExtractorConfig {
-                detector: detector.clone(),
-                pyramid: Some(pyramid),
-                ..ExtractorConfig::default()
-            },
+            ExtractorConfig::default()
+                .with_detector(detector.clone())
+                .with_pyramid(Some(pyramid)),
         )
         .expect("valid configuration")
     }
@@ -96,17 +91,14 @@ mod gpu {
         let mut out = Vec::new();
         for threshold in [5u8, 20, 80] {
             for max_keypoints in [1usize, 300, 5000, usize::MAX] {
-                out.push(DetectorConfig {
-                    threshold,
-                    max_keypoints,
-                    ..DetectorConfig::default()
-                });
+                out.push(
+                    DetectorConfig::default()
+                        .with_threshold(threshold)
+                        .with_max_keypoints(max_keypoints),
+                );
             }
         }
-        out.push(DetectorConfig {
-            keypoint_size: 16.0,
-            ..DetectorConfig::default()
-        });
+        out.push(DetectorConfig::default().with_keypoint_size(16.0));
         out
     }
 
@@ -229,16 +221,9 @@ mod gpu {
         let stream = clatch::cuda::GpuStream::new(0)?;
         let (mut runs, mut keypoints) = (0, 0);
         for (name, image) in images() {
-            for p in [
-                None,
-                Some(pyramids()[0]),
-                Some(Pyramid {
-                    levels: 8,
-                    scale_factor: 1.2,
-                }),
-            ]
-            .into_iter()
-            .take(scale::pick(3, 2))
+            for p in [None, Some(pyramids()[0]), Some(Pyramid::new(8, 1.2))]
+                .into_iter()
+                .take(scale::pick(3, 2))
             {
                 for (grid, level_budget, ranking) in [
                     (8, LevelBudget::Global, Ranking::Fast),
@@ -247,18 +232,14 @@ mod gpu {
                     (1, LevelBudget::Global, Ranking::Harris),
                     (1, LevelBudget::Geometric, Ranking::Harris),
                 ] {
-                    let detector = DetectorConfig {
-                        grid,
-                        level_budget,
-                        ranking,
-                        max_keypoints: scale::pick(700, 150),
-                        ..DetectorConfig::default()
-                    };
-                    let config = ExtractorConfig {
-                        detector,
-                        pyramid: p,
-                        ..ExtractorConfig::default()
-                    };
+                    let detector = DetectorConfig::default()
+                        .with_grid(grid)
+                        .with_level_budget(level_budget)
+                        .with_ranking(ranking)
+                        .with_max_keypoints(scale::pick(700, 150));
+                    let config = ExtractorConfig::default()
+                        .with_detector(detector)
+                        .with_pyramid(p);
                     let view = image.view();
                     let cpu =
                         Extractor::new(Backend::Cpu, config.clone())?.detect_and_describe(&view)?;
@@ -296,22 +277,16 @@ mod gpu {
         for (name, image) in images() {
             for p in scale::thin(pyramids().into_iter().take(3), 2) {
                 for level_budget in [LevelBudget::Global, LevelBudget::Geometric] {
-                    let detector = DetectorConfig {
-                        level_budget,
-                        max_keypoints: scale::pick(3000, 300),
-                        ..DetectorConfig::default()
-                    };
+                    let detector = DetectorConfig::default()
+                        .with_level_budget(level_budget)
+                        .with_max_keypoints(scale::pick(3000, 300));
                     let view = image.view();
                     let plain = extractor(Backend::Cpu, &detector, p).detect_and_describe(&view)?;
                     for smoothing in [Smoothing::Binomial3, Smoothing::Binomial5] {
-                        let config = ExtractorConfig {
-                            detector: detector.clone(),
-                            descriptor: DescriptorConfig {
-                                smoothing,
-                                ..DescriptorConfig::default()
-                            },
-                            pyramid: Some(p),
-                        };
+                        let config = ExtractorConfig::default()
+                            .with_detector(detector.clone())
+                            .with_descriptor(DescriptorConfig::default().with_smoothing(smoothing))
+                            .with_pyramid(Some(p));
                         let cpu = Extractor::new(Backend::Cpu, config.clone())?
                             .detect_and_describe(&view)?;
                         let gpu = Extractor::new(GPU, config)?;
@@ -412,25 +387,17 @@ mod gpu {
             );
             for &p in &chosen_pyramids {
                 for &(grid, level_budget, max_keypoints) in &selections {
-                    let detector = DetectorConfig {
-                        grid,
-                        level_budget,
-                        max_keypoints,
-                        subpixel: Subpixel::Score,
-                        ..DetectorConfig::default()
-                    };
-                    let config = ExtractorConfig {
-                        detector: detector.clone(),
-                        pyramid: p,
-                        ..ExtractorConfig::default()
-                    };
-                    let whole_config = ExtractorConfig {
-                        detector: DetectorConfig {
-                            subpixel: Subpixel::None,
-                            ..detector
-                        },
-                        ..config.clone()
-                    };
+                    let detector = DetectorConfig::default()
+                        .with_grid(grid)
+                        .with_level_budget(level_budget)
+                        .with_max_keypoints(max_keypoints)
+                        .with_subpixel(Subpixel::Score);
+                    let config = ExtractorConfig::default()
+                        .with_detector(detector.clone())
+                        .with_pyramid(p);
+                    let whole_config = config
+                        .clone()
+                        .with_detector(detector.with_subpixel(Subpixel::None));
                     let view = image.view();
                     let cpu =
                         Extractor::new(Backend::Cpu, config.clone())?.detect_and_describe(&view)?;

@@ -69,22 +69,19 @@ mod gpu {
     }
 
     fn random_config(rng: &mut SplitMix64) -> ExtractorConfig {
-        ExtractorConfig {
-            detector: DetectorConfig {
-                threshold: draw(rng, THRESHOLDS) as u8,
-                max_keypoints: draw(rng, MAX_KEYPOINTS),
-                ..DetectorConfig::default()
-            },
-            descriptor: DescriptorConfig {
-                width: DescriptorWidth::from_bits(8 * draw(rng, WIDTH_BYTES))
-                    .expect("a multiple of 8"),
-                ..DescriptorConfig::default()
-            },
-            pyramid: (rng.below(3) == 0).then_some(Pyramid {
-                levels: draw(rng, LEVELS),
-                scale_factor: SCALE_FACTORS[rng.below(3) as usize],
-            }),
-        }
+        ExtractorConfig::default()
+            .with_detector(
+                DetectorConfig::default()
+                    .with_threshold(draw(rng, THRESHOLDS) as u8)
+                    .with_max_keypoints(draw(rng, MAX_KEYPOINTS)),
+            )
+            .with_descriptor(DescriptorConfig::default().with_width(
+                DescriptorWidth::from_bits(8 * draw(rng, WIDTH_BYTES)).expect("a multiple of 8"),
+            ))
+            .with_pyramid((rng.below(3) == 0).then_some(Pyramid::new(
+                draw(rng, LEVELS),
+                SCALE_FACTORS[rng.below(3) as usize],
+            )))
     }
 
     /// The largest image the random draws make (`worker`), as noise (the most corners).
@@ -96,25 +93,22 @@ mod gpu {
         let mut configs = vec![None];
         for levels in LEVELS {
             for scale_factor in SCALE_FACTORS {
-                configs.push(Some(Pyramid {
-                    levels,
-                    scale_factor,
-                }));
+                configs.push(Some(Pyramid::new(levels, scale_factor)));
             }
         }
         configs
             .into_iter()
-            .map(|pyramid| ExtractorConfig {
-                detector: DetectorConfig {
-                    threshold: THRESHOLDS.start as u8,
-                    max_keypoints: MAX_KEYPOINTS.end - 1,
-                    ..DetectorConfig::default()
-                },
-                descriptor: DescriptorConfig {
-                    width: DescriptorWidth::from_bits(8 * (WIDTH_BYTES.end - 1)).expect("512 bits"),
-                    ..DescriptorConfig::default()
-                },
-                pyramid,
+            .map(|pyramid| {
+                ExtractorConfig::default()
+                    .with_detector(
+                        DetectorConfig::default()
+                            .with_threshold(THRESHOLDS.start as u8)
+                            .with_max_keypoints(MAX_KEYPOINTS.end - 1),
+                    )
+                    .with_descriptor(DescriptorConfig::default().with_width(
+                        DescriptorWidth::from_bits(8 * (WIDTH_BYTES.end - 1)).expect("512 bits"),
+                    ))
+                    .with_pyramid(pyramid)
             })
             .collect()
     }

@@ -63,7 +63,12 @@ fn pairs_and_searches_equal_one_call_per_pair() {
             (sizes.len(), Some(300), None)
         );
         let all = Matcher::all_pairs(sets.len());
-        let got = collect(all.len(), |each| c.match_all_pairs(each).unwrap());
+        let got = collect(all.len(), |each| c.match_all_pairs_each(each).unwrap());
+        assert_eq!(
+            c.match_all_pairs().unwrap(),
+            got,
+            "the plain call returns them"
+        );
         for (&(a, b), g) in all.iter().zip(&got) {
             assert_eq!(
                 g,
@@ -73,7 +78,10 @@ fn pairs_and_searches_equal_one_call_per_pair() {
             kept += g.len();
         }
         let listed = [(3, 3), (5, 0), (0, 5), (1, 2), (2, 1), (5, 5), (5, 0)];
-        let got = collect(listed.len(), |each| c.match_pairs(&listed, each).unwrap());
+        let got = collect(listed.len(), |each| {
+            c.match_pairs_each(&listed, each).unwrap()
+        });
+        assert_eq!(c.match_pairs(&listed).unwrap(), got);
         for (&(a, b), g) in listed.iter().zip(&got) {
             assert_eq!(
                 g,
@@ -82,12 +90,16 @@ fn pairs_and_searches_equal_one_call_per_pair() {
             );
         }
         let query = &tied_collection(16, &[150], &mut rng)[0];
-        let got = collect(sets.len(), |each| c.search(query, each).unwrap());
+        let got = collect(sets.len(), |each| c.search_each(query, each).unwrap());
+        assert_eq!(c.search(query).unwrap(), got);
         for (set, g) in sets.iter().zip(&got) {
             assert_eq!(g, &expected(&matcher, query, set), "{config:?} search");
         }
         let ids = [7, 0, 7, 5];
-        let got = collect(ids.len(), |each| c.search_sets(query, &ids, each).unwrap());
+        let got = collect(ids.len(), |each| {
+            c.search_sets_each(query, &ids, each).unwrap()
+        });
+        assert_eq!(c.search_sets(query, &ids).unwrap(), got);
         for (&id, g) in ids.iter().zip(&got) {
             assert_eq!(
                 g,
@@ -96,7 +108,7 @@ fn pairs_and_searches_equal_one_call_per_pair() {
             );
         }
         let empty = DescriptorSet::empty(sets[0].width());
-        let got = collect(sets.len(), |each| c.search(&empty, each).unwrap());
+        let got = collect(sets.len(), |each| c.search_each(&empty, each).unwrap());
         assert!(got.iter().all(Vec::is_empty), "no queries, no matches");
     }
     assert!(kept > 1000, "matching found something: {kept}");
@@ -112,7 +124,7 @@ fn bad_requests_are_refused_before_any_work() {
     let narrow = random_set(DescriptorWidth::from_bits(8).unwrap(), 5, &mut rng);
     let mut called = 0;
     assert!(matches!(
-        c.match_pairs(&[(0, 1), (1, 2)], |_, _| called += 1),
+        c.match_pairs_each(&[(0, 1), (1, 2)], |_, _| called += 1),
         Err(Error::PairOutOfRange {
             pair: 1,
             index: 2,
@@ -120,7 +132,7 @@ fn bad_requests_are_refused_before_any_work() {
         })
     ));
     assert!(matches!(
-        c.search_sets(&sets[0], &[0, 9], |_, _| called += 1),
+        c.search_sets_each(&sets[0], &[0, 9], |_, _| called += 1),
         Err(Error::PairOutOfRange {
             pair: 1,
             index: 9,
@@ -128,7 +140,7 @@ fn bad_requests_are_refused_before_any_work() {
         })
     ));
     assert!(matches!(
-        c.search(&narrow, |_, _| called += 1),
+        c.search_each(&narrow, |_, _| called += 1),
         Err(Error::DescriptorWidthMismatch {
             query_bits: 8,
             train_bits: 64
@@ -140,11 +152,26 @@ fn bad_requests_are_refused_before_any_work() {
         Err(Error::DescriptorWidthMismatch { .. })
     ));
     assert_eq!(c.len(), 2, "a refused add adds nothing");
-    c.match_pairs(&[], |_, _| called += 1).unwrap();
+    c.match_pairs_each(&[], |_, _| called += 1).unwrap();
     let empty = DescriptorCollection::new(&matcher, w).unwrap();
     assert!(empty.is_empty());
-    empty.match_all_pairs(|_, _| called += 1).unwrap();
-    empty.search(&sets[0], |_, _| called += 1).unwrap();
+    empty.match_all_pairs_each(|_, _| called += 1).unwrap();
+    empty.search_each(&sets[0], |_, _| called += 1).unwrap();
+    assert_eq!(c.match_pairs(&[]), Ok(vec![]));
+    assert_eq!(empty.match_all_pairs(), Ok(vec![]));
+    assert_eq!(empty.search(&sets[0]), Ok(vec![]));
+    assert!(matches!(
+        c.match_pairs(&[(2, 0)]),
+        Err(Error::PairOutOfRange {
+            pair: 0,
+            index: 2,
+            sets: 2
+        })
+    ));
+    assert!(matches!(
+        c.search_sets(&narrow, &[0]),
+        Err(Error::DescriptorWidthMismatch { .. })
+    ));
     assert_eq!(called, 0);
     assert_eq!((c.width(), c.matcher().backend()), (w, Backend::Cpu));
 }
@@ -156,10 +183,7 @@ fn callbacks_may_match_again_and_threads_share_a_collection() {
     let mut rng = SplitMix64::new(32);
     let sets = tied_collection(64, &[70, 0, 1, 2, 65, 130, 9, 300], &mut rng);
     let query = &tied_collection(64, &[90], &mut rng)[0];
-    let config = MatchConfig {
-        cross_check: true,
-        ..MatchConfig::default()
-    };
+    let config = MatchConfig::default().with_cross_check(true);
     let matcher = Matcher::new(Backend::Cpu, config).unwrap();
     let c = collection(&matcher, &sets);
     let all = Matcher::all_pairs(sets.len());
@@ -169,10 +193,10 @@ fn callbacks_may_match_again_and_threads_share_a_collection() {
         .collect();
     let want_search: Vec<Vec<Match>> = sets.iter().map(|s| expected(&matcher, query, s)).collect();
     let outer = collect(all.len(), |each| {
-        c.match_pairs(&all, |i, m| {
-            let inner = collect(2, |e| c.match_pairs(&[all[i], all[0]], e).unwrap());
+        c.match_pairs_each(&all, |i, m| {
+            let inner = collect(2, |e| c.match_pairs_each(&[all[i], all[0]], e).unwrap());
             assert_eq!(inner, [want[i].clone(), want[0].clone()], "inside pair {i}");
-            let found = collect(sets.len(), |e| c.search(query, e).unwrap());
+            let found = collect(sets.len(), |e| c.search_each(query, e).unwrap());
             assert_eq!(found, want_search, "search inside pair {i}");
             each(i, m);
         })
@@ -181,7 +205,9 @@ fn callbacks_may_match_again_and_threads_share_a_collection() {
     assert_eq!(outer, want, "outer run");
     std::thread::scope(|scope| {
         let runs: Vec<_> = (0..2)
-            .map(|_| scope.spawn(|| collect(all.len(), |each| c.match_all_pairs(each).unwrap())))
+            .map(|_| {
+                scope.spawn(|| collect(all.len(), |each| c.match_all_pairs_each(each).unwrap()))
+            })
             .collect();
         for run in runs {
             assert_eq!(run.join().unwrap(), want, "one of two threads");

@@ -48,7 +48,7 @@ fn pairs_equal_one_device_for_every_worker_count_and_tile() {
         let sets: Vec<&DescriptorSet> = owned.iter().collect();
         for config in match_configs().into_iter().step_by(5) {
             let matcher = Matcher::new(Backend::Cpu, config.clone()).unwrap();
-            let expected = matcher.match_pairs(&sets, &pairs, &|_| {}).unwrap();
+            let expected = matcher.match_pairs(&sets, &pairs).unwrap();
             let found: usize = expected.iter().map(Vec::len).sum();
             assert!(found > 1000, "{bits} bits, {config:?}: {found} matches");
             for workers in WORKER_COUNTS {
@@ -59,7 +59,7 @@ fn pairs_equal_one_device_for_every_worker_count_and_tile() {
                         .unwrap();
                     let reported = Reported::new(pairs.len());
                     let got = pool
-                        .match_pairs(&config, &sets, &pairs, &|p| reported.record(p))
+                        .match_pairs_with_progress(&config, &sets, &pairs, &|p| reported.record(p))
                         .unwrap();
                     let what = format!("{bits} bits, {config:?}, {workers} workers, tile {tile}");
                     assert_eq!(
@@ -84,7 +84,7 @@ fn all_pairs_equal_one_device() {
     let config = MatchConfig::default();
     let expected = Matcher::new(Backend::Cpu, config.clone())
         .unwrap()
-        .match_pairs(&sets, &Matcher::all_pairs(sets.len()), &|_| {})
+        .match_pairs(&sets, &Matcher::all_pairs(sets.len()))
         .unwrap();
     for workers in WORKER_COUNTS {
         let pool = DevicePool::new(&vec![Backend::Cpu; workers]).unwrap();
@@ -92,19 +92,17 @@ fn all_pairs_equal_one_device() {
         assert_eq!(pool.workers().len(), workers);
         let reported = Reported::new(expected.len());
         let got = pool
-            .match_all_pairs(&config, &sets, &|p| reported.record(p))
+            .match_pairs_with_progress(&config, &sets, &Matcher::all_pairs(sets.len()), &|p| {
+                reported.record(p)
+            })
             .unwrap();
         assert_eq!(got, expected, "{workers} workers");
         assert_eq!(reported.counts(), vec![1; expected.len()]);
     }
     let pool = DevicePool::new(&[Backend::Cpu; 2]).unwrap();
+    assert!(pool.match_all_pairs(&config, &[]).unwrap().is_empty());
     assert!(
-        pool.match_all_pairs(&config, &[], &|_| {})
-            .unwrap()
-            .is_empty()
-    );
-    assert!(
-        pool.match_all_pairs(&config, &sets[..1], &|_| {})
+        pool.match_all_pairs(&config, &sets[..1])
             .unwrap()
             .is_empty()
     );
@@ -124,15 +122,13 @@ fn a_batch_equals_one_device_for_every_worker_count() {
     let views: Vec<clatch::GrayView> = images.iter().map(common::Gray::view).collect();
     for config in [ExtractorConfig::default(), ExtractorConfig::single_scale()] {
         let extractor = Extractor::new(Backend::Cpu, config.clone()).unwrap();
-        let expected = extractor
-            .detect_and_describe_batch(&views, &|_| {})
-            .unwrap();
+        let expected = extractor.detect_and_describe_batch(&views).unwrap();
         assert!(expected[0].keypoints.len() > 100 && expected[2].keypoints.is_empty());
         for workers in WORKER_COUNTS {
             let pool = DevicePool::new(&vec![Backend::Cpu; workers]).unwrap();
             let reported = Reported::new(views.len());
             let got = pool
-                .detect_and_describe_batch(&config, &views, &|i| reported.record(i))
+                .detect_and_describe_batch_with_progress(&config, &views, &|i| reported.record(i))
                 .unwrap();
             assert_eq!(reported.counts(), vec![1; views.len()], "{workers} workers");
             assert_eq!(got, expected, "{workers} workers, {config:?}");
@@ -140,7 +136,7 @@ fn a_batch_equals_one_device_for_every_worker_count() {
     }
     let pool = DevicePool::new(&[Backend::Cpu; 3]).unwrap();
     let none = pool
-        .detect_and_describe_batch(&ExtractorConfig::default(), &[], &|_| {})
+        .detect_and_describe_batch(&ExtractorConfig::default(), &[])
         .unwrap();
     assert!(none.is_empty());
 }
@@ -185,7 +181,7 @@ fn bad_pools_and_bad_input_are_refused_before_any_work() {
     let called = Mutex::new(0);
     let count = |_| *called.lock().unwrap() += 1;
     assert_eq!(
-        pool.match_pairs(&config, &sets, &[(0, 1), (2, 9), (3, 3)], &count),
+        pool.match_pairs_with_progress(&config, &sets, &[(0, 1), (2, 9), (3, 3)], &count),
         Err(Error::PairOutOfRange {
             pair: 1,
             index: 9,
@@ -193,7 +189,7 @@ fn bad_pools_and_bad_input_are_refused_before_any_work() {
         })
     );
     assert!(matches!(
-        pool.match_pairs(&config, &sets, &[(12, 0)], &count),
+        pool.match_pairs_with_progress(&config, &sets, &[(12, 0)], &count),
         Err(Error::PairOutOfRange {
             pair: 0,
             index: 12,
@@ -206,35 +202,29 @@ fn bad_pools_and_bad_input_are_refused_before_any_work() {
         &mut SplitMix64::new(5),
     );
     assert!(matches!(
-        pool.match_pairs(&config, &[sets[0], &narrow], &[(0, 0)], &count),
+        pool.match_pairs_with_progress(&config, &[sets[0], &narrow], &[(0, 0)], &count),
         Err(Error::DescriptorWidthMismatch { .. })
     ));
-    let bad_ratio = MatchConfig {
-        ratio: Some(1.5),
-        ..MatchConfig::default()
-    };
+    let bad_ratio = MatchConfig::default().with_ratio(Some(1.5));
     assert!(matches!(
-        pool.match_pairs(&bad_ratio, &sets, &[(0, 1)], &count),
+        pool.match_pairs_with_progress(&bad_ratio, &sets, &[(0, 1)], &count),
         Err(Error::InvalidConfig { field: "ratio", .. })
     ));
-    assert_eq!(pool.match_pairs(&config, &sets, &[], &count), Ok(vec![]));
+    assert_eq!(
+        pool.match_pairs_with_progress(&config, &sets, &[], &count),
+        Ok(vec![])
+    );
 
     let photo = common::astronaut();
     let tiny = common::Gray::new(vec![0u8; 10 * 10], 10, 10);
     let images = [photo.view(), tiny.view(), photo.view()];
     assert!(matches!(
-        pool.detect_and_describe_batch(&ExtractorConfig::default(), &images, &count),
+        pool.detect_and_describe_batch_with_progress(&ExtractorConfig::default(), &images, &count),
         Err(Error::ImageTooSmall { .. })
     ));
-    let bad_pyramid = ExtractorConfig {
-        pyramid: Some(clatch::Pyramid {
-            levels: 0,
-            scale_factor: 1.2,
-        }),
-        ..ExtractorConfig::default()
-    };
+    let bad_pyramid = ExtractorConfig::default().with_pyramid(Some(clatch::Pyramid::new(0, 1.2)));
     assert!(matches!(
-        pool.detect_and_describe_batch(&bad_pyramid, &images[..1], &count),
+        pool.detect_and_describe_batch_with_progress(&bad_pyramid, &images[..1], &count),
         Err(Error::InvalidConfig { .. })
     ));
     assert_eq!(*called.lock().unwrap(), 0, "no work before the checks");

@@ -27,11 +27,10 @@ fn set(bits: usize, count: usize) -> DescriptorSet {
 fn matcher(ratio: Option<f32>) -> Matcher {
     Matcher::new(
         Backend::Cpu,
-        MatchConfig {
-            ratio,
-            cross_check: true,
-            max_distance: None,
-        },
+        MatchConfig::default()
+            .with_ratio(ratio)
+            .with_cross_check(true)
+            .with_max_distance(None),
     )
     .unwrap()
 }
@@ -405,23 +404,14 @@ fn ratio_test_with_a_one_descriptor_gallery() {
 #[test]
 fn bad_ratio() {
     for ratio in [f32::NAN, 0.0, 1.5, -0.5, f32::INFINITY, 1.0000001] {
-        let result = Matcher::new(
-            Backend::Cpu,
-            MatchConfig {
-                ratio: Some(ratio),
-                ..MatchConfig::default()
-            },
-        );
+        let result = Matcher::new(Backend::Cpu, MatchConfig::default().with_ratio(Some(ratio)));
         assert!(
             matches!(result, Err(Error::InvalidConfig { field: "ratio", .. })),
             "{ratio}: {result:?}"
         );
     }
     for ratio in [1.0, f32::MIN_POSITIVE, 0.5] {
-        let config = MatchConfig {
-            ratio: Some(ratio),
-            ..MatchConfig::default()
-        };
+        let config = MatchConfig::default().with_ratio(Some(ratio));
         assert!(Matcher::new(Backend::Cpu, config).is_ok(), "{ratio}");
     }
 }
@@ -482,13 +472,8 @@ fn weights_at_the_limit_describe_without_overflow() {
     // The largest allowed weights on maximal-contrast pixels: d stays inside i32 (overflow checks are on).
     let mut w = vec![0u32; 64];
     w[9] = MAX_WEIGHT_SUM as u32;
-    let config = ExtractorConfig {
-        descriptor: DescriptorConfig {
-            weights: PatchWeights::new(&w).unwrap(),
-            ..DescriptorConfig::default()
-        },
-        ..ExtractorConfig::default()
-    };
+    let config = ExtractorConfig::default()
+        .with_descriptor(DescriptorConfig::default().with_weights(PatchWeights::new(&w).unwrap()));
     let pixels: Vec<u8> = (0..100 * 100)
         .map(|i| if (i / 7 + i / 700) % 2 == 0 { 0 } else { 255 })
         .collect();
@@ -505,33 +490,21 @@ fn weights_at_the_limit_describe_without_overflow() {
 fn detector_error(detector: DetectorConfig) -> clatch::Result<Extractor> {
     Extractor::new(
         Backend::Cpu,
-        ExtractorConfig {
-            detector,
-            ..ExtractorConfig::default()
-        },
+        ExtractorConfig::default().with_detector(detector),
     )
 }
 
 #[test]
 fn detector_threshold_0_and_255() {
     for threshold in [0, 255] {
-        let result = detector_error(DetectorConfig {
-            threshold,
-            ..DetectorConfig::default()
-        });
+        let result = detector_error(DetectorConfig::default().with_threshold(threshold));
         assert!(
             matches!(&result, Err(Error::InvalidConfig { field: "threshold", value, .. }) if *value == threshold.to_string()),
             "{threshold}: {result:?}"
         );
     }
     for threshold in [1, 254] {
-        assert!(
-            detector_error(DetectorConfig {
-                threshold,
-                ..DetectorConfig::default()
-            })
-            .is_ok()
-        );
+        assert!(detector_error(DetectorConfig::default().with_threshold(threshold)).is_ok());
     }
 }
 
@@ -540,17 +513,9 @@ fn pyramid_levels_and_factor_out_of_range() {
     let with = |levels, scale_factor, keypoint_size| {
         Extractor::new(
             Backend::Cpu,
-            ExtractorConfig {
-                detector: DetectorConfig {
-                    keypoint_size,
-                    ..DetectorConfig::default()
-                },
-                pyramid: Some(clatch::Pyramid {
-                    levels,
-                    scale_factor,
-                }),
-                ..ExtractorConfig::default()
-            },
+            ExtractorConfig::default()
+                .with_detector(DetectorConfig::default().with_keypoint_size(keypoint_size))
+                .with_pyramid(Some(clatch::Pyramid::new(levels, scale_factor))),
         )
     };
     for (levels, factor, size, field) in [
@@ -576,10 +541,7 @@ fn pyramid_levels_and_factor_out_of_range() {
 #[test]
 fn detector_max_keypoints_0() {
     assert!(matches!(
-        detector_error(DetectorConfig {
-            max_keypoints: 0,
-            ..DetectorConfig::default()
-        }),
+        detector_error(DetectorConfig::default().with_max_keypoints(0)),
         Err(Error::InvalidConfig {
             field: "max_keypoints",
             ..
@@ -590,10 +552,7 @@ fn detector_max_keypoints_0() {
 #[test]
 fn detector_keypoint_size() {
     for size in [0.0, 0.5, 1024.5, f32::NAN, f32::INFINITY, -64.0] {
-        let result = detector_error(DetectorConfig {
-            keypoint_size: size,
-            ..DetectorConfig::default()
-        });
+        let result = detector_error(DetectorConfig::default().with_keypoint_size(size));
         assert!(
             matches!(
                 result,

@@ -115,9 +115,7 @@ fn malformed_files_give_an_image_or_a_typed_error() {
     let dir = std::env::temp_dir().join(format!("clatch-hostile-files-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     // 4 megapixels: what the decoder may allocate for one image is bounded by it.
-    let limits = DecodeLimits {
-        max_pixels: 4_000_000,
-    };
+    let limits = DecodeLimits::default().with_max_pixels(4_000_000);
     let mut rng = SplitMix64::new(0xf11e5);
     let (mut decoded, mut refused, mut panics) = (0usize, 0usize, Vec::new());
     let mut run = |name: &str, ext: &str, bytes: &[u8], dir: &Path| {

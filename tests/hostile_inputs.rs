@@ -106,27 +106,26 @@ fn wild_usize(rng: &mut SplitMix64, plain: usize) -> usize {
 }
 
 fn random_config(rng: &mut SplitMix64) -> ExtractorConfig {
-    let detector = DetectorConfig {
-        threshold: rng.below(256) as u8,
-        max_keypoints: wild_usize!(rng, 1 + rng.below(3000) as usize),
-        keypoint_size: wild_f32!(rng, 8.0 + rng.below(120) as f32),
-        grid: wild_usize!(rng, 1 + rng.below(12) as usize),
-        level_budget: if rng.below(2) == 0 {
+    let detector = DetectorConfig::default()
+        .with_threshold(rng.below(256) as u8)
+        .with_max_keypoints(wild_usize!(rng, 1 + rng.below(3000) as usize))
+        .with_keypoint_size(wild_f32!(rng, 8.0 + rng.below(120) as f32))
+        .with_grid(wild_usize!(rng, 1 + rng.below(12) as usize))
+        .with_level_budget(if rng.below(2) == 0 {
             clatch::LevelBudget::Global
         } else {
             clatch::LevelBudget::Geometric
-        },
-        ranking: if rng.below(2) == 0 {
+        })
+        .with_ranking(if rng.below(2) == 0 {
             clatch::Ranking::Fast
         } else {
             clatch::Ranking::Harris
-        },
-        subpixel: if rng.below(2) == 0 {
+        })
+        .with_subpixel(if rng.below(2) == 0 {
             clatch::Subpixel::None
         } else {
             clatch::Subpixel::Score
-        },
-    };
+        });
     let bits = match rng.below(6) {
         0 => rng.below(600) as usize,
         _ => 8 * (1 + rng.below(64) as usize),
@@ -142,25 +141,21 @@ fn random_config(rng: &mut SplitMix64) -> ExtractorConfig {
         _ => Ok(PatchWeights::latch_7x7()),
     };
     let pyramid = match rng.below(4) {
-        0 => Some(Pyramid {
-            levels: rng.below(40) as usize,
-            scale_factor: wild_f32!(rng, 1.0 + rng.below(120) as f32 / 100.0),
-        }),
-        1 => Some(Pyramid {
-            levels: 1 + rng.below(4) as usize,
-            scale_factor: 2.0,
-        }),
+        0 => Some(Pyramid::new(
+            rng.below(40) as usize,
+            wild_f32!(rng, 1.0 + rng.below(120) as f32 / 100.0),
+        )),
+        1 => Some(Pyramid::new(1 + rng.below(4) as usize, 2.0)),
         _ => None,
     };
-    ExtractorConfig {
-        detector,
-        descriptor: DescriptorConfig {
-            width: DescriptorWidth::from_bits(bits).unwrap_or_default(),
-            weights: weights.unwrap_or_default(),
-            ..DescriptorConfig::default()
-        },
-        pyramid,
-    }
+    ExtractorConfig::default()
+        .with_detector(detector)
+        .with_descriptor(
+            DescriptorConfig::default()
+                .with_width(DescriptorWidth::from_bits(bits).unwrap_or_default())
+                .with_weights(weights.unwrap_or_default()),
+        )
+        .with_pyramid(pyramid)
 }
 
 fn random_keypoints(rng: &mut SplitMix64, width: usize, height: usize) -> Vec<KeyPoint> {
@@ -353,15 +348,14 @@ fn descriptor_sets_and_matching_against_the_references() {
             1 => train.len() + 1,
             _ => 1 + rng.below(4) as usize,
         };
-        let config = MatchConfig {
-            ratio: match rng.below(6) {
+        let config = MatchConfig::default()
+            .with_ratio(match rng.below(6) {
                 0 => Some(wild_f32!(&mut rng, 0.8)),
                 1 => None,
                 _ => Some([0.5, 0.8, 1.0][rng.below(3) as usize]),
-            },
-            cross_check: rng.below(2) == 0,
-            max_distance: (rng.below(3) == 0).then(|| rng.below(100) as u32),
-        };
+            })
+            .with_cross_check(rng.below(2) == 0)
+            .with_max_distance((rng.below(3) == 0).then(|| rng.below(100) as u32));
         let Some(matcher) = tally.call(
             || format!("case {case}: Matcher::new({config:?})"),
             || Matcher::new(Backend::Cpu, config.clone()),

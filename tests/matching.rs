@@ -173,11 +173,10 @@ fn match_descriptors_equals_the_naive_contract() {
         let (query, train) = tied_sets(bits, 80, 61, 500 + i as u64);
         let (forward, backward) = (naive_sorted(&query, &train), naive_sorted(&train, &query));
         let naive = |ratio, cross_check, max_distance| {
-            let config = MatchConfig {
-                ratio,
-                cross_check,
-                max_distance,
-            };
+            let config = MatchConfig::default()
+                .with_ratio(ratio)
+                .with_cross_check(cross_check)
+                .with_max_distance(max_distance);
             naive_match_sorted(&forward, &backward, &config)
         };
         let all = naive(None, false, None).len();
@@ -224,11 +223,10 @@ fn ratio_test_boundary_is_one_f32_product() {
     let width = DescriptorWidth::from_bits(64).unwrap();
     let ones = |n: u32| if n == 64 { u64::MAX } else { (1u64 << n) - 1 };
     for ratio in [0.8f32, 0.75, 0.7, 0.9, 1.0, 0.3] {
-        let config = MatchConfig {
-            ratio: Some(ratio),
-            cross_check: false,
-            max_distance: None,
-        };
+        let config = MatchConfig::default()
+            .with_ratio(Some(ratio))
+            .with_cross_check(false)
+            .with_max_distance(None);
         let matcher = cpu(config);
         let mut kept = 0;
         for d2 in 1..=64u32 {

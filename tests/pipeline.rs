@@ -16,15 +16,11 @@ use common::{Gray, astronaut, rectangles};
 fn extractor_with(keypoint_size: f32) -> Extractor {
     Extractor::new(
         Backend::Cpu,
-        ExtractorConfig {
-            detector: DetectorConfig {
-                keypoint_size,
-                subpixel: clatch::Subpixel::None,
-                ..DetectorConfig::default()
-            },
-            // Full resolution only: these tests describe detected keypoints on the input itself.
-            ..ExtractorConfig::single_scale()
-        },
+        ExtractorConfig::single_scale().with_detector(
+            DetectorConfig::default()
+                .with_keypoint_size(keypoint_size)
+                .with_subpixel(clatch::Subpixel::None),
+        ),
     )
     .unwrap()
 }
@@ -121,11 +117,7 @@ fn margin_positions_fit_at_every_angle_bin() {
     let mut rng = SplitMix64::new(12);
     sizes.extend((0..20).map(|_| 1.0 + (rng.below(1 << 20) as f32 / (1 << 20) as f32) * 1023.0));
     for size in sizes {
-        let m = DetectorConfig {
-            keypoint_size: size,
-            ..DetectorConfig::default()
-        }
-        .margin();
+        let m = DetectorConfig::default().with_keypoint_size(size).margin();
         // The smallest image with a detectable pixel, and a larger, non-square one.
         for (w, h) in [(2 * m + 1, 2 * m + 1), (2 * m + 37, 2 * m + 5)] {
             let positions = [
@@ -305,14 +297,11 @@ fn descriptors_do_not_depend_on_order_or_company() {
 }
 
 fn run_everything(image: &Gray) -> (Features, Features, Vec<clatch::Match>, clatch::KnnMatches) {
-    let config = ExtractorConfig {
-        descriptor: DescriptorConfig {
-            width: DescriptorWidth::from_bits(256).unwrap(),
-            weights: PatchWeights::uniform(),
-            ..DescriptorConfig::default()
-        },
-        ..ExtractorConfig::single_scale()
-    };
+    let config = ExtractorConfig::single_scale().with_descriptor(
+        DescriptorConfig::default()
+            .with_width(DescriptorWidth::from_bits(256).unwrap())
+            .with_weights(PatchWeights::uniform()),
+    );
     let e = Extractor::new(Backend::Cpu, config).unwrap();
     let features = e.detect_and_describe(&image.view()).unwrap();
     let described = e
@@ -352,11 +341,10 @@ fn an_image_matched_against_itself_finds_itself() {
     let features = e.detect_and_describe(&image.view()).unwrap();
     let matcher = Matcher::new(
         Backend::Cpu,
-        MatchConfig {
-            ratio: None,
-            cross_check: true,
-            max_distance: None,
-        },
+        MatchConfig::default()
+            .with_ratio(None)
+            .with_cross_check(true)
+            .with_max_distance(None),
     )
     .unwrap();
     let matches = matcher

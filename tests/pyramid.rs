@@ -12,24 +12,16 @@ use common::{Gray, astronaut, rectangles};
 fn extractor(pyramid: Option<Pyramid>) -> Extractor {
     Extractor::new(
         Backend::Cpu,
-        ExtractorConfig {
-            pyramid,
+        ExtractorConfig::default()
+            .with_pyramid(pyramid)
             // Whole pixels: these tests compare positions and descriptors with full-resolution ones.
-            detector: DetectorConfig {
-                subpixel: clatch::Subpixel::None,
-                ..DetectorConfig::default()
-            },
-            ..ExtractorConfig::default()
-        },
+            .with_detector(DetectorConfig::default().with_subpixel(clatch::Subpixel::None)),
     )
     .unwrap()
 }
 
 fn octave_two(levels: usize) -> Option<Pyramid> {
-    Some(Pyramid {
-        levels,
-        scale_factor: 2.0,
-    })
+    Some(Pyramid::new(levels, 2.0))
 }
 
 /// `image` resized by `scale` with the `image` crate's Catmull-Rom filter: an independent resampler,
@@ -75,10 +67,7 @@ fn a_one_level_pyramid_is_the_plain_detector() {
     let image = astronaut();
     let plain = extractor(None).detect_and_describe(&image.view()).unwrap();
     for factor in [2.0, 1.2] {
-        let one = Some(Pyramid {
-            levels: 1,
-            scale_factor: factor,
-        });
+        let one = Some(Pyramid::new(1, factor));
         assert_eq!(
             extractor(one).detect_and_describe(&image.view()).unwrap(),
             plain
@@ -90,21 +79,14 @@ fn a_one_level_pyramid_is_the_plain_detector() {
 fn levels_report_octave_size_and_level0_positions() {
     let image = rectangles(800, 600, 5);
     // The global budget: the strongest of all levels, so that a smaller budget keeps a prefix.
-    let config = DetectorConfig {
-        level_budget: clatch::LevelBudget::Global,
-        subpixel: clatch::Subpixel::None,
-        ..DetectorConfig::default()
-    };
+    let config = DetectorConfig::default()
+        .with_level_budget(clatch::LevelBudget::Global)
+        .with_subpixel(clatch::Subpixel::None);
     let e = Extractor::new(
         Backend::Cpu,
-        ExtractorConfig {
-            detector: config.clone(),
-            pyramid: Some(Pyramid {
-                levels: 4,
-                scale_factor: 1.5,
-            }),
-            ..ExtractorConfig::default()
-        },
+        ExtractorConfig::default()
+            .with_detector(config.clone())
+            .with_pyramid(Some(Pyramid::new(4, 1.5))),
     )
     .unwrap();
     let features = e.detect_and_describe(&image.view()).unwrap();
@@ -135,13 +117,9 @@ fn levels_report_octave_size_and_level0_positions() {
     // A top-N cut keeps a prefix.
     let few = Extractor::new(
         Backend::Cpu,
-        ExtractorConfig {
-            detector: DetectorConfig {
-                max_keypoints: 50,
-                ..config
-            },
-            ..e.config().clone()
-        },
+        e.config()
+            .clone()
+            .with_detector(config.with_max_keypoints(50)),
     )
     .unwrap()
     .detect_and_describe(&image.view())
@@ -204,10 +182,7 @@ fn the_pyramid_matches_across_scale_where_the_plain_detector_cannot() {
 fn a_non_power_of_two_factor_matches_across_its_own_scale_steps() {
     // Scaled by 1/1.44 and by 1.44 = 1.2², two levels of a factor-1.2 pyramid apart. Measured:
     // 1/1.44: 13 of 23 without, 1230 of 1253 with; 1.44: 21 of 26 without, 1973 of 2009 with.
-    let pyramid = Pyramid {
-        levels: 5,
-        scale_factor: 1.2,
-    };
+    let pyramid = Pyramid::new(5, 1.2);
     for scale in [1.0 / 1.44, 1.44] {
         let counts = across_scale(scale, pyramid, 3.0);
         let (plain, with) = (counts[0].0, counts[1].0);

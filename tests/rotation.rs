@@ -19,15 +19,8 @@ use common::{Gray, astronaut, rectangles, rotate90_point};
 fn extractor(detector: DetectorConfig) -> Extractor {
     Extractor::new(
         Backend::Cpu,
-        ExtractorConfig {
-            detector: DetectorConfig {
-                subpixel: clatch::Subpixel::None,
-                ..detector
-            },
-            // Quarter turns commute with full-resolution detection only (pyramid levels sample
-            // their source off the pixel grid).
-            ..ExtractorConfig::single_scale()
-        },
+        ExtractorConfig::single_scale()
+            .with_detector(detector.with_subpixel(clatch::Subpixel::None)),
     )
     .unwrap()
 }
@@ -94,11 +87,7 @@ fn random_keypoints(image: &Gray, n: usize, seed: u64) -> Vec<KeyPoint> {
     (0..n)
         .map(|i| {
             let size = sizes[i % sizes.len()];
-            let margin = DetectorConfig {
-                keypoint_size: size,
-                ..DetectorConfig::default()
-            }
-            .margin();
+            let margin = DetectorConfig::default().with_keypoint_size(size).margin();
             let x = margin + rng.below((image.width - 2 * margin) as u64) as usize;
             let y = margin + rng.below((image.height - 2 * margin) as u64) as usize;
             let angle = bin_degrees(rng.below(ANGLE_BINS as u64) as usize);
@@ -402,16 +391,11 @@ fn min_fraction(image: &str) -> f64 {
 #[test]
 fn detection_is_covariant_under_quarter_turns() {
     let configs = [
-        DetectorConfig {
-            max_keypoints: usize::MAX,
-            ..DetectorConfig::default()
-        },
-        DetectorConfig {
-            max_keypoints: usize::MAX,
-            threshold: 10,
-            keypoint_size: 31.0,
-            ..DetectorConfig::default()
-        },
+        DetectorConfig::default().with_max_keypoints(usize::MAX),
+        DetectorConfig::default()
+            .with_max_keypoints(usize::MAX)
+            .with_threshold(10)
+            .with_keypoint_size(31.0),
     ];
     for config in configs {
         let e = extractor(config.clone());

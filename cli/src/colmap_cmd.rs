@@ -90,7 +90,8 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let watch = Stopwatch::start();
     // The library matches the whole collection (a featureless photo simply matches nothing).
     let sets: Vec<&DescriptorSet> = descriptors.iter().collect();
-    let matches: Vec<Vec<Match>> = matcher.match_pairs(&sets, &pairs, &|_| progress.done())?;
+    let matches: Vec<Vec<Match>> =
+        matcher.match_pairs_with_progress(&sets, &pairs, &|_| progress.done())?;
     times.matching = watch.stop();
     progress.finish();
 

@@ -3,7 +3,7 @@
 //! mapping onto the library's configuration, so the names and defaults are written once.
 
 use clap::Args;
-use clatch::{Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, ExtractorConfig};
+use clatch::{Backend, DescriptorWidth, ExtractorConfig};
 use clatch::{LevelBudget, MatchConfig, Pyramid, Ranking, Smoothing, Subpixel};
 
 use crate::names::{self, BackendFlag};
@@ -141,10 +141,7 @@ fn parse_pyramid(s: &str) -> Result<Pyramid, String> {
              copies of each other"
         ));
     }
-    let pyramid = Pyramid {
-        levels,
-        scale_factor,
-    };
+    let pyramid = Pyramid::new(levels, scale_factor);
     pyramid
         .validate(clatch::KeyPoint::DEFAULT_SIZE)
         .map_err(|e| e.to_string())?;
@@ -220,34 +217,35 @@ impl DetectArgs {
     }
 
     fn config_from(&self, base: ExtractorConfig) -> clatch::Result<ExtractorConfig> {
-        Ok(ExtractorConfig {
-            detector: DetectorConfig {
-                threshold: self.threshold,
-                max_keypoints: self.max_keypoints.unwrap_or(base.detector.max_keypoints),
-                keypoint_size: self.keypoint_size.unwrap_or(base.detector.keypoint_size),
-                grid: self.grid.unwrap_or(1) as usize,
-                level_budget: self.level_budget.unwrap_or(base.detector.level_budget),
-                ranking: self.ranking,
-                subpixel: base.detector.subpixel,
-            },
-            descriptor: DescriptorConfig {
-                width: DescriptorWidth::from_bits(self.bits)?,
-                smoothing: self.smoothing.unwrap_or(base.descriptor.smoothing),
-                ..base.descriptor
-            },
-            pyramid: self.pyramid.or(base.pyramid),
-        })
+        let detector = &base.detector;
+        let detector = detector
+            .clone()
+            .with_threshold(self.threshold)
+            .with_max_keypoints(self.max_keypoints.unwrap_or(detector.max_keypoints))
+            .with_keypoint_size(self.keypoint_size.unwrap_or(detector.keypoint_size))
+            .with_grid(self.grid.unwrap_or(1) as usize)
+            .with_level_budget(self.level_budget.unwrap_or(detector.level_budget))
+            .with_ranking(self.ranking);
+        let descriptor = &base.descriptor;
+        let descriptor = descriptor
+            .clone()
+            .with_width(DescriptorWidth::from_bits(self.bits)?)
+            .with_smoothing(self.smoothing.unwrap_or(descriptor.smoothing));
+        let pyramid = self.pyramid.or(base.pyramid);
+        Ok(base
+            .with_detector(detector)
+            .with_descriptor(descriptor)
+            .with_pyramid(pyramid))
     }
 }
 
 impl MatchingArgs {
     /// Matcher configuration.
     pub fn config(&self) -> MatchConfig {
-        MatchConfig {
-            ratio: (!self.no_ratio).then_some(self.ratio),
-            cross_check: !self.no_cross_check,
-            max_distance: self.max_distance,
-        }
+        MatchConfig::default()
+            .with_ratio((!self.no_ratio).then_some(self.ratio))
+            .with_cross_check(!self.no_cross_check)
+            .with_max_distance(self.max_distance)
     }
 }
 
@@ -269,11 +267,11 @@ pub fn describe_matching(config: &MatchConfig) -> String {
     parts.join(", ")
 }
 
-#[cfg(test)]
+// Its one test needs a build without CUDA.
+#[cfg(all(test, not(feature = "cuda")))]
 mod tests {
     use super::*;
 
-    #[cfg(not(feature = "cuda"))]
     #[test]
     fn cuda_without_the_feature_is_a_typed_error() {
         let args = BackendArgs {

@@ -269,9 +269,7 @@ pub struct InputArgs {
 impl InputArgs {
     /// The decoding limits.
     pub fn limits(&self) -> DecodeLimits {
-        DecodeLimits {
-            max_pixels: self.max_pixels,
-        }
+        DecodeLimits::default().with_max_pixels(self.max_pixels)
     }
 }
 
@@ -408,16 +406,7 @@ mod tests {
         assert_eq!(parse("2:1.05").scale_factor, MIN_PYRAMID_FACTOR);
         assert_eq!(
             (parse("3"), parse("8:1.2")),
-            (
-                Pyramid {
-                    levels: 3,
-                    scale_factor: 2.0
-                },
-                Pyramid {
-                    levels: 8,
-                    scale_factor: 1.2
-                }
-            )
+            (Pyramid::new(3, 2.0), Pyramid::new(8, 1.2))
         );
         assert_eq!(demo.matching.config().ratio, None);
         let parse = |extra: &[&str]| {

@@ -224,13 +224,7 @@ mod tests {
         let (w, h) = (400, 300);
         let pixels = clatch::synthetic::rectangles(w, h, 4).expect("synthetic image");
         let img = GrayImage::from_raw(w as u32, h as u32, pixels.clone()).unwrap();
-        let config = ExtractorConfig {
-            pyramid: Some(clatch::Pyramid {
-                levels: 2,
-                scale_factor: 2.0,
-            }),
-            ..ExtractorConfig::default()
-        };
+        let config = ExtractorConfig::default().with_pyramid(Some(clatch::Pyramid::new(2, 2.0)));
         let extractor = Extractor::new(Backend::Cpu, config).unwrap();
         let got = extract(&extractor, &img, Path::new("a"), &Progress::hidden()).unwrap();
         let view = GrayView::new(&pixels, w, h, w).unwrap();

@@ -59,10 +59,7 @@ impl ClatchMethod {
             // Full-resolution keypoints: OpenCV-compatible LATCH describes no other level (an
             // explicit --pyramid keeps this method out, see methods_to_run).
             ClatchMethod::ClatchOpencv => (
-                ExtractorConfig {
-                    pyramid: None,
-                    ..setup.extractor.clone()
-                },
+                setup.extractor.clone().with_pyramid(None),
                 Some(opencv_default_latch()?),
             ),
         })
@@ -336,14 +333,8 @@ mod tests {
         let run = run_column(method, &s, &rot).unwrap();
         // The keypoints are the detector's (with its angles); the descriptors are the library's
         // OpenCV-compatible ones for them, not CLATCH's.
-        let extractor = Extractor::new(
-            Backend::Cpu,
-            ExtractorConfig {
-                pyramid: None,
-                ..ExtractorConfig::default()
-            },
-        )
-        .unwrap();
+        let extractor =
+            Extractor::new(Backend::Cpu, ExtractorConfig::default().with_pyramid(None)).unwrap();
         for (img, got) in [(&rot.a, &run.a), (&rot.b, &run.b)] {
             let view = GrayView::try_from(img).unwrap();
             let detected = extractor.detect(&view).unwrap();
@@ -402,11 +393,10 @@ mod tests {
     #[test]
     fn without_cross_check_the_curve_still_agrees_with_the_matcher() {
         let (dir, pairs) = astronaut_pairs("nocross");
-        let config = MatchConfig {
-            ratio: Some(0.9),
-            cross_check: false,
-            max_distance: Some(120),
-        };
+        let config = MatchConfig::default()
+            .with_ratio(Some(0.9))
+            .with_cross_check(false)
+            .with_max_distance(Some(120));
         let loaded = load_pair(&pairs[15], 3.0).unwrap();
         let r = evaluate_pair(ClatchMethod::Clatch, &setup(config), &loaded, &[0.9]).unwrap();
         assert_eq!(

@@ -12,7 +12,7 @@
 
 use std::mem::{offset_of, size_of};
 
-use clatch::{Descriptor, DescriptorSet, DescriptorWidth, GrayView, KeyPoint, Match};
+use clatch::{DescriptorSet, DescriptorWidth, GrayView, KeyPoint, Match};
 use numpy::ndarray::{ArrayView2, ArrayViewD, Ix2};
 use numpy::{
     Element, IntoPyArray, PyArray1, PyArrayDescr, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods,
@@ -330,27 +330,13 @@ pub fn descriptors_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Descriptor
         )
     })?;
     let width = DescriptorWidth::from_bytes(view.ncols()).or_raise(py)?;
-    let bytes = width.bytes();
-    let from_row = |row: &[u8]| {
-        let mut full = [0u8; 64];
-        full[..bytes].copy_from_slice(row);
-        Descriptor::from_opencv_bytes(&full)
+    let set = match view.as_slice() {
+        // C order (what numpy and the extractor give): the rows as they lie.
+        Some(packed) => DescriptorSet::from_opencv_bytes(width, packed),
+        // Any other strides: the bytes in row order first (`iter` walks in logical order).
+        None => DescriptorSet::from_opencv_bytes(width, &view.iter().copied().collect::<Vec<u8>>()),
     };
-    let rows: Vec<Descriptor> = match view.as_slice() {
-        // C order (what numpy and the extractor give): whole rows as slices.
-        Some(packed) => packed.chunks_exact(bytes).map(from_row).collect(),
-        None => view
-            .outer_iter()
-            .map(|row| {
-                let mut full = [0u8; 64];
-                for (dst, &src) in full.iter_mut().zip(row.iter()) {
-                    *dst = src;
-                }
-                Descriptor::from_opencv_bytes(&full)
-            })
-            .collect(),
-    };
-    Ok(DescriptorSet::from_descriptors(width, &rows))
+    set.or_raise(py)
 }
 
 /// The records of a 1-D structured array of `R`'s dtype (`dtype_name` in errors), copied out.

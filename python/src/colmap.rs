@@ -36,7 +36,7 @@ impl ImageFolder {
     #[new]
     #[pyo3(signature = (images, *, max_pixels = 100_000_000))]
     fn new(py: Python<'_>, images: PathBuf, max_pixels: u64) -> PyResult<Self> {
-        let limits = DecodeLimits { max_pixels };
+        let limits = DecodeLimits::default().with_max_pixels(max_pixels);
         let inner = compute_with(py, || clatch::colmap::ImageFolder::open(&images, &limits))?;
         Ok(Self { inner })
     }
@@ -179,7 +179,7 @@ fn _extract_photos<'py>(
             ));
         }
     };
-    let limits = DecodeLimits { max_pixels };
+    let limits = DecodeLimits::default().with_max_pixels(max_pixels);
     let (photos, _decoding) = compute_with(py, || {
         clatch::colmap::extract_photos(
             &extractor.inner,
@@ -283,13 +283,9 @@ impl FolderWriter {
         focal_35mm: Option<u16>,
         keypoints: &Bound<'_, PyAny>,
     ) -> PyResult<usize> {
-        let photo = clatch::colmap::Photo {
-            name,
-            width,
-            height,
-            focal_35mm,
-            keypoints: keypoints_in(keypoints, "keypoints")?,
-        };
+        let photo =
+            clatch::colmap::Photo::new(name, width, height, keypoints_in(keypoints, "keypoints")?)
+                .with_focal_35mm(focal_35mm);
         self.with(py, |w| w.add_photo(&photo))
     }
 

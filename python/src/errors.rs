@@ -105,6 +105,7 @@ fn class_of(e: &clatch::Error) -> Class {
         | E::DescriptorWidthMismatch { .. }
         | E::PairOutOfRange { .. }
         | E::DescriptorBufferLength { .. }
+        | E::DescriptorBytesLength { .. }
         | E::EmptyGallery
         | E::InvalidK { .. }
         | E::KTooLargeForBackend { .. }
@@ -112,6 +113,7 @@ fn class_of(e: &clatch::Error) -> Class {
         | E::WeightsOverflow { .. }
         | E::WeightsAllZero
         | E::InvalidConfig { .. }
+        | E::InvalidInput { .. }
         | E::NoWorkers => Class::InvalidInput,
         // A device pool worker's error is raised as the class of what the worker hit.
         E::Worker { source, .. } => class_of(source),

@@ -83,10 +83,7 @@ fn parse_pyramid(value: &Bound<'_, PyAny>) -> PyResult<Option<Pyramid>> {
         }
     } else if let Ok((levels, scale_factor)) = value.extract::<(i64, f32)>() {
         let levels = int_in(py, "pyramid.levels", levels, 0, i64::from(u16::MAX))? as usize;
-        return Ok(Some(Pyramid {
-            levels,
-            scale_factor,
-        }));
+        return Ok(Some(Pyramid::new(levels, scale_factor)));
     }
     Err(invalid_input(
         py,
@@ -296,7 +293,7 @@ impl Extractor {
             .map(|(i, image)| ImageInput::new(image, &format!("images[{i}]")))
             .collect::<PyResult<Vec<_>>>()?;
         let views = Self::views(py, &inputs)?;
-        let all = compute(py, || self.inner.detect_and_describe_batch(&views, &|_| {}))?;
+        let all = compute(py, || self.inner.detect_and_describe_batch(&views))?;
         let out = all
             .into_iter()
             .map(|f| Self::features_out(py, f))

@@ -29,7 +29,7 @@ fn imread<'py>(
     path: std::path::PathBuf,
     max_pixels: u64,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let limits = DecodeLimits { max_pixels };
+    let limits = DecodeLimits::default().with_max_pixels(max_pixels);
     let gray = py
         .detach(|| clatch::decode::open_gray(&path, &limits))
         .map_err(|e| from_decode(py, e))?;

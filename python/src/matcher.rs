@@ -113,11 +113,10 @@ impl Matcher {
             })?),
             None => None,
         };
-        let config = MatchConfig {
-            ratio,
-            cross_check,
-            max_distance,
-        };
+        let config = MatchConfig::default()
+            .with_ratio(ratio)
+            .with_cross_check(cross_check)
+            .with_max_distance(max_distance);
         let inner = clatch::Matcher::new(backend, config).map_err(|e| backend_error(py, e))?;
         Ok(Self { inner })
     }
@@ -223,7 +222,7 @@ impl Matcher {
             .collect::<PyResult<Vec<DescriptorSet>>>()?;
         let pairs = pairs_in(pairs, sets.len())?;
         let refs: Vec<&DescriptorSet> = sets.iter().collect();
-        let all = compute(py, || self.inner.match_pairs(&refs, &pairs, &|_| {}))?;
+        let all = compute(py, || self.inner.match_pairs(&refs, &pairs))?;
         let out: Vec<_> = all.into_iter().map(|m| matches_out(py, m)).collect();
         PyList::new(py, out)
     }
@@ -235,14 +234,14 @@ impl Matcher {
     #[staticmethod]
     fn all_pairs(py: Python<'_>, n: i64) -> PyResult<Bound<'_, PyAny>> {
         let n = usize::try_from(n)
-            .map_err(|_| invalid_input(py, "InvalidConfig", format!("n must be >= 0, got {n}")))?;
+            .map_err(|_| invalid_input(py, "InvalidInput", format!("n must be >= 0, got {n}")))?;
         // More pairs than any array can index is refused rather than run out of memory.
         if n.checked_mul(n.saturating_sub(1))
             .is_none_or(|twice| twice / 2 > isize::MAX as usize / 32)
         {
             return Err(invalid_input(
                 py,
-                "InvalidConfig",
+                "InvalidInput",
                 format!("n = {n} sets have too many pairs to list"),
             ));
         }

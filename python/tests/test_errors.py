@@ -177,7 +177,7 @@ def test_bad_pairs(backend):
     raises(clatch.InvalidInputError, "WrongShape", lambda: m.match_pairs(sets, 3))
     mixed = [sets[0], random_descriptors(rng, 20, 32)]
     raises(clatch.InvalidInputError, "DescriptorWidthMismatch", lambda: m.match_pairs(mixed, [(0, 0)]))
-    raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Matcher.all_pairs(-1))
+    raises(clatch.InvalidInputError, "InvalidInput", lambda: clatch.Matcher.all_pairs(-1))
 
 
 def test_bad_keypoints(backend, photo):

@@ -82,6 +82,25 @@ def test_real_features_match_as_the_reference(backend):
     assert got == reference_match(a, b, 0.8, True, None)
 
 
+@pytest.mark.parametrize(
+    "view",
+    [
+        lambda a: a[::2],  # every other row: rows apart, each contiguous
+        lambda a: a[::-1],  # mirrored rows
+        np.asfortranarray,  # column-major: bytes of a row apart
+        lambda a: a[:, :16],  # the first half of each row: a narrower width
+    ],
+    ids=["row-step", "mirrored", "fortran", "first-bytes"],
+)
+def test_descriptor_arrays_of_any_strides(backend, view):
+    # Descriptors are read row by row in OpenCV's byte order whatever the array's memory layout.
+    rng = np.random.default_rng(9)
+    query, train = view(random_descriptors(rng, 120, 32)), view(random_descriptors(rng, 140, 32))
+    got = as_tuples(clatch.Matcher(backend, ratio=None).match(query, train))
+    assert got == reference_match(np.ascontiguousarray(query), np.ascontiguousarray(train), None, True, None)
+    assert len(got) > 0
+
+
 def test_narrow_descriptors_are_the_first_bytes(backend):
     # bits = 8n uses the first 8n triplets, which OpenCV's byte order puts in the first n bytes.
     photo = clatch.imread(ASTRONAUT)

@@ -32,11 +32,16 @@ const HOST_BLOCK: usize = 256;
 /// query, or with too small a gallery (none, or one descriptor under the ratio test), gets no matches,
 /// as in [`Matcher::match_pairs`].
 ///
-/// Results are handed to a callback, `each(i, matches)`, once per pair `i` of the request, in
-/// increasing `i`, as soon as the block of pairs holding it is back: memory stays bounded for any
-/// number of pairs (blocks of pairs are matched one after another), and the caller may write each
-/// result out and drop it. The callback may match on the same collection again, and several threads
-/// may match one collection at once (it is `Sync`; on CUDA their work shares the collection's stream).
+/// Each request comes in two forms. The plain call ([`DescriptorCollection::match_pairs`],
+/// [`match_all_pairs`](DescriptorCollection::match_all_pairs), [`search`](DescriptorCollection::search),
+/// [`search_sets`](DescriptorCollection::search_sets)) returns every result in request order, as
+/// [`Matcher::match_pairs`] does. Its `*_each` form ([`DescriptorCollection::match_pairs_each`], ...)
+/// holds none of them: it hands each to a callback, `each(i, matches)`, once per pair `i` of the
+/// request, in increasing `i`, as soon as the block of pairs holding it is back, so memory stays
+/// bounded for any number of pairs (blocks of pairs are matched one after another) and the caller may
+/// write each result out and drop it; `each` is the progress report too. The callback may match on
+/// the same collection again, and several threads may match one collection at once (it is `Sync`; on
+/// CUDA their work shares the collection's stream).
 ///
 /// ```
 /// use clatch::{Backend, DescriptorCollection, DescriptorSet, DescriptorWidth, MatchConfig, Matcher};
@@ -52,14 +57,17 @@ const HOST_BLOCK: usize = 256;
 /// assert_eq!(collection.add(&[&a, &b])?, 0..2);
 /// assert_eq!(collection.add(&[&c])?, 2..3);
 ///
-/// let mut all = Vec::new();
-/// collection.match_all_pairs(|i, matches| all.push((i, matches)))?;
+/// let all = collection.match_all_pairs()?;
 /// assert_eq!(all.len(), 3); // (0, 1), (0, 2), (1, 2)
-/// assert_eq!(all[1].1, matcher.match_descriptors(&a, &c)?);
+/// assert_eq!(all[1], matcher.match_descriptors(&a, &c)?);
 ///
-/// let mut found = Vec::new();
-/// collection.search(&b, |id, matches| found.push((id, matches.len())))?;
-/// assert_eq!(found.iter().map(|f| f.0).collect::<Vec<_>>(), vec![0, 1, 2]);
+/// let found = collection.search(&b)?; // b against sets 0, 1 and 2
+/// assert_eq!(found[1], matcher.match_descriptors(&b, &b)?);
+///
+/// // Each result handed over as it is ready, none held: e.g. written out, counted, dropped.
+/// let mut total = 0;
+/// collection.match_all_pairs_each(|_pair, matches| total += matches.len())?;
+/// assert_eq!(total, all.iter().map(Vec::len).sum::<usize>());
 /// # Ok::<(), clatch::Error>(())
 /// ```
 #[derive(Debug)]
@@ -143,7 +151,7 @@ impl DescriptorCollection {
     /// the one `pending.wait()` would give, so every match does too.
     ///
     /// Errors: [`Error::DescriptorWidthMismatch`] when the extraction's width is not the
-    /// collection's, [`Error::InvalidConfig`] when it runs on another device; nothing is added then.
+    /// collection's, [`Error::InvalidInput`] when it runs on another device; nothing is added then.
     ///
     /// ```no_run
     /// use clatch::cuda::GpuStream;
@@ -162,7 +170,7 @@ impl DescriptorCollection {
     ///     let (id, keypoints) = collection.add_pending(pending)?;
     ///     println!("set {id}: {} keypoints", keypoints.len());
     /// }
-    /// collection.match_all_pairs(|pair, matches| println!("pair {pair}: {} matches", matches.len()))?;
+    /// collection.match_all_pairs_each(|pair, matches| println!("pair {pair}: {} matches", matches.len()))?;
     /// # Ok::<(), clatch::Error>(())
     /// ```
     pub fn add_pending(
@@ -196,10 +204,18 @@ impl DescriptorCollection {
         Ok((self.sizes.len() - 1, keypoints))
     }
 
-    /// Matches every `(a, b)` of `pairs` (held set `a` the queries, `b` the gallery; any order,
-    /// repeats allowed) and calls `each(i, matches)` for each `pairs[i]`, in increasing `i`. Every id is
-    /// checked before any work ([`Error::PairOutOfRange`]).
-    pub fn match_pairs(
+    /// The matches of every `(a, b)` of `pairs` (held set `a` the queries, `b` the gallery; any
+    /// order, repeats allowed), in pair order. Every id is checked before any work
+    /// ([`Error::PairOutOfRange`]). [`DescriptorCollection::match_pairs_each`] gives the same results
+    /// one at a time, without holding them.
+    pub fn match_pairs(&self, pairs: &[(usize, usize)]) -> Result<Vec<Vec<Match>>> {
+        collected(pairs.len(), |each| self.match_pairs_each(pairs, each))
+    }
+
+    /// [`DescriptorCollection::match_pairs`], each result handed to `each(i, matches)` (for
+    /// `pairs[i]`, in increasing `i`) as soon as it is ready instead of returned: for more pairs
+    /// than their matches fit in memory together.
+    pub fn match_pairs_each(
         &self,
         pairs: &[(usize, usize)],
         mut each: impl FnMut(usize, Vec<Match>),
@@ -222,21 +238,42 @@ impl DescriptorCollection {
 
     /// [`DescriptorCollection::match_pairs`] of every pair `(a, b)`, `a < b`, of the sets held, in
     /// [`Matcher::all_pairs`] order.
-    pub fn match_all_pairs(&self, each: impl FnMut(usize, Vec<Match>)) -> Result<()> {
-        self.match_pairs(&Matcher::all_pairs(self.len()), each)
+    pub fn match_all_pairs(&self) -> Result<Vec<Vec<Match>>> {
+        self.match_pairs(&Matcher::all_pairs(self.len()))
     }
 
-    /// Matches `query` (the queries) against every held set (the galleries) and calls
-    /// `each(id, matches)` for each set, in id order. `query` must have the collection's width.
-    pub fn search(&self, query: &DescriptorSet, each: impl FnMut(usize, Vec<Match>)) -> Result<()> {
+    /// [`DescriptorCollection::match_all_pairs`], each result handed to `each(i, matches)` as soon
+    /// as it is ready (as [`DescriptorCollection::match_pairs_each`] does).
+    pub fn match_all_pairs_each(&self, each: impl FnMut(usize, Vec<Match>)) -> Result<()> {
+        self.match_pairs_each(&Matcher::all_pairs(self.len()), each)
+    }
+
+    /// The matches of `query` (the queries) against every held set (the galleries), in id order.
+    /// `query` must have the collection's width.
+    pub fn search(&self, query: &DescriptorSet) -> Result<Vec<Vec<Match>>> {
+        collected(self.len(), |each| self.search_each(query, each))
+    }
+
+    /// [`DescriptorCollection::search`], the result of each set handed to `each(id, matches)` as soon
+    /// as it is ready, in id order.
+    pub fn search_each(
+        &self,
+        query: &DescriptorSet,
+        each: impl FnMut(usize, Vec<Match>),
+    ) -> Result<()> {
         let ids: Vec<usize> = (0..self.len()).collect();
-        self.search_sets(query, &ids, each)
+        self.search_sets_each(query, &ids, each)
     }
 
-    /// Matches `query` against the held sets `ids` (any order, repeats allowed) and calls
-    /// `each(i, matches)` for each `ids[i]`, in increasing `i`. The width and every id are checked
-    /// before any work.
-    pub fn search_sets(
+    /// The matches of `query` against the held sets `ids` (any order, repeats allowed), in the order
+    /// of `ids`. The width and every id are checked before any work.
+    pub fn search_sets(&self, query: &DescriptorSet, ids: &[usize]) -> Result<Vec<Vec<Match>>> {
+        collected(ids.len(), |each| self.search_sets_each(query, ids, each))
+    }
+
+    /// [`DescriptorCollection::search_sets`], each result handed to `each(i, matches)` (for
+    /// `ids[i]`, in increasing `i`) as soon as it is ready.
+    pub fn search_sets_each(
         &self,
         query: &DescriptorSet,
         ids: &[usize],
@@ -285,6 +322,16 @@ impl DescriptorCollection {
         }
         Ok(())
     }
+}
+
+/// The `n` results an `*_each` call hands over (in increasing index), collected in order.
+fn collected(
+    n: usize,
+    run: impl FnOnce(&mut dyn FnMut(usize, Vec<Match>)) -> Result<()>,
+) -> Result<Vec<Vec<Match>>> {
+    let mut results = Vec::with_capacity(n);
+    run(&mut |_, matches| results.push(matches))?;
+    Ok(results)
 }
 
 /// One pair on the CPU, as [`Matcher::match_pairs`] treats it: no matches without queries or with

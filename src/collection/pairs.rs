@@ -25,12 +25,18 @@ impl Matcher {
     /// against `sets[b]` (gallery) exactly as [`Matcher::match_descriptors`] does. A pair with no
     /// query or too small a gallery (none, or one descriptor under the ratio test) gets no matches
     /// rather than an error, so that one featureless photo does not stop a collection. Every index and
-    /// width is checked before any work. `done` is called once per finished pair with its index
-    /// (in any order on the CPU, in pair order on the GPU), e.g. for progress.
+    /// width is checked before any work.
     ///
     /// The CPU backend spreads the pairs over its threads; the CUDA backend uploads each set once into
     /// a [`DescriptorCollection`] and matches many pairs per kernel launch, blocks of pairs one after
     /// another.
+    ///
+    /// This is the convention of every many-items call ([`crate::Extractor::detect_and_describe_batch`],
+    /// [`DescriptorCollection`], [`crate::DevicePool`]): the plain call returns every result in input
+    /// order; its `*_with_progress` twin ([`Matcher::match_pairs_with_progress`]) also reports each
+    /// finished item; and where all the results of a large collection need not be held at once, the
+    /// collection's `*_each` calls ([`DescriptorCollection::match_pairs_each`]) hand each result over
+    /// as it is ready instead.
     ///
     /// ```
     /// use clatch::{Backend, DescriptorSet, DescriptorWidth, MatchConfig, Matcher};
@@ -44,7 +50,7 @@ impl Matcher {
     /// let matcher = Matcher::new(Backend::Cpu, MatchConfig::default())?;
     /// let sets = [&a, &b, &c];
     /// let pairs = Matcher::all_pairs(sets.len());
-    /// let matches = matcher.match_pairs(&sets, &pairs, &|_| {})?;
+    /// let matches = matcher.match_pairs(&sets, &pairs)?;
     /// assert_eq!(matches.len(), 3);
     /// assert_eq!(matches[0], matcher.match_descriptors(&a, &b)?);
     /// # Ok::<(), clatch::Error>(())
@@ -53,7 +59,36 @@ impl Matcher {
         &self,
         sets: &[&DescriptorSet],
         pairs: &[(usize, usize)],
-        done: &(dyn Fn(usize) + Sync),
+    ) -> Result<Vec<Vec<Match>>> {
+        self.match_pairs_with_progress(sets, pairs, &|_| {})
+    }
+
+    /// [`Matcher::match_pairs`], calling `progress(p)` once per finished pair `p` (in any order and
+    /// from any thread on the CPU, in pair order on the GPU), e.g. for a progress bar. The results
+    /// are the same.
+    ///
+    /// ```
+    /// use std::sync::atomic::{AtomicUsize, Ordering};
+    /// use clatch::{Backend, DescriptorSet, DescriptorWidth, MatchConfig, Matcher};
+    ///
+    /// let width = DescriptorWidth::from_bits(64)?;
+    /// let set = |seed: u64| DescriptorSet::from_words(width, (0..50).map(|i| i * seed).collect());
+    /// let (a, b, c) = (set(3)?, set(5)?, set(7)?);
+    /// let matcher = Matcher::new(Backend::Cpu, MatchConfig::default())?;
+    /// let finished = AtomicUsize::new(0);
+    /// let pairs = Matcher::all_pairs(3);
+    /// let matches = matcher.match_pairs_with_progress(&[&a, &b, &c], &pairs, &|_pair| {
+    ///     finished.fetch_add(1, Ordering::Relaxed);
+    /// })?;
+    /// assert_eq!(finished.into_inner(), 3);
+    /// assert_eq!(matches, matcher.match_pairs(&[&a, &b, &c], &pairs)?);
+    /// # Ok::<(), clatch::Error>(())
+    /// ```
+    pub fn match_pairs_with_progress(
+        &self,
+        sets: &[&DescriptorSet],
+        pairs: &[(usize, usize)],
+        progress: &(dyn Fn(usize) + Sync),
     ) -> Result<Vec<Vec<Match>>> {
         self.check_pairs(sets, pairs)?;
         let matchable = |&pair: &(usize, usize)| self.matchable(sets, pair);
@@ -67,7 +102,7 @@ impl Matcher {
                     } else {
                         Vec::new()
                     };
-                    done(p);
+                    progress(p);
                     found
                 })
                 .collect()),
@@ -78,9 +113,9 @@ impl Matcher {
                 let mut collection = DescriptorCollection::new(self, first.width())?;
                 collection.add(sets)?;
                 let mut results = Vec::with_capacity(pairs.len());
-                collection.match_pairs(pairs, |p, matches| {
+                collection.match_pairs_each(pairs, |p, matches| {
                     results.push(matches);
-                    done(p);
+                    progress(p);
                 })?;
                 Ok(results)
             }

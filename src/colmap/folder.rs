@@ -156,7 +156,19 @@ impl ImageFolder {
 }
 
 /// What the database holds of one photo.
+///
+/// `#[non_exhaustive]`, so that what is written of a photo can grow: built with [`Photo::new`] and
+/// [`Photo::with_focal_35mm`].
+///
+/// ```
+/// use clatch::KeyPoint;
+/// use clatch::colmap::Photo;
+///
+/// let photo = Photo::new("a.jpg", 640, 480, vec![KeyPoint::new(10.0, 20.0)]).with_focal_35mm(Some(28));
+/// assert_eq!((photo.width, photo.focal_35mm), (640, Some(28)));
+/// ```
 #[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct Photo {
     /// Its name in the database ([`image_name`]).
     pub name: String,
@@ -168,6 +180,25 @@ pub struct Photo {
     pub focal_35mm: Option<u16>,
     /// Its keypoints, refined; keypoint `i` is described by row `i` of its descriptors.
     pub keypoints: Vec<KeyPoint>,
+}
+
+impl Photo {
+    /// The photo named `name` in the database, `width` x `height` pixels, with `keypoints`, and no
+    /// EXIF focal length.
+    pub fn new(name: impl Into<String>, width: u32, height: u32, keypoints: Vec<KeyPoint>) -> Self {
+        Self {
+            name: name.into(),
+            width,
+            height,
+            focal_35mm: None,
+            keypoints,
+        }
+    }
+
+    with_methods! {
+        /// The same photo with this EXIF `FocalLengthIn35mmFilm` ([`Photo::focal_35mm`]).
+        with_focal_35mm => focal_35mm: Option<u16>;
+    }
 }
 
 /// The camera of a photo without a given K: the focal length from EXIF's 35 mm equivalent where the

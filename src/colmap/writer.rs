@@ -29,12 +29,8 @@ type CameraKey = ((u32, u32), Option<u16>);
 ///
 /// let path = std::env::temp_dir().join(format!("clatch-doc-writer-{}.db", std::process::id()));
 /// # std::fs::remove_file(&path).ok();
-/// let photo = |name: &str| Photo {
-///     name: name.into(),
-///     width: 640,
-///     height: 480,
-///     focal_35mm: None,
-///     keypoints: vec![KeyPoint::new(10.0, 20.0), KeyPoint::new(30.0, 40.0)],
+/// let photo = |name: &str| {
+///     Photo::new(name, 640, 480, vec![KeyPoint::new(10.0, 20.0), KeyPoint::new(30.0, 40.0)])
 /// };
 /// let mut writer = FolderWriter::create(&path, Vec::new(), None)?;
 /// writer.add_photo(&photo("a.png"))?;

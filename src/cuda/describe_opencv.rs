@@ -59,10 +59,9 @@ pub(crate) fn describe_opencv(
         .checked_mul(chunks * 32)
         .and_then(|t| u32::try_from(t.div_ceil(CLATCH_OPENCV_THREADS as usize)).ok())
         .filter(|_| i32::try_from(count).is_ok())
-        .ok_or_else(|| Error::InvalidConfig {
-            field: "keypoints",
-            value: count.to_string(),
-            reason: "too many keypoints for one launch",
+        .ok_or_else(|| Error::InvalidInput {
+            what: "keypoints",
+            reason: format!("{count} keypoints are too many for one launch"),
         })?;
     let stream = dev.new_stream()?;
     let device_image = upload(&stream, &packed, "image upload")?;

@@ -98,14 +98,9 @@ impl GpuStream {
         super::memory::arena::settled(self.lane(), result)
     }
 
-    /// The device ordinal.
+    /// The ordinal of the device the stream is on (the `device` of its [`crate::Backend::Cuda`]).
     pub fn ordinal(&self) -> usize {
         self.ordinal
-    }
-
-    /// The device.
-    pub fn device(&self) -> &GpuDevice {
-        &self.dev
     }
 
     /// Blocks until everything queued so far has run.
@@ -132,10 +127,12 @@ impl GpuStream {
     /// Checks that this stream belongs to the backend's device.
     pub(crate) fn check_device(&self, device: usize) -> Result<()> {
         if device != self.ordinal {
-            return Err(Error::InvalidConfig {
-                field: "stream",
-                value: format!("cuda:{}", self.ordinal),
-                reason: "the stream belongs to another device than the backend",
+            return Err(Error::InvalidInput {
+                what: "stream",
+                reason: format!(
+                    "it belongs to cuda:{}, another device than the backend's (cuda:{device})",
+                    self.ordinal
+                ),
             });
         }
         Ok(())

@@ -49,7 +49,7 @@ impl GpuStream {
         Self::new(ordinal)
     }
 
-    /// The device ordinal.
+    /// The ordinal of the device the stream is on (the `device` of its [`crate::Backend::Cuda`]).
     pub fn ordinal(&self) -> usize {
         match self.never {}
     }

@@ -15,7 +15,17 @@ use crate::gray_view::MAX_IMAGE_SIDE;
 ///
 /// The size is read from the file's header and checked before any pixel buffer is allocated; the
 /// decoder's own allocations are capped at [`DecodeLimits::max_alloc`].
+///
+/// `#[non_exhaustive]`, so that limits can be added: start from [`DecodeLimits::default`].
+///
+/// ```
+/// use clatch::decode::DecodeLimits;
+///
+/// let limits = DecodeLimits::default().with_max_pixels(50_000_000);
+/// assert_eq!(limits.max_alloc(), 400_000_000);
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub struct DecodeLimits {
     /// Most pixels (width × height) an image may have. Default [`DecodeLimits::DEFAULT_MAX_PIXELS`].
     /// Each side is also capped at [`crate::MAX_IMAGE_SIDE`], the most clatch can process.
@@ -25,6 +35,11 @@ pub struct DecodeLimits {
 impl DecodeLimits {
     /// 100 megapixels: a 12 000 × 8 000 photo; its decoded RGB takes 300 MB.
     pub const DEFAULT_MAX_PIXELS: u64 = 100_000_000;
+
+    with_methods! {
+        /// The same limits with at most this many pixels an image ([`DecodeLimits::max_pixels`]).
+        with_max_pixels => max_pixels: u64;
+    }
 
     /// Bytes the decoder may allocate: 8 per pixel, the largest decoded pixel (16-bit RGBA).
     pub fn max_alloc(&self) -> u64 {
@@ -96,6 +111,7 @@ type GrayWithExif = (GrayImage, Option<Vec<u8>>);
 
 /// What a file's header says, checked against the limits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub struct ImageInfo {
     /// Width in pixels.
     pub width: u32,
@@ -135,7 +151,7 @@ pub fn probe(path: &Path, limits: &DecodeLimits) -> Result<ImageInfo, DecodeErro
 /// image::GrayImage::from_pixel(120, 100, image::Luma([9])).save(&path)?;
 /// let gray = open_gray(&path, &DecodeLimits::default())?;
 /// assert_eq!(gray.dimensions(), (120, 100));
-/// let small = DecodeLimits { max_pixels: 10_000 };
+/// let small = DecodeLimits::default().with_max_pixels(10_000);
 /// assert!(matches!(open_gray(&path, &small), Err(DecodeError::TooLarge { .. })));
 /// # std::fs::remove_file(&path)?;
 /// # Ok::<(), Box<dyn std::error::Error>>(())

@@ -104,7 +104,22 @@ impl Default for PatchWeights {
 /// CLATCH descriptor settings: a rotated, scaled 64x64 window sampled around each keypoint, 512 learned
 /// patch triplets compared by weighted sums of squared differences (every rule: [`crate::numerics`],
 /// section 4).
+///
+/// `#[non_exhaustive]`: start from [`DescriptorConfig::default`] and set what differs with the
+/// `with_*` methods (or assign the public fields of a value you hold).
+///
+/// ```
+/// use clatch::{DescriptorConfig, DescriptorWidth, PatchWeights, Smoothing};
+///
+/// let descriptor = DescriptorConfig::default()
+///     .with_width(DescriptorWidth::from_bits(256)?)
+///     .with_weights(PatchWeights::uniform())
+///     .with_smoothing(Smoothing::Binomial5);
+/// assert_eq!(descriptor.width.bytes(), 32);
+/// # Ok::<(), clatch::Error>(())
+/// ```
 #[derive(Clone, Debug, PartialEq, Default)]
+#[non_exhaustive]
 pub struct DescriptorConfig {
     /// Number of bits (the first `bits` triplets). Default 512.
     pub width: DescriptorWidth,
@@ -114,6 +129,17 @@ pub struct DescriptorConfig {
     /// before its keypoints are described); detection and orientation always see the unsmoothed
     /// image. Default [`Smoothing::None`].
     pub smoothing: Smoothing,
+}
+
+impl DescriptorConfig {
+    with_methods! {
+        /// The same settings with descriptors of this width ([`DescriptorConfig::width`]).
+        with_width => width: DescriptorWidth;
+        /// The same settings with these patch weights ([`DescriptorConfig::weights`]).
+        with_weights => weights: PatchWeights;
+        /// The same settings with this smoothing before sampling ([`DescriptorConfig::smoothing`]).
+        with_smoothing => smoothing: Smoothing;
+    }
 }
 
 /// An integer low-pass filter applied to the image before description samples it

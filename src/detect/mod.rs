@@ -67,7 +67,25 @@ pub const SUBPIXEL_FRAC_BITS: u32 = 16;
 
 /// FAST-9 detector settings: score, non-maximum suppression, top-N, orientation by intensity centroid
 /// (every rule: [`crate::numerics`], section 3).
+///
+/// `#[non_exhaustive]`: start from [`DetectorConfig::default`] and set what differs with the `with_*`
+/// methods (or assign the public fields of a value you hold).
+///
+/// ```
+/// use clatch::{DetectorConfig, Ranking, Subpixel};
+///
+/// let detector = DetectorConfig::default()
+///     .with_threshold(30)
+///     .with_max_keypoints(2000)
+///     .with_ranking(Ranking::Harris)
+///     .with_subpixel(Subpixel::None);
+/// assert_eq!((detector.threshold, detector.max_keypoints), (30, 2000));
+/// assert_eq!(detector.grid, 1); // the default
+/// detector.validate()?;
+/// # Ok::<(), clatch::Error>(())
+/// ```
 #[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct DetectorConfig {
     /// FAST threshold: a corner needs nine contiguous circle pixels more than this above or below the
     /// centre. 1..=254. Default 20.
@@ -107,9 +125,8 @@ pub struct DetectorConfig {
 ///
 /// let pixels = clatch::synthetic::rectangles(320, 240, 1)?;
 /// let image = GrayView::new(&pixels, 320, 240, 320)?;
-/// let config = |subpixel| ExtractorConfig {
-///     detector: DetectorConfig { subpixel, ..DetectorConfig::default() },
-///     ..ExtractorConfig::default()
+/// let config = |subpixel| {
+///     ExtractorConfig::default().with_detector(DetectorConfig::default().with_subpixel(subpixel))
 /// };
 /// let whole = Extractor::new(Backend::Cpu, config(Subpixel::None))?.detect_and_describe(&image)?;
 /// let refined = Extractor::new(Backend::Cpu, config(Subpixel::Score))?.detect_and_describe(&image)?;
@@ -178,6 +195,27 @@ impl Default for DetectorConfig {
 impl DetectorConfig {
     /// The default `keypoint_size` of detected keypoints.
     pub const DEFAULT_KEYPOINT_SIZE: f32 = 40.0;
+
+    with_methods! {
+        /// The same settings with this FAST threshold ([`DetectorConfig::threshold`]).
+        with_threshold => threshold: u8;
+        /// The same settings keeping at most this many keypoints
+        /// ([`DetectorConfig::max_keypoints`]).
+        with_max_keypoints => max_keypoints: usize;
+        /// The same settings with this window side for detected keypoints
+        /// ([`DetectorConfig::keypoint_size`]).
+        with_keypoint_size => keypoint_size: f32;
+        /// The same settings spreading keypoints over a `grid` x `grid` division
+        /// ([`DetectorConfig::grid`]).
+        with_grid => grid: usize;
+        /// The same settings sharing the keypoints among pyramid levels this way
+        /// ([`DetectorConfig::level_budget`]).
+        with_level_budget => level_budget: LevelBudget;
+        /// The same settings ranking corners this way ([`DetectorConfig::ranking`]).
+        with_ranking => ranking: Ranking;
+        /// The same settings refining positions this way ([`DetectorConfig::subpixel`]).
+        with_subpixel => subpixel: Subpixel;
+    }
 
     /// Checks every field's range.
     pub fn validate(&self) -> Result<()> {

@@ -13,8 +13,7 @@ use crate::parallel::*;
 
 impl Extractor {
     /// [`Extractor::detect_and_describe`] of every image, in input order (each result equal to its
-    /// own call). Every image is checked before any work. `done(i)` is called as image `i` finishes
-    /// (in any order on the CPU, in input order on the GPU), e.g. for progress.
+    /// own call). Every image is checked before any work.
     ///
     /// The CPU backend spreads the images over its threads (each image's own work is parallel too);
     /// the CUDA backend keeps several streams busy, each image's upload and kernels queued while
@@ -28,14 +27,37 @@ impl Extractor {
     /// let b = clatch::synthetic::rectangles(200, 300, 2)?;
     /// let images = [GrayView::new(&a, 320, 240, 320)?, GrayView::new(&b, 200, 300, 200)?];
     /// let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
-    /// let all = extractor.detect_and_describe_batch(&images, &|_| {})?;
+    /// let all = extractor.detect_and_describe_batch(&images)?;
     /// assert_eq!(all[1], extractor.detect_and_describe(&images[1])?);
     /// # Ok::<(), clatch::Error>(())
     /// ```
-    pub fn detect_and_describe_batch(
+    pub fn detect_and_describe_batch(&self, images: &[GrayView]) -> Result<Vec<Features>> {
+        self.detect_and_describe_batch_with_progress(images, &|_| {})
+    }
+
+    /// [`Extractor::detect_and_describe_batch`], calling `progress(i)` as image `i` finishes (in any
+    /// order and from any thread on the CPU, in input order on the GPU), e.g. for a progress bar.
+    /// The results are the same.
+    ///
+    /// ```
+    /// use std::sync::Mutex;
+    /// use clatch::{Backend, Extractor, ExtractorConfig, GrayView};
+    ///
+    /// let pixels = clatch::synthetic::rectangles(160, 120, 1)?;
+    /// let images = [GrayView::new(&pixels, 160, 120, 160)?; 3];
+    /// let extractor = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+    /// let finished = Mutex::new(Vec::new());
+    /// let all = extractor
+    ///     .detect_and_describe_batch_with_progress(&images, &|i| finished.lock().unwrap().push(i))?;
+    /// let mut finished = finished.into_inner().unwrap();
+    /// finished.sort_unstable();
+    /// assert_eq!((all.len(), finished), (3, vec![0, 1, 2]));
+    /// # Ok::<(), clatch::Error>(())
+    /// ```
+    pub fn detect_and_describe_batch_with_progress(
         &self,
         images: &[GrayView],
-        done: &(dyn Fn(usize) + Sync),
+        progress: &(dyn Fn(usize) + Sync),
     ) -> Result<Vec<Features>> {
         for image in images {
             Self::check_image(image)?;
@@ -46,7 +68,7 @@ impl Extractor {
                 .enumerate()
                 .map(|(i, image)| {
                     let features = self.detect_and_describe(image);
-                    done(i);
+                    progress(i);
                     features
                 })
                 .collect(),
@@ -54,7 +76,7 @@ impl Extractor {
                 let mut all = Vec::with_capacity(images.len());
                 self.stream_on_gpu(device, images.iter().map(Ok::<_, Error>), |i, _, f| {
                     all.push(f);
-                    done(i);
+                    progress(i);
                     Ok(())
                 })?;
                 Ok(all)

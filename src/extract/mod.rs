@@ -30,13 +30,30 @@ use crate::pyramid::{self, Pyramid};
 /// use clatch::{ExtractorConfig, LevelBudget, Pyramid};
 ///
 /// let accurate = ExtractorConfig::default();
-/// assert_eq!(accurate.pyramid, Some(Pyramid { levels: 8, scale_factor: 1.2 }));
+/// assert_eq!(accurate.pyramid, Some(Pyramid::new(8, 1.2)));
 /// assert_eq!(accurate.detector.level_budget, LevelBudget::Geometric);
 /// let fast = ExtractorConfig::single_scale();
 /// assert_eq!(fast.pyramid, None);
 /// assert_eq!(fast.detector.keypoint_size, 64.0);
 /// ```
+///
+/// The struct is `#[non_exhaustive]`, so that settings can be added without breaking callers: build
+/// it from [`ExtractorConfig::default`] (or [`ExtractorConfig::single_scale`]) with the `with_*`
+/// methods, or change the public fields of one you hold.
+///
+/// ```
+/// use clatch::{DetectorConfig, ExtractorConfig, Pyramid, Smoothing};
+///
+/// let config = ExtractorConfig::default()
+///     .with_detector(DetectorConfig::default().with_max_keypoints(2000).with_grid(4))
+///     .with_pyramid(Some(Pyramid::new(4, 1.5)));
+/// assert_eq!(config.detector.max_keypoints, 2000);
+///
+/// let mut smoothed = ExtractorConfig::single_scale();
+/// smoothed.descriptor.smoothing = Smoothing::Binomial3;
+/// ```
 #[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct ExtractorConfig {
     /// FAST detector settings.
     pub detector: DetectorConfig,
@@ -73,6 +90,16 @@ impl ExtractorConfig {
             descriptor: DescriptorConfig::default(),
             pyramid: None,
         }
+    }
+
+    with_methods! {
+        /// The same settings with these detector settings ([`ExtractorConfig::detector`]).
+        with_detector => detector: DetectorConfig;
+        /// The same settings with these descriptor settings ([`ExtractorConfig::descriptor`]).
+        with_descriptor => descriptor: DescriptorConfig;
+        /// The same settings with this pyramid ([`ExtractorConfig::pyramid`]; `None`: the
+        /// full-resolution image only).
+        with_pyramid => pyramid: Option<Pyramid>;
     }
 }
 
@@ -292,7 +319,7 @@ impl Extractor {
     /// Queues detection and description of `image` on `stream` and returns at once; the result's
     /// `wait` gives exactly what [`Extractor::detect_and_describe`] gives. With one stream per image,
     /// several images are in flight at once (see [`GpuStream`]). The backend must be
-    /// `Backend::Cuda` on the stream's device ([`Error::InvalidConfig`] otherwise). With a [`Pyramid`], the levels and their detection are
+    /// `Backend::Cuda` on the stream's device ([`Error::InvalidInput`] otherwise). With a [`Pyramid`], the levels and their detection are
     /// queued; the top-N over the levels and the description on each level run in `wait`.
     ///
     /// ```no_run
@@ -339,10 +366,10 @@ impl Extractor {
                     life,
                 )
             }
-            Backend::Cpu => Err(Error::InvalidConfig {
-                field: "backend",
-                value: "cpu".into(),
-                reason: "asynchronous extraction runs on a CUDA backend",
+            Backend::Cpu => Err(Error::InvalidInput {
+                what: "stream",
+                reason: "asynchronous extraction runs on a CUDA backend; this extractor's is cpu"
+                    .into(),
             }),
         }
     }

@@ -34,7 +34,20 @@ pub struct Match {
 
 /// Which matches [`crate::Matcher::match_descriptors`] keeps (every rule, ties included:
 /// [`crate::numerics`], section 5).
+///
+/// `#[non_exhaustive]`: start from [`MatchConfig::default`] and set what differs with the `with_*`
+/// methods (or assign the public fields of a value you hold).
+///
+/// ```
+/// use clatch::MatchConfig;
+///
+/// let config = MatchConfig::default().with_ratio(Some(0.7)).with_max_distance(Some(64));
+/// assert!(config.cross_check); // the default
+/// let plain = MatchConfig::default().with_ratio(None).with_cross_check(false);
+/// assert_eq!((plain.ratio, plain.max_distance), (None, None));
+/// ```
 #[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct MatchConfig {
     /// Lowe's ratio test: keep the best match only if `d1 < ratio · d2`. `None` turns it off; otherwise
     /// a finite value in `(0, 1]`. Needs at least two gallery descriptors. Default `Some(0.8)`.
@@ -138,6 +151,15 @@ pub fn check_sets(query: &DescriptorSet, train: &DescriptorSet, k: usize) -> Res
 }
 
 impl MatchConfig {
+    with_methods! {
+        /// The same rules with this ratio test ([`MatchConfig::ratio`]; `None` turns it off).
+        with_ratio => ratio: Option<f32>;
+        /// The same rules with the mutual cross-check on or off ([`MatchConfig::cross_check`]).
+        with_cross_check => cross_check: bool;
+        /// The same rules with this distance bound ([`MatchConfig::max_distance`]; `None`: none).
+        with_max_distance => max_distance: Option<u32>;
+    }
+
     /// How many nearest neighbours of each query these rules look at: 2 with the ratio test (it
     /// compares the best with the second best), else 1. A gallery needs at least this many
     /// descriptors to be matched against.
@@ -146,7 +168,7 @@ impl MatchConfig {
     /// use clatch::MatchConfig;
     ///
     /// assert_eq!(MatchConfig::default().neighbours_needed(), 2);
-    /// let no_ratio = MatchConfig { ratio: None, ..MatchConfig::default() };
+    /// let no_ratio = MatchConfig::default().with_ratio(None);
     /// assert_eq!(no_ratio.neighbours_needed(), 1);
     /// ```
     pub fn neighbours_needed(&self) -> usize {

@@ -57,15 +57,23 @@ pub const MAX_LEVELS: usize = 32;
 ///
 /// let pixels = clatch::synthetic::rectangles(640, 480, 1)?;
 /// let image = GrayView::new(&pixels, 640, 480, 640)?;
-/// let config = ExtractorConfig {
-///     pyramid: Some(Pyramid { levels: 3, scale_factor: 2.0 }),
-///     ..ExtractorConfig::default()
-/// };
+/// let config = ExtractorConfig::default().with_pyramid(Some(Pyramid::new(3, 2.0)));
 /// let features = Extractor::new(Backend::Cpu, config)?.detect_and_describe(&image)?;
 /// assert!(features.keypoints.iter().any(|k| k.octave == 1 && k.size == 80.0)); // 40 x 2
 /// # Ok::<(), clatch::Error>(())
 /// ```
+///
+/// `#[non_exhaustive]`: built with [`Pyramid::new`], or from [`Pyramid::DEFAULT`] with the `with_*`
+/// methods.
+///
+/// ```
+/// use clatch::Pyramid;
+///
+/// assert_eq!(Pyramid::DEFAULT.with_levels(4), Pyramid::new(4, 1.2));
+/// assert_eq!(Pyramid::default(), Pyramid::DEFAULT);
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct Pyramid {
     /// Levels including the full-resolution image (1 = no downscaling). 1..=32, and the top level's
     /// keypoint size must stay within 1024 pixels.
@@ -77,10 +85,25 @@ pub struct Pyramid {
 
 impl Pyramid {
     /// The default pyramid: 8 levels, each 1.2 times smaller than the one before (as ORB's).
-    pub const DEFAULT: Pyramid = Pyramid {
-        levels: 8,
-        scale_factor: 1.2,
-    };
+    pub const DEFAULT: Pyramid = Pyramid::new(8, 1.2);
+
+    /// A pyramid of `levels` levels (the full-resolution image included), each `scale_factor` times
+    /// smaller than the one before. The ranges are checked when an extractor is made with it
+    /// ([`Pyramid::validate`]).
+    pub const fn new(levels: usize, scale_factor: f32) -> Self {
+        Self {
+            levels,
+            scale_factor,
+        }
+    }
+
+    with_methods! {
+        /// The same pyramid with this many levels ([`Pyramid::levels`]).
+        with_levels => levels: usize;
+        /// The same pyramid with this ratio between the sizes of consecutive levels
+        /// ([`Pyramid::scale_factor`]).
+        with_scale_factor => scale_factor: f32;
+    }
 
     /// The scale factor in 16.16 fixed point: `round_half_even(scale_factor · 2^16)`.
     pub(crate) fn step(&self) -> i64 {
@@ -119,6 +142,13 @@ impl Pyramid {
             reason: "the top level's keypoint size (keypoint_size x scale_factor^(levels - 1)) \
                      must stay within 1024 pixels",
         })
+    }
+}
+
+/// [`Pyramid::DEFAULT`].
+impl Default for Pyramid {
+    fn default() -> Self {
+        Self::DEFAULT
     }
 }
 

@@ -151,15 +151,13 @@ pub fn render(image: &Gray, backend: Backend) -> String {
     }
     let list = keypoint_list();
     for (name, weights, bits) in sections() {
-        let config = ExtractorConfig {
-            descriptor: DescriptorConfig {
-                width: DescriptorWidth::from_bits(bits).unwrap(),
-                weights,
+        let config = ExtractorConfig::default().with_descriptor(
+            DescriptorConfig::default()
+                .with_width(DescriptorWidth::from_bits(bits).unwrap())
+                .with_weights(weights)
                 // The golden file holds the unsmoothed bits.
-                smoothing: Smoothing::None,
-            },
-            ..ExtractorConfig::default()
-        };
+                .with_smoothing(Smoothing::None),
+        );
         let described = Extractor::new(backend, config)
             .unwrap()
             .describe(&view, &list)

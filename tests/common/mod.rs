@@ -176,11 +176,12 @@ pub fn match_configs() -> Vec<clatch::MatchConfig> {
     for ratio in [None, Some(0.8), Some(1.0), Some(0.5), Some(0.95)] {
         for cross_check in [false, true] {
             for max_distance in [None, Some(0), Some(3), Some(100)] {
-                out.push(clatch::MatchConfig {
-                    ratio,
-                    cross_check,
-                    max_distance,
-                });
+                out.push(
+                    clatch::MatchConfig::default()
+                        .with_ratio(ratio)
+                        .with_cross_check(cross_check)
+                        .with_max_distance(max_distance),
+                );
             }
         }
     }

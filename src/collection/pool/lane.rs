@@ -220,7 +220,7 @@ fn match_blocks_grouped(
             .iter()
             .map(|&(_, (a, t))| Ok((id(a)?, id(t)?)))
             .collect::<Result<Vec<_>>>()?;
-        held.match_pairs(&local, |i, matches| {
+        held.match_pairs_each(&local, |i, matches| {
             let p = listed[i].0;
             done(p);
             finished.push((p, matches));

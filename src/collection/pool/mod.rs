@@ -52,9 +52,9 @@ use lane::Collection;
 /// let sets: Vec<&DescriptorSet> = owned.iter().collect();
 ///
 /// let config = MatchConfig::default();
-/// let all = pool.match_all_pairs(&config, &sets, &|_pair| {})?;
+/// let all = pool.match_all_pairs(&config, &sets)?;
 /// let one_device = Matcher::new(Backend::Cpu, config)?;
-/// assert_eq!(all, one_device.match_pairs(&sets, &Matcher::all_pairs(5), &|_| {})?);
+/// assert_eq!(all, one_device.match_pairs(&sets, &Matcher::all_pairs(5))?);
 /// assert_eq!(all[0], one_device.match_descriptors(&owned[0], &owned[1])?); // pair (0, 1)
 /// # Ok::<(), clatch::Error>(())
 /// ```
@@ -117,13 +117,22 @@ impl DevicePool {
     /// [`Extractor::detect_and_describe`] of every image with `config`, in input order, each result
     /// equal to [`Extractor::detect_and_describe_batch`]'s on one device. The configuration and every
     /// image are checked before any work. Images are handed to workers one at a time as they free
-    /// up; `done(i)` is called once per image as it finishes, in any order, from the workers'
-    /// threads.
+    /// up.
     pub fn detect_and_describe_batch(
         &self,
         config: &ExtractorConfig,
         images: &[GrayView],
-        done: &(dyn Fn(usize) + Sync),
+    ) -> Result<Vec<Features>> {
+        self.detect_and_describe_batch_with_progress(config, images, &|_| {})
+    }
+
+    /// [`DevicePool::detect_and_describe_batch`], calling `progress(i)` once per image `i` as it
+    /// finishes, in any order, from the workers' threads.
+    pub fn detect_and_describe_batch_with_progress(
+        &self,
+        config: &ExtractorConfig,
+        images: &[GrayView],
+        progress: &(dyn Fn(usize) + Sync),
     ) -> Result<Vec<Features>> {
         // Checks the configuration (the CPU is always there); each worker runs it on its backend.
         let template = Extractor::new(Backend::Cpu, config.clone())?;
@@ -134,7 +143,7 @@ impl DevicePool {
             &self.workers,
             images.len(),
             images.len(),
-            |_, backend, queue| lane::extract_on(&template.on(backend), images, queue, done),
+            |_, backend, queue| lane::extract_on(&template.on(backend), images, queue, progress),
         )
     }
 
@@ -143,14 +152,24 @@ impl DevicePool {
     /// pairs without a query or with too small a gallery get no matches). Pairs may come in any
     /// order and repeat. The configuration, every index and every width are checked before any work
     /// ([`Error::PairOutOfRange`], [`Error::DescriptorWidthMismatch`]). Blocks of pairs (see
-    /// [`DevicePool`]) are handed to workers as they free up; `done(p)` is called once per pair as
-    /// it finishes, in any order, from the workers' threads.
+    /// [`DevicePool`]) are handed to workers as they free up.
     pub fn match_pairs(
         &self,
         config: &MatchConfig,
         sets: &[&DescriptorSet],
         pairs: &[(usize, usize)],
-        done: &(dyn Fn(usize) + Sync),
+    ) -> Result<Vec<Vec<Match>>> {
+        self.match_pairs_with_progress(config, sets, pairs, &|_| {})
+    }
+
+    /// [`DevicePool::match_pairs`], calling `progress(p)` once per pair `p` as it finishes, in any
+    /// order, from the workers' threads.
+    pub fn match_pairs_with_progress(
+        &self,
+        config: &MatchConfig,
+        sets: &[&DescriptorSet],
+        pairs: &[(usize, usize)],
+        progress: &(dyn Fn(usize) + Sync),
     ) -> Result<Vec<Vec<Match>>> {
         // Checks the configuration (the CPU is always there); each worker runs it on its backend.
         let matcher = Matcher::new(Backend::Cpu, config.clone())?;
@@ -168,18 +187,18 @@ impl DevicePool {
             pairs.len(),
             |_, backend, queue| {
                 let on_worker = collection.matcher.on(backend);
-                lane::match_on(&on_worker, &collection, queue, done)
+                lane::match_on(&on_worker, &collection, queue, progress)
             },
         )
     }
 
-    /// [`DevicePool::match_pairs`] of every pair `(i, j)`, `i < j`, in [`Matcher::all_pairs`] order.
+    /// [`DevicePool::match_pairs`] of every pair `(i, j)`, `i < j`, in [`Matcher::all_pairs`] order
+    /// (with progress: [`DevicePool::match_pairs_with_progress`] of [`Matcher::all_pairs`]).
     pub fn match_all_pairs(
         &self,
         config: &MatchConfig,
         sets: &[&DescriptorSet],
-        done: &(dyn Fn(usize) + Sync),
     ) -> Result<Vec<Vec<Match>>> {
-        self.match_pairs(config, sets, &Matcher::all_pairs(sets.len()), done)
+        self.match_pairs(config, sets, &Matcher::all_pairs(sets.len()))
     }
 }

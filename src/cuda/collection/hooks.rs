@@ -111,13 +111,15 @@ impl HeldCollection {
 
 /// Set `id` of a CUDA `collection`, read back from the device (blocking): lets the tests compare what
 /// [`crate::DescriptorCollection::add_pending`] put there with the host's features bit for bit.
-/// [`Error::InvalidConfig`] for a CPU collection, an error past the last set.
+/// [`Error::InvalidInput`] for a CPU collection, an error past the last set.
 pub fn read_set(collection: &crate::DescriptorCollection, id: usize) -> Result<DescriptorSet> {
-    let held = collection.device_store().ok_or(Error::InvalidConfig {
-        field: "collection",
-        value: "cpu".into(),
-        reason: "only a CUDA collection holds sets on the device",
-    })?;
+    let held = collection
+        .device_store()
+        .ok_or_else(|| Error::InvalidInput {
+            what: "collection",
+            reason: "only a CUDA collection holds sets on the device; this one is on the cpu"
+                .into(),
+        })?;
     let place = held.place(id)?;
     let words = held.width.words();
     let rows = held

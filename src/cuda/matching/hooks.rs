@@ -151,14 +151,14 @@ pub fn time_knn_variants(
     const K: usize = 2;
     crate::matching::check_sets(query, train, K)?;
     if query.width().words() != 8 || train.len() < K {
-        return Err(Error::InvalidConfig {
-            field: "variant sets",
-            value: format!(
-                "{} bits, {} gallery rows",
+        return Err(Error::InvalidInput {
+            what: "variant sets",
+            reason: format!(
+                "{} bits, {} gallery rows: the kNN variants are compiled for 512-bit descriptors \
+                 and k = 2",
                 query.width().bits(),
                 train.len()
             ),
-            reason: "the kNN variants are compiled for 512-bit descriptors and k = 2",
         });
     }
     let expected = knn_on(dev, query, train, K, None, MatchKernel::Popcount)?.into_vec();

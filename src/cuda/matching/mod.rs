@@ -104,10 +104,13 @@ fn check_k(k: usize) -> Result<()> {
 
 pub(crate) fn check_rows(set: &DescriptorSet, what: &'static str) -> Result<()> {
     if set.len() > MAX_ROWS {
-        return Err(Error::InvalidConfig {
-            field: what,
-            value: set.len().to_string(),
-            reason: "the CUDA matcher indexes descriptors with u32: at most 2^32 - 257 per set",
+        return Err(Error::InvalidInput {
+            what,
+            reason: format!(
+                "{} descriptors; the CUDA matcher indexes descriptors with u32: at most \
+                 2^32 - 257 per set",
+                set.len()
+            ),
         });
     }
     Ok(())

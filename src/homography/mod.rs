@@ -144,11 +144,15 @@ impl Homography {
             [cof(1, 2, 0, 1), -cof(0, 2, 0, 1), cof(0, 1, 0, 1)],
         ];
         let inv = adj.map(|row| row.map(|v| v / det));
+        let columns: [[f64; 3]; 3] = std::array::from_fn(|j| m.map(|row| row[j]));
         for (i, row) in inv.iter().enumerate() {
-            for j in 0..3 {
-                let (sum, magnitude) = (0..3).fold((0.0f64, 0.0f64), |(s, a), k| {
-                    (s + row[k] * m[k][j], a + (row[k] * m[k][j]).abs())
-                });
+            for (j, column) in columns.iter().enumerate() {
+                let (sum, magnitude) = row
+                    .iter()
+                    .zip(column)
+                    .fold((0.0f64, 0.0f64), |(s, a), (r, c)| {
+                        (s + r * c, a + (r * c).abs())
+                    });
                 let identity = if i == j { 1.0 } else { 0.0 };
                 if !sum.is_finite() || (sum - identity).abs() > 1e-8 * magnitude.max(1.0) {
                     return None;

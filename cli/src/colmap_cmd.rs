@@ -15,11 +15,11 @@ use crate::colmap_program::{ColmapProgram, ModelStats, parse_model_analyzer};
 use crate::cpu_time::{StageTime, Stopwatch};
 use crate::error::CliError;
 use crate::model_folder::{ModelFolder, check_images_outside};
-use crate::output::{Staged, TempDir, check_distinct, check_writable};
 use crate::progress::Progress;
 use crate::report::print_set_up_steps;
 use crate::text_input::read_text;
 use crate::{report, settings_on};
+use clatch::output::{Staged, TempDir, check_distinct, check_writable};
 
 /// Wall and CPU time of each stage.
 #[derive(Default)]

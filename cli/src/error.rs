@@ -140,6 +140,33 @@ pub enum CliError {
     OptionConflict { options: String, reason: String },
 }
 
+/// The library's output errors as the tool's own (the same messages).
+impl From<clatch::output::OutputError> for CliError {
+    fn from(e: clatch::output::OutputError) -> Self {
+        use clatch::output::OutputError as E;
+        match e {
+            E::Write { path, source } => CliError::Write { path, source },
+            E::OutputPath { path, reason } => CliError::OutputPath { path, reason },
+            E::OutputClash {
+                role,
+                path,
+                other_role,
+                other,
+            } => CliError::OutputClash {
+                role,
+                path,
+                other_role,
+                other,
+            },
+            // A variant added later keeps its message.
+            other => CliError::OutputPath {
+                path: PathBuf::new(),
+                reason: other.to_string(),
+            },
+        }
+    }
+}
+
 impl CliError {
     /// Attaches an image's path to a library error.
     pub fn in_image(path: &Path) -> impl FnOnce(clatch::Error) -> CliError + '_ {

@@ -3,8 +3,8 @@
 //! names an input, or another output, is refused before any work ([`check_distinct`]), and so is a
 //! path that is not a regular file ([`check_writable`]).
 //!
-//! The COLMAP writer ([`crate::colmap::FolderOutput`]) and every file the command-line tool writes go
-//! through this module.
+//! The COLMAP writer (`clatch::colmap`'s `FolderOutput`) and every file the command-line tool writes
+//! go through this module.
 //!
 //! ```
 //! use std::io::Write;

@@ -170,32 +170,25 @@ def _job(
     database: PathArg,
     *,
     backend: str = "cpu",
-    workspace: Optional[PathArg] = None,
     pairs: Optional[Sequence[Sequence[PhotoArg]]] = None,
     camera_k: Any = None,
     extractor: Optional[Mapping[str, Any]] = None,
     matcher: Optional[Mapping[str, Any]] = None,
-    subpixel: str = "score",
-    subpixel_radius: int = 3,
-    max_pixels: int = 100_000_000,
-    force: bool = False,
+    **settings: Any,
 ) -> _FolderJob:
     """The Rust library's job (``clatch::colmap::FolderJob``) of ``match_folder``'s keywords, its
-    extractor and matcher on ``backend``."""
+    extractor and matcher on ``backend``; ``settings``: ``workspace``, ``subpixel``,
+    ``subpixel_radius``, ``max_pixels`` and ``force``, as they are."""
     k_text, k_file = _k_input(camera_k)
     return _FolderJob(
         images,
         database,
         extractor=Extractor(backend, **_extractor_options(extractor)),
         matcher=Matcher(backend, **dict(matcher or {})),
-        workspace=workspace,
         pairs=_pair_args(pairs),
         camera_k=k_text,
         camera_k_file=k_file,
-        subpixel=subpixel,
-        subpixel_radius=subpixel_radius,
-        max_pixels=max_pixels,
-        force=force,
+        **settings,
     )
 
 

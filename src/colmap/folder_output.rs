@@ -47,12 +47,7 @@ impl FolderOutput {
         let temp_database = staged.reserve(database)?;
         // `Database::create` makes the file itself (and never opens an existing one).
         std::fs::remove_file(&temp_database).map_err(OutputError::write(&temp_database))?;
-        let temp_list = staged.reserve(match_list)?;
-        let list = File::options()
-            .write(true)
-            .truncate(true)
-            .open(&temp_list)
-            .map_err(OutputError::write(&temp_list))?;
+        let (temp_list, list) = staged.open(match_list)?;
         let writer = FolderWriter::create(&temp_database, BufWriter::new(list), camera)?;
         Ok(Self {
             writer,
@@ -65,10 +60,7 @@ impl FolderOutput {
 
     /// Adds the next photo: [`FolderWriter::add_photo`].
     pub fn add_photo(&mut self, photo: &Photo) -> Result<usize, ColmapError> {
-        let began = Instant::now();
-        let index = self.writer.add_photo(photo);
-        self.writing += began.elapsed();
-        index
+        self.timed(|w| w.add_photo(photo))
     }
 
     /// Adds the matches of a pair: [`FolderWriter::add_matches`].
@@ -78,10 +70,15 @@ impl FolderOutput {
         j: usize,
         matches: &[Match],
     ) -> Result<(), ColmapError> {
+        self.timed(|w| w.add_matches(i, j, matches))
+    }
+
+    /// `write` on the writer, its time added to the writing time.
+    fn timed<T>(&mut self, write: impl FnOnce(&mut FolderWriter<BufWriter<File>>) -> T) -> T {
         let began = Instant::now();
-        let added = self.writer.add_matches(i, j, matches);
+        let result = write(&mut self.writer);
         self.writing += began.elapsed();
-        added
+        result
     }
 
     /// Photos, keypoints, pairs and matches written so far.

@@ -119,12 +119,12 @@ pub fn check_distinct(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::output::staged::tests::TestDir;
+    use crate::output::staged::tests::test_dir;
 
     #[cfg(unix)]
     #[test]
     fn outputs_naming_an_input_or_each_other_are_refused() {
-        let d = TestDir::new("clash");
+        let d = test_dir("clash");
         let input = d.join("in.png");
         std::fs::write(&input, "x").unwrap();
         let link = d.join("link.png");
@@ -157,15 +157,17 @@ mod tests {
             })
         ));
         assert!(clash(&[("picture", &d.join("p.png")), ("CSV", &new)]).is_ok());
+        std::fs::remove_dir_all(&d).ok();
     }
 
     #[test]
     fn folders_and_devices_are_not_output_files() {
-        let d = TestDir::new("kinds");
+        let d = test_dir("kinds");
         assert!(check_writable(&d).is_err());
         assert!(check_writable(Path::new("out/")).is_err());
         #[cfg(unix)]
         assert!(check_writable(Path::new("/dev/null")).is_err());
         assert!(check_writable(&d.join("new.png")).is_ok());
+        std::fs::remove_dir_all(&d).ok();
     }
 }

@@ -29,12 +29,7 @@ impl Staged {
         path: &Path,
         write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
     ) -> Result<PathBuf, OutputError> {
-        let temp = self.reserve(path)?;
-        let file = File::options()
-            .write(true)
-            .truncate(true)
-            .open(&temp)
-            .map_err(OutputError::write(&temp))?;
+        let (temp, file) = self.open(path)?;
         let mut out = BufWriter::new(file);
         write(&mut out).map_err(OutputError::write(path))?;
         let file = out
@@ -42,6 +37,18 @@ impl Staged {
             .map_err(|e| OutputError::write(path)(e.into_error()))?;
         file.sync_all().map_err(OutputError::write(path))?;
         Ok(temp)
+    }
+
+    /// A new temporary file beside `path`, open for writing, to be renamed onto `path` by
+    /// [`Staged::commit`]; and its path.
+    pub fn open(&mut self, path: &Path) -> Result<(PathBuf, File), OutputError> {
+        let temp = self.reserve(path)?;
+        let file = File::options()
+            .write(true)
+            .truncate(true)
+            .open(&temp)
+            .map_err(OutputError::write(&temp))?;
+        Ok((temp, file))
     }
 
     /// A new, empty temporary file beside `path`, to be renamed onto `path` by [`Staged::commit`]
@@ -141,30 +148,12 @@ pub(super) mod tests {
     use super::*;
     use std::io::Write;
 
-    /// A fresh temporary folder for one unit test, removed when the test ends.
-    pub struct TestDir(PathBuf);
-
-    impl TestDir {
-        pub fn new(what: &str) -> Self {
-            let dir =
-                std::env::temp_dir().join(format!("clatch-output-{what}-{}", std::process::id()));
-            std::fs::remove_dir_all(&dir).ok();
-            std::fs::create_dir_all(&dir).unwrap();
-            Self(dir)
-        }
-    }
-
-    impl std::ops::Deref for TestDir {
-        type Target = Path;
-        fn deref(&self) -> &Path {
-            &self.0
-        }
-    }
-
-    impl Drop for TestDir {
-        fn drop(&mut self) {
-            std::fs::remove_dir_all(&self.0).ok();
-        }
+    /// An empty temporary folder for one unit test (the test removes it once it passed).
+    pub fn test_dir(what: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("clatch-output-{what}-{}", std::process::id()));
+        std::fs::remove_dir_all(&dir).ok();
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
     }
 
     fn listing(d: &Path) -> Vec<String> {
@@ -178,7 +167,7 @@ pub(super) mod tests {
 
     #[test]
     fn nothing_replaces_the_old_files_until_commit() {
-        let d = TestDir::new("commit");
+        let d = test_dir("commit");
         let (a, b) = (d.join("a.txt"), d.join("b.txt"));
         std::fs::write(&a, "old a").unwrap();
         let mut staged = Staged::new();
@@ -190,11 +179,12 @@ pub(super) mod tests {
         assert_eq!(std::fs::read_to_string(&a).unwrap(), "new a");
         assert_eq!(std::fs::read_to_string(&b).unwrap(), "new b");
         assert_eq!(listing(&d), ["a.txt", "b.txt"], "no temporary file left");
+        std::fs::remove_dir_all(&d).ok();
     }
 
     #[test]
     fn a_failed_write_leaves_the_old_files_and_no_temporary() {
-        let d = TestDir::new("fail");
+        let d = test_dir("fail");
         let a = d.join("a.txt");
         std::fs::write(&a, "old a").unwrap();
         let mut staged = Staged::new();
@@ -208,11 +198,12 @@ pub(super) mod tests {
         drop(staged);
         assert_eq!(std::fs::read_to_string(&a).unwrap(), "old a");
         assert_eq!(listing(&d), ["a.txt"]);
+        std::fs::remove_dir_all(&d).ok();
     }
 
     #[test]
     fn a_temporary_folder_vanishes() {
-        let d = TestDir::new("tempdir");
+        let d = test_dir("tempdir");
         let target = d.join("sparse");
         std::fs::create_dir_all(target.join("new")).unwrap();
         let temp = TempDir::beside(&target).unwrap();
@@ -220,5 +211,6 @@ pub(super) mod tests {
         drop(temp);
         assert_eq!(listing(&d), ["sparse"]);
         assert_eq!(listing(&target), ["new"]);
+        std::fs::remove_dir_all(&d).ok();
     }
 }

@@ -121,6 +121,7 @@ impl FolderOutput {
 /// a program that reads them first: `colmap matches_importer` verifies the matches into the
 /// database): [`WrittenFolder::commit`] renames them into place; dropped uncommitted, they are
 /// removed.
+#[derive(Debug)]
 pub struct WrittenFolder {
     staged: Staged,
     /// The report, its paths the temporary files'.

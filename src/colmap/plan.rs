@@ -18,6 +18,7 @@ use crate::output::{check_distinct, check_writable};
 /// the photos' sizes, the pairs, and the outputs (files clatch may replace, none of them an input, no
 /// existing database unless [`Overwrite::Replace`]). Nothing is written until
 /// [`FolderPlan::run`] or [`FolderPlan::open_output`].
+#[derive(Debug)]
 pub struct FolderPlan {
     pub(crate) job: FolderJob,
     pub(crate) folder: ImageFolder,

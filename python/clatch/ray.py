@@ -1,10 +1,12 @@
 """A folder of photos matched over a Ray cluster, into the database ``clatch.colmap`` writes.
 
 ``match_folder(images, database, ...)`` takes the options of ``clatch.colmap.match_folder`` and
-writes byte-identical files, with the work spread over Ray actors:
+writes byte-identical files: it runs the stages of the same Rust library call
+(``clatch::colmap::FolderJob``: the checks and the one writer on the driver, the extraction and the
+matching on the actors), with the work spread over Ray actors:
 
-- each actor holds an ``Extractor`` and a ``Matcher`` on its ``backend`` (``"cpu"``: the actor's
-  CPU threads; ``"cuda"`` with ``actor_options={"num_gpus": 1}``: one device each) for the whole run;
+- each actor holds the run's job on its ``backend`` (``"cpu"``: the actor's CPU threads; ``"cuda"``
+  with ``actor_options={"num_gpus": 1}``: one device each) for the whole run;
 - photos are extracted in tasks of ``photos_per_task`` photos; their descriptors go to Ray's object
   store (owned by the driver), their keypoints to the driver, which writes them to the database in
   image order;

@@ -43,6 +43,7 @@ pub mod cuda;
 #[cfg_attr(docsrs, doc(cfg(feature = "image")))]
 pub mod decode;
 pub mod homography;
+pub mod output;
 pub mod prefetch;
 pub mod synthetic;
 

@@ -83,9 +83,18 @@ fn public_types_are_send_and_sync() {
     send_sync::<clatch::cuda::PendingFeatures>();
     send_sync::<clatch::cuda::PendingMatches>();
     send_sync::<clatch::colmap::MatchList<Vec<u8>>>();
+    send_sync::<clatch::colmap::FolderJob>();
+    send_sync::<clatch::colmap::FolderPlan>();
+    send_sync::<clatch::colmap::WrittenFolder>();
+    send_sync::<clatch::colmap::FolderReport>();
+    send_sync::<clatch::colmap::ColmapError>();
+    send_sync::<clatch::output::Staged>();
+    send_sync::<clatch::output::TempDir>();
+    send_sync::<clatch::output::OutputError>();
     // The database holds a SQLite connection: it may move to another thread, not be shared.
     fn send<T: Send>() {}
     send::<clatch::colmap::Database>();
+    send::<clatch::colmap::FolderOutput>();
 }
 
 /// `Error` fits the usual boxed-error plumbing.

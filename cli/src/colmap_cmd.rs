@@ -2,229 +2,117 @@
 //! structure from motion (see [`clatch::colmap`] for the conventions).
 
 use std::ffi::OsString;
-use std::io::Write;
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
-use clatch::colmap::{ColmapError, FolderWriter, ImageFolder, Photo, PinholeCamera};
-use clatch::prefetch::Prefetched;
-use clatch::{Backend, DescriptorSet, Extractor, Match, Matcher};
+use clatch::colmap::{
+    ColmapError, FolderCamera, FolderJob, FolderPlan, FolderProgress, FolderReport, Overwrite,
+    WrittenFolder,
+};
+use clatch::output::TempDir;
 
 use crate::ColmapArgs;
 use crate::colmap_program::{ColmapProgram, ModelStats, parse_model_analyzer};
 use crate::cpu_time::{StageTime, Stopwatch};
 use crate::error::CliError;
 use crate::model_folder::{ModelFolder, check_images_outside};
-use crate::output::{Staged, TempDir, check_distinct, check_writable};
 use crate::progress::Progress;
 use crate::report::print_set_up_steps;
 use crate::text_input::read_text;
 use crate::{report, settings_on};
 
-/// Wall and CPU time of each stage.
+/// Wall and CPU time of the COLMAP steps.
 #[derive(Default)]
-struct Times {
-    /// The backend's set-up (on the GPU, the device's context and kernels), on a thread of its own
-    /// alongside the checks and the first photos' decoding.
-    start: Duration,
-    extract: StageTime,
-    /// The decoders' side of `extract`.
-    decoding: Prefetched,
-    matching: StageTime,
-    write: StageTime,
+struct ColmapTimes {
     verify: StageTime,
     map: StageTime,
     analyze: StageTime,
 }
 
-/// Everything checked before any work: the photos, their names and sizes, the camera, the outputs.
-struct Plan {
-    folder: ImageFolder,
-    /// The camera of `--camera-k`, for the photos' one size.
-    camera: Option<PinholeCamera>,
-    workspace: PathBuf,
-    match_list: PathBuf,
+/// What `clatch colmap` checks and writes beyond the library's run: the workspace, its `sparse/`
+/// and the `colmap` program.
+struct Workspace {
+    path: PathBuf,
     /// The workspace's `sparse/`, checked: what clatch may replace there.
     sparse: ModelFolder,
     /// `None` with --no-colmap or when `colmap` is not on PATH.
     colmap: Option<ColmapProgram>,
 }
 
-/// Runs `clatch colmap`.
+/// Runs `clatch colmap`: the library's folder run ([`FolderJob`]), then COLMAP on its files before
+/// they are put in place.
 pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
-    let refinement = args.subpixel.refinement(args.subpixel_radius);
-    // The backend's set-up (on the GPU: the device's context and kernels) runs on a thread of its
-    // own while the inputs are checked and the first photos decoded.
-    let start = args.backend.start()?;
-    let settings = settings_on(
-        start.backend(),
-        &args.detect,
-        Some(refinement.detector_subpixel()),
-        Some(&args.matching),
-    )?;
-    let plan = preflight(args)?;
-    let mut times = Times::default();
-
-    // Detect and describe every photo.
-    let extractor = Extractor::starting(&start, extraction_config(&settings, args))?;
-    let progress = Progress::counter(plan.folder.paths.len() as u64, "extracting features");
-    let watch = Stopwatch::start();
-    let (extracted, decoding) = clatch::colmap::extract_photos(
-        &extractor,
-        (&plan.folder.paths, &plan.folder.names),
-        &args.input.limits(),
-        refinement,
-        &|_| progress.done(),
-    )?;
-    let (photos, descriptors): (Vec<Photo>, Vec<DescriptorSet>) = extracted.into_iter().unzip();
-    times.extract = watch.stop();
-    times.decoding = decoding;
-    // Done by now: the first photo's extraction waited for it.
-    times.start = start.wait()?;
-    progress.finish();
-
-    // Match every pair.
-    let matcher = Matcher::new(settings.backend, settings.matching.clone())?;
-    let pairs = Matcher::all_pairs(photos.len());
-    let progress = Progress::counter(pairs.len() as u64, "matching pairs");
-    let watch = Stopwatch::start();
-    // The library matches the whole collection (a featureless photo simply matches nothing).
-    let sets: Vec<&DescriptorSet> = descriptors.iter().collect();
-    let matches: Vec<Vec<Match>> =
-        matcher.match_pairs_with_progress(&sets, &pairs, &|_| progress.done())?;
-    times.matching = watch.stop();
-    progress.finish();
-
-    // Outputs: a workspace made here is removed again if nothing could be written to it.
-    let workspace_existed = plan.workspace.exists();
-    std::fs::create_dir_all(&plan.workspace).map_err(CliError::write(&plan.workspace))?;
-    let result = write_and_run(
-        args,
-        &plan,
-        &settings.backend,
-        &photos,
-        (&pairs, &matches),
-        &mut times,
-    );
+    let job = folder_job(args)?;
+    // Every check before any work; the backend's set-up (on the GPU: the device's context and
+    // kernels) runs on a thread of its own meanwhile and while the first photos are decoded.
+    let plan = job.plan().map_err(|e| camera_k_error(args, e))?;
+    let workspace = check_workspace(args, &job)?;
+    // A workspace made here is removed again if nothing could be written to it.
+    let workspace_existed = workspace.path.exists();
+    let result = write_and_run(args, plan, &workspace);
     if result.is_err() && !workspace_existed {
         // Only when empty: a failed COLMAP step leaves its log there.
-        std::fs::remove_dir(&plan.workspace).ok();
+        std::fs::remove_dir(&workspace.path).ok();
     }
     result
 }
 
-/// Writes the database and the match list to temporary files, runs COLMAP on them, and renames them
-/// into place (replacing older ones, with --force) only when everything succeeded.
-fn write_and_run(
-    args: &ColmapArgs,
-    plan: &Plan,
-    backend: &Backend,
-    photos: &[Photo],
-    (pairs, matches): (&[(usize, usize)], &[Vec<Match>]),
-    times: &mut Times,
-) -> Result<(), CliError> {
-    let watch = Stopwatch::start();
-    let mut staged = Staged::new();
-    let database = staged.reserve(&args.database)?;
-    // `Database::create` makes the file itself (and never opens an existing one).
-    std::fs::remove_file(&database).map_err(CliError::write(&database))?;
-    let list = write_all(&database, plan.camera.as_ref(), photos, (pairs, matches))?;
-    let match_list = staged.write(&plan.match_list, |w| w.write_all(&list))?;
-    times.write = watch.stop();
-
-    let Some(colmap) = &plan.colmap else {
-        staged.commit()?;
-        print_extraction_report(args, backend, photos, pairs, matches, times);
-        if !args.no_colmap {
-            println!("  colmap      not found on PATH: database written, COLMAP not run. Run:");
-            let final_paths = (
-                args.database.as_path(),
-                plan.match_list.as_path(),
-                plan.sparse.path(),
-            );
-            for (step, step_args) in &colmap_steps(args, final_paths) {
-                println!("    colmap {step} {}", shell_words(step_args));
-            }
-        }
-        return Ok(());
+/// The library's job of the flags: the folder, the database, the match list in the workspace, the
+/// camera of --camera-k, the settings.
+fn folder_job(args: &ColmapArgs) -> Result<FolderJob, CliError> {
+    let backend = args.backend.chosen();
+    let settings = settings_on(backend, &args.detect, None, Some(&args.matching))?;
+    let camera = match &args.camera_k {
+        Some(k) => FolderCamera::KText {
+            text: read_text(k, "camera matrix")?,
+            file: Some(k.clone()),
+        },
+        None => FolderCamera::PerPhoto,
     };
-
-    let built = TempDir::beside(plan.sparse.path())?;
-    let [(_, import_args), (_, mapper_args)] =
-        &colmap_steps(args, (&database, &match_list, built.path()));
-    let watch = Stopwatch::start();
-    colmap.run("matches_importer", import_args)?;
-    times.verify = watch.stop();
-    let (verified, inliers) = verified_pairs(&database)?;
-    let watch = Stopwatch::start();
-    colmap.run("mapper", mapper_args)?;
-    times.map = watch.stop();
-
-    staged.commit()?;
-    let installed = plan.sparse.install(&built)?;
-    print_extraction_report(args, backend, photos, pairs, matches, times);
-
-    let watch = Stopwatch::start();
-    let mut models = Vec::new();
-    for model in installed
-        .into_iter()
-        .filter(|m| m.join("images.bin").exists())
-    {
-        let output = colmap.run(
-            "model_analyzer",
-            &[OsString::from("--path"), model.clone().into()],
-        )?;
-        models.push(parse_model_analyzer(&model, &output)?);
-    }
-    times.analyze = watch.stop();
-    print_colmap_report(photos, pairs, verified, inliers, &models, times);
-    Ok(())
+    Ok(FolderJob::new(&args.images, &args.database)
+        .with_workspace(workspace_path(args))
+        .with_camera(camera)
+        .with_backend(backend)
+        .with_extractor(extraction_config(&settings, args))
+        .with_matching(settings.matching)
+        .with_refinement(args.subpixel.refinement(args.subpixel_radius))
+        .with_limits(args.input.limits())
+        .with_overwrite(if args.force {
+            Overwrite::Replace
+        } else {
+            Overwrite::Refuse
+        }))
 }
 
-/// Checks every input and output before any work: photo names, headers (size limits, truncation,
-/// the detector's minimum), the camera matrix against the photos' size, outputs that would overwrite
-/// an input or an earlier result, and the `colmap` program.
-fn preflight(args: &ColmapArgs) -> Result<Plan, CliError> {
-    let folder = ImageFolder::open(&args.images, &args.input.limits())?;
-    let camera = args
-        .camera_k
-        .as_deref()
-        .map(|k| camera_for_all(k, &folder))
-        .transpose()?;
-
-    let workspace = args
-        .workspace
+/// --workspace, or the database's name + `-colmap` beside it.
+fn workspace_path(args: &ColmapArgs) -> PathBuf {
+    args.workspace
         .clone()
-        .unwrap_or_else(|| default_workspace(&args.database));
-    let match_list = workspace.join("matches.txt");
-    let sparse = workspace.join("sparse");
-    check_images_outside(&args.images, &workspace, &sparse)?;
-    check_writable(&args.database)?;
-    check_writable(&match_list)?;
-    let mut inputs: Vec<(&'static str, &Path)> = folder
-        .paths
-        .iter()
-        .map(|p| ("image", p.as_path()))
-        .collect();
-    if let Some(k) = &args.camera_k {
-        inputs.push(("camera matrix", k));
-    }
-    check_distinct(
-        &inputs,
-        &[("database", &args.database), ("match list", &match_list)],
-    )?;
-    if !args.force && args.database.exists() {
-        return Err(clatch::colmap::ColmapError::DatabaseExists {
-            path: args.database.display().to_string(),
-        }
-        .into());
-    }
+        .unwrap_or_else(|| clatch::colmap::default_workspace(&args.database))
+}
 
+/// A K file that is not a pinhole K, named as the file's fault.
+fn camera_k_error(args: &ColmapArgs, e: ColmapError) -> CliError {
+    match (e, &args.camera_k) {
+        (e @ ColmapError::InvalidCamera { .. }, Some(path)) => CliError::CameraK {
+            path: path.clone(),
+            source: e,
+        },
+        (other, _) => other.into(),
+    }
+}
+
+/// Checks what the library's run does not write, before any work: the photos are not where clatch
+/// writes, the workspace's `sparse/` holds only what clatch may replace, the `colmap` program.
+fn check_workspace(args: &ColmapArgs, job: &FolderJob) -> Result<Workspace, CliError> {
+    let path = workspace_path(args);
+    let sparse = path.join("sparse");
+    check_images_outside(&job.images, &path, &sparse)?;
     let colmap = if args.no_colmap {
         None
     } else {
         let program = args.colmap.clone().unwrap_or_else(|| "colmap".into());
-        let found = ColmapProgram::find(&program, &workspace)?;
+        let found = ColmapProgram::find(&program, &path)?;
         if found.is_none() && args.colmap.is_some() {
             return Err(CliError::ColmapStart {
                 program,
@@ -239,32 +127,94 @@ fn preflight(args: &ColmapArgs) -> Result<Plan, CliError> {
         Some(_) => ModelFolder::inspect(&sparse, args.force)?,
         None => ModelFolder::untouched(&sparse),
     };
-    Ok(Plan {
-        folder,
-        camera,
-        workspace,
-        match_list,
+    Ok(Workspace {
+        path,
         sparse,
         colmap,
     })
 }
 
-/// The camera of the K file `k_path`, which needs every photo to have the first one's size.
-fn camera_for_all(k_path: &Path, folder: &ImageFolder) -> Result<PinholeCamera, CliError> {
-    let text = read_text(k_path, "camera matrix")?;
-    folder.shared_camera(&text).map_err(|e| match e {
-        ColmapError::InvalidCamera { .. } => CliError::CameraK {
-            path: k_path.to_path_buf(),
-            source: e,
-        },
-        other => other.into(),
-    })
+/// Runs the library's stages with a progress bar, then COLMAP on the database and match list under
+/// their temporary names; renames them into place (replacing older ones, with --force) only when
+/// everything succeeded.
+fn write_and_run(
+    args: &ColmapArgs,
+    plan: FolderPlan,
+    workspace: &Workspace,
+) -> Result<(), CliError> {
+    let backend = plan.job().backend;
+    let watch = Stopwatch::start();
+    let written = run_with_progress_bar(plan)?;
+    let run = watch.stop();
+
+    let Some(colmap) = &workspace.colmap else {
+        let report = written.commit()?;
+        print_extraction_report(args, backend, &report, run);
+        if !args.no_colmap {
+            println!("  colmap      not found on PATH: database written, COLMAP not run. Run:");
+            let final_paths = (
+                report.database.as_path(),
+                report.match_list.as_path(),
+                workspace.sparse.path(),
+            );
+            for (step, step_args) in &colmap_steps(args, final_paths) {
+                println!("    colmap {step} {}", shell_words(step_args));
+            }
+        }
+        return Ok(());
+    };
+
+    let mut times = ColmapTimes::default();
+    let built = TempDir::beside(workspace.sparse.path())?;
+    let [(_, import_args), (_, mapper_args)] = &colmap_steps(
+        args,
+        (written.database(), written.match_list(), built.path()),
+    );
+    let watch = Stopwatch::start();
+    colmap.run("matches_importer", import_args)?;
+    times.verify = watch.stop();
+    let (verified, inliers) = verified_pairs(written.database())?;
+    let watch = Stopwatch::start();
+    colmap.run("mapper", mapper_args)?;
+    times.map = watch.stop();
+
+    let report = written.commit()?;
+    let installed = workspace.sparse.install(&built)?;
+    print_extraction_report(args, backend, &report, run);
+
+    let watch = Stopwatch::start();
+    let mut models = Vec::new();
+    for model in installed
+        .into_iter()
+        .filter(|m| m.join("images.bin").exists())
+    {
+        let output = colmap.run(
+            "model_analyzer",
+            &[OsString::from("--path"), model.clone().into()],
+        )?;
+        models.push(parse_model_analyzer(&model, &output)?);
+    }
+    times.analyze = watch.stop();
+    print_colmap_report(&report, verified, inliers, &models, &times);
+    Ok(())
 }
 
-/// `out.db` → `out-colmap/` beside it.
-fn default_workspace(database: &Path) -> PathBuf {
-    let stem = database.file_stem().unwrap_or_default().to_string_lossy();
-    database.with_file_name(format!("{stem}-colmap"))
+/// [`FolderPlan::run`] with a progress bar per stage on stderr.
+fn run_with_progress_bar(plan: FolderPlan) -> Result<WrittenFolder, CliError> {
+    let mut bar: Option<Progress> = None;
+    let mut show = |p: FolderProgress| {
+        if p.done == 0 {
+            bar = Some(Progress::counter(p.total as u64, p.stage.to_string()));
+        } else if let Some(bar) = &bar {
+            bar.done_so_far(p.done as u64);
+        }
+        ControlFlow::Continue(())
+    };
+    let written = plan.run(Some(&mut show))?;
+    if let Some(bar) = bar {
+        bar.finish();
+    }
+    Ok(written)
 }
 
 /// The extractor's settings: the library's grid and keypoint budget for structure from motion
@@ -284,24 +234,6 @@ fn extraction_config(
         .max_keypoints
         .unwrap_or(clatch::colmap::DEFAULT_MAX_KEYPOINTS);
     config
-}
-
-/// Writes the database at `path` and returns the match list: the library's one writer of a folder
-/// ([`FolderWriter`]), in the order every run writes.
-fn write_all(
-    path: &Path,
-    camera: Option<&PinholeCamera>,
-    photos: &[Photo],
-    (pairs, matches): (&[(usize, usize)], &[Vec<Match>]),
-) -> Result<Vec<u8>, CliError> {
-    let mut writer = FolderWriter::create(path, Vec::new(), camera)?;
-    for photo in photos {
-        writer.add_photo(photo)?;
-    }
-    for (&(i, j), m) in pairs.iter().zip(matches) {
-        writer.add_matches(i, j, m)?;
-    }
-    Ok(writer.finish()?)
 }
 
 /// The two COLMAP steps after the database: import with verification, then the mapper, on the given
@@ -388,61 +320,60 @@ fn verified_pairs(database: &Path) -> Result<(usize, usize), CliError> {
 
 fn print_extraction_report(
     args: &ColmapArgs,
-    backend: &Backend,
-    photos: &[Photo],
-    pairs: &[(usize, usize)],
-    matches: &[Vec<Match>],
-    times: &Times,
+    backend: clatch::Backend,
+    report: &FolderReport,
+    run: StageTime,
 ) {
-    let keypoints: usize = photos.iter().map(|p| p.keypoints.len()).sum();
-    let putative: usize = matches.iter().map(Vec::len).sum();
+    let (counts, times) = (&report.counts, &report.times);
     println!("clatch colmap (COLMAP 3.8 database)");
     println!(
         "  images      {} in {}",
-        photos.len(),
+        counts.photos,
         args.images.display()
     );
     println!("  backend     {backend}");
     println!(
         "  start       {:.2} s (the backend's set-up, alongside the checks and decoding; extract includes any wait for it)",
-        times.start.as_secs_f64()
+        times.set_up.as_secs_f64()
     );
-    print_set_up_steps(*backend);
+    print_set_up_steps(backend);
     println!(
-        "  keypoints   {keypoints} ({:.0} per image)",
-        keypoints as f64 / photos.len() as f64
+        "  keypoints   {} ({:.0} per image)",
+        counts.keypoints,
+        counts.keypoints as f64 / counts.photos as f64
     );
     println!(
-        "  matches     {putative} putative over {} pairs ({} with none)",
-        pairs.len(),
-        matches.iter().filter(|m| m.is_empty()).count()
+        "  matches     {} putative over {} pairs ({} with none)",
+        counts.matches,
+        counts.pairs,
+        counts.pairs - counts.pairs_with_matches
     );
-    println!("  database    {}", args.database.display());
+    println!("  database    {}", report.database.display());
     println!(
-        "  extract     {} ({})",
-        times.extract,
-        report::per_second(photos.len(), times.extract.wall, "images")
+        "  extract     {:.2} s ({})",
+        times.extraction.as_secs_f64(),
+        report::per_second(counts.photos, times.extraction, "images")
     );
     println!("  decode      {}", report::decoding(&times.decoding));
     println!(
-        "  match       {} ({})",
-        times.matching,
-        report::per_second(pairs.len(), times.matching.wall, "pairs")
+        "  match       {:.2} s ({})",
+        times.matching.as_secs_f64(),
+        report::per_second(counts.pairs, times.matching, "pairs")
     );
-    println!("  write       {}", times.write);
+    println!("  write       {:.2} s", times.writing.as_secs_f64());
+    println!("  total       {run}: extract, match and write");
 }
 
 fn print_colmap_report(
-    photos: &[Photo],
-    pairs: &[(usize, usize)],
+    report: &FolderReport,
     verified: usize,
     inliers: usize,
     models: &[ModelStats],
-    times: &Times,
+    times: &ColmapTimes,
 ) {
     println!(
         "  verified    {verified} of {} pairs, {inliers} inlier matches (colmap matches_importer)",
-        pairs.len()
+        report.counts.pairs
     );
     println!("  verify      {}", times.verify);
     println!("  map         {}", times.map);
@@ -457,8 +388,7 @@ fn print_colmap_report(
             );
             println!(
                 "  registered  {} of {} images",
-                best.registered,
-                photos.len()
+                best.registered, report.counts.photos
             );
             println!("  points      {}", best.points);
             println!(

@@ -50,7 +50,7 @@ impl ColmapProgram {
         let mut text = String::from_utf8_lossy(&output.stdout).into_owned();
         text.push_str(&String::from_utf8_lossy(&output.stderr));
         let log = self.logs.join(format!("colmap-{step}.log"));
-        crate::output::write_file(&log, |w| w.write_all(text.as_bytes()))?;
+        clatch::output::write_file(&log, |w| w.write_all(text.as_bytes()))?;
         if !output.status.success() {
             return Err(CliError::ColmapFailed {
                 step,

@@ -8,7 +8,7 @@ use image::codecs::pnm::{PnmEncoder, PnmSubtype, SampleEncoding};
 use image::{ExtendedColorType, GrayImage, ImageEncoder, ImageFormat, Rgb, RgbImage};
 
 use crate::error::CliError;
-use crate::output::Staged;
+use clatch::output::Staged;
 
 /// Lines and circles of matches that agree with the ground truth.
 pub const INLIER: Rgb<u8> = Rgb([0, 230, 0]);
@@ -217,7 +217,7 @@ pub fn picture_format(path: &Path) -> Result<PictureFormat, CliError> {
 /// path can be a file.
 pub fn check_picture_path(path: &Path) -> Result<(), CliError> {
     picture_format(path)?;
-    crate::output::check_writable(path)
+    Ok(clatch::output::check_writable(path)?)
 }
 
 /// Encodes `picture` as `format`.
@@ -255,7 +255,7 @@ pub fn stage_picture(staged: &mut Staged, picture: &RgbImage, path: &Path) -> Re
 pub fn save_picture(picture: &RgbImage, path: &Path) -> Result<(), CliError> {
     let mut staged = Staged::new();
     stage_picture(&mut staged, picture, path)?;
-    staged.commit()
+    Ok(staged.commit()?)
 }
 
 #[cfg(test)]

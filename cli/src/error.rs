@@ -56,17 +56,10 @@ pub enum CliError {
         what: &'static str,
     },
 
-    /// An output path that names an input or another output.
-    #[error(
-        "the {role} {path} is the same file as the {other_role} {other}; choose another path",
-        path = .path.display(), other = .other.display()
-    )]
-    OutputClash {
-        role: &'static str,
-        path: PathBuf,
-        other_role: &'static str,
-        other: PathBuf,
-    },
+    /// An output refused before any work (a folder, an input's path) or not written: the library's
+    /// rules for every file the tool writes ([`clatch::output`]).
+    #[error("{0}")]
+    Output(#[from] clatch::output::OutputError),
 
     /// An output path that cannot be written as a file (a folder, a device, ...).
     #[error("cannot write {path}: {reason}", path = .path.display())]

@@ -8,11 +8,11 @@ use clatch::{DescriptorSet, Extractor, KeyPoint};
 
 use crate::error::CliError;
 use crate::input::{check_detectable, load_gray};
-use crate::output::{Staged, check_distinct, check_writable, ends_with_separator};
 use crate::pipeline::{self, EXTRACT_STAGES};
 use crate::progress::Progress;
 use crate::report::{ms, print_set_up_steps};
 use crate::{ExtractArgs, npy, settings_on};
+use clatch::output::{Staged, check_distinct, check_writable, ends_with_separator};
 
 /// `PREFIX` followed by `suffix` (no separator added).
 pub fn with_suffix(prefix: &Path, suffix: &str) -> PathBuf {

@@ -11,9 +11,9 @@ use crate::ExtractArgs;
 use crate::error::CliError;
 use crate::extract::{write_descriptors_npy, write_keypoints_csv, write_keypoints_json};
 use crate::input::{check_detectable, load_gray};
-use crate::output::{Staged, check_distinct, check_writable};
 use crate::progress::Progress;
 use crate::report::{self, ms, per_second, print_set_up_steps};
+use clatch::output::{Staged, check_distinct, check_writable};
 use clatch::prefetch::extract_decoded;
 
 /// A decoded image waiting for extraction.

@@ -177,7 +177,7 @@ fn parse_tolerance(s: &str) -> Result<f64, String> {
 
 impl BackendArgs {
     /// The backend asked for (`auto`: CUDA device 0 when usable, else the CPU), not yet checked.
-    fn chosen(&self) -> Backend {
+    pub fn chosen(&self) -> Backend {
         self.backend.backend(self.device)
     }
 

@@ -15,7 +15,6 @@ mod input;
 mod match_cmd;
 mod model_folder;
 mod npy;
-mod output;
 mod pipeline;
 mod progress;
 mod report;

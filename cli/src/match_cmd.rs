@@ -8,12 +8,12 @@ use clatch::{KeyPoint, Match};
 use crate::draw::{MatchClass, check_picture_path, draw_matches, stage_picture};
 use crate::error::CliError;
 use crate::input::{check_detectable, load_gray};
-use crate::output::{Staged, check_distinct, check_writable};
 use crate::pipeline;
 use crate::progress::Progress;
 use crate::report;
 use crate::text_input::read_homography;
 use crate::{MatchArgs, settings};
+use clatch::output::{Staged, check_distinct, check_writable};
 
 /// Writes matches as CSV: `query,train,distance,xq,yq,xt,yt`.
 pub fn write_matches_csv(
@@ -144,7 +144,7 @@ fn check_paths(args: &MatchArgs) -> Result<(), CliError> {
         check_writable(csv)?;
         outputs.push(("matches CSV", csv));
     }
-    check_distinct(&inputs, &outputs)
+    Ok(check_distinct(&inputs, &outputs)?)
 }
 
 #[cfg(test)]

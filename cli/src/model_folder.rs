@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::io::Write as _;
 
 use crate::error::CliError;
-use crate::output::{TempDir, write_file};
+use clatch::output::{TempDir, write_file};
 
 /// The list of model folders clatch installed, inside `sparse/`.
 pub const MANIFEST: &str = ".clatch-models";
@@ -111,9 +111,9 @@ impl ModelFolder {
                 rename(&built.path().join(name), &target)?;
                 installed.push(name.clone());
             }
-            write_file(&self.path.join(MANIFEST), |w| {
+            Ok(write_file(&self.path.join(MANIFEST), |w| {
                 new.iter().try_for_each(|name| writeln!(w, "{name}"))
-            })
+            })?)
         })();
         if let Err(e) = result {
             // Back as it was: the new models to the build folder, the earlier ones to their place.

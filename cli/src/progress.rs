@@ -1,6 +1,7 @@
 //! A progress bar over a command's stages, drawn to stderr (indicatif hides it when stderr is not a
 //! terminal, so piped output stays clean).
 
+use std::borrow::Cow;
 use std::time::Duration;
 
 use indicatif::{ProgressBar, ProgressStyle};
@@ -22,7 +23,7 @@ impl Progress {
     }
 
     /// A bar counting `len` items of one stage (images, pairs) under `message`, with their rate.
-    pub fn counter(len: u64, message: &'static str) -> Self {
+    pub fn counter(len: u64, message: impl Into<Cow<'static, str>>) -> Self {
         let progress = Self::new(len);
         if let Ok(style) = ProgressStyle::with_template(
             "{spinner:.cyan} [{bar:24.cyan/blue}] {pos}/{len} {msg} ({per_sec}, {eta} left)",
@@ -40,13 +41,18 @@ impl Progress {
     }
 
     /// Announces the stage about to run.
-    pub fn stage(&self, message: &'static str) {
+    pub fn stage(&self, message: impl Into<Cow<'static, str>>) {
         self.0.set_message(message);
     }
 
     /// Marks the current stage done.
     pub fn done(&self) {
         self.0.inc(1);
+    }
+
+    /// Moves a counter to `done` items.
+    pub fn done_so_far(&self, done: u64) {
+        self.0.set_position(done);
     }
 
     /// Removes the bar so that the report prints on a clean terminal.

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from typing import Any, Literal, Optional, Sequence, Tuple, Union, final
+from typing import Any, Callable, Literal, Mapping, Optional, Sequence, Tuple, Union, final
 
 import numpy as np
 import numpy.typing as npt
@@ -18,8 +18,13 @@ __all__ = [
     "_rust_extract_seconds",
     "ImageFolder",
     "PinholeCamera",
+    "_FolderJob",
+    "_FolderPlan",
     "_FolderWriter",
     "_extract_photos",
+    "DEFAULT_GRID",
+    "DEFAULT_MAX_KEYPOINTS",
+    "SUBPIXEL_METHODS",
     "KEYPOINT_DTYPE",
     "MATCH_DTYPE",
     "CUDA_BUILT",
@@ -33,6 +38,12 @@ CUDA_BUILT: bool
 KEYPOINT_DTYPE: np.dtype
 #: Matches: query, train, distance (uint32); the library's ``Match``.
 MATCH_DTYPE: np.dtype
+#: ``clatch.colmap``: the grid keypoints are spread over unless told otherwise (the library's).
+DEFAULT_GRID: int
+#: ``clatch.colmap``: keypoints per photo unless told otherwise (the library's, COLMAP's SIFT budget).
+DEFAULT_MAX_KEYPOINTS: int
+#: ``clatch.colmap``: the names of ``subpixel=``.
+SUBPIXEL_METHODS: Tuple[str, ...]
 
 #: An image: ``uint8``, 2-D gray (H x W) or H x W x 3 RGB (H x W x 4: alpha ignored).
 _Image = npt.NDArray[np.uint8]
@@ -182,7 +193,48 @@ class PinholeCamera:
     def focal_is_known(self) -> bool:
         """Whether the focal length is known (a given K is)."""
 
-# Not public API: the writer and the extraction that clatch.colmap and clatch.ray call.
+# Not public API: the library's folder run, its stages and its writer, which clatch.colmap and
+# clatch.ray call.
+_Photo = Tuple[str, int, int, Optional[int], _KeyPoints, _Descriptors]
+
+@final
+class _FolderJob:
+    def __new__(
+        cls,
+        images: Union[str, os.PathLike[str]],
+        database: Union[str, os.PathLike[str]],
+        *,
+        extractor: Extractor,
+        matcher: Matcher,
+        workspace: Optional[Union[str, os.PathLike[str]]] = None,
+        pairs: Optional[Sequence[Tuple[Union[int, str], Union[int, str]]]] = None,
+        camera_k: Optional[str] = None,
+        camera_k_file: Optional[Union[str, os.PathLike[str]]] = None,
+        subpixel: str = "score",
+        subpixel_radius: int = 3,
+        max_pixels: int = 100_000_000,
+        force: bool = False,
+    ) -> _FolderJob: ...
+    def run(self, progress: Optional[Callable[[str, int, int], None]] = None) -> dict[str, Any]: ...
+    def plan(self) -> _FolderPlan: ...
+    def extract_photos(
+        self, paths: Sequence[Union[str, os.PathLike[str]]], names: Sequence[str]
+    ) -> list[_Photo]: ...
+    def match_pairs(
+        self, descriptors: Mapping[int, _Descriptors], pairs: Sequence[Tuple[int, int]]
+    ) -> list[_Matches]: ...
+
+@final
+class _FolderPlan:
+    @property
+    def paths(self) -> list[Any]: ...
+    @property
+    def names(self) -> list[str]: ...
+    @property
+    def pairs(self) -> list[Tuple[int, int]]: ...
+    def __len__(self) -> int: ...
+    def open_writer(self) -> _FolderWriter: ...
+
 @final
 class _FolderWriter:
     def __new__(
@@ -197,7 +249,7 @@ class _FolderWriter:
     def add_matches(self, i: int, j: int, matches: _Matches) -> None: ...
     @property
     def photos(self) -> int: ...
-    def finish(self) -> None: ...
+    def finish(self) -> Optional[dict[str, Any]]: ...
     def close(self) -> None: ...
 
 def _extract_photos(
@@ -206,7 +258,7 @@ def _extract_photos(
     names: Sequence[str],
     max_pixels: int,
     corner_radius: Optional[int] = None,
-) -> list[Tuple[str, int, int, Optional[int], _KeyPoints, _Descriptors]]: ...
+) -> list[_Photo]: ...
 
 # Not public API: the test suite's and the overhead bench's hooks.
 def _reads_in_place(image: _Image) -> bool:

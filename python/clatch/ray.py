@@ -1,10 +1,12 @@
 """A folder of photos matched over a Ray cluster, into the database ``clatch.colmap`` writes.
 
 ``match_folder(images, database, ...)`` takes the options of ``clatch.colmap.match_folder`` and
-writes byte-identical files, with the work spread over Ray actors:
+writes byte-identical files: it runs the stages of the same Rust library call
+(``clatch::colmap::FolderJob``: the checks and the one writer on the driver, the extraction and the
+matching on the actors), with the work spread over Ray actors:
 
-- each actor holds an ``Extractor`` and a ``Matcher`` on its ``backend`` (``"cpu"``: the actor's
-  CPU threads; ``"cuda"`` with ``actor_options={"num_gpus": 1}``: one device each) for the whole run;
+- each actor holds the run's job on its ``backend`` (``"cpu"``: the actor's CPU threads; ``"cuda"``
+  with ``actor_options={"num_gpus": 1}``: one device each) for the whole run;
 - photos are extracted in tasks of ``photos_per_task`` photos; their descriptors go to Ray's object
   store (owned by the driver), their keypoints to the driver, which writes them to the database in
   image order;
@@ -35,13 +37,12 @@ from __future__ import annotations
 
 import os
 from collections import OrderedDict, deque
-from typing import Any, Callable, Deque, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Deque, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ._clatch import Extractor, Matcher
 from ._exceptions import ClatchError, ClusterError
-from .colmap import MatchFolderResult, PathArg, Photo, Progress, _invalid, _Plan, extract_photos, match_block
+from .colmap import MatchFolderResult, PathArg, PhotoArg, Photo, Progress, _invalid, _job, _result
 
 __all__ = ["match_folder"]
 
@@ -60,7 +61,8 @@ def _import_ray() -> Any:
 
 
 class _Worker:
-    """One actor: an extractor and a matcher for the whole run, and resident descriptor sets.
+    """One actor: the run's job on its backend for the whole run (the library's extraction and
+    matching stages with the run's settings), and resident descriptor sets.
 
     Its constructor never raises: a backend that cannot start here is raised by ``ready``, so that
     the driver gets the clatch error rather than a dead actor.
@@ -68,22 +70,15 @@ class _Worker:
 
     def __init__(
         self,
-        backend: str,
-        extractor_options: Dict[str, Any],
-        matcher_options: Dict[str, Any],
-        max_pixels: int,
-        corner_radius: Optional[int],
+        job_settings: Dict[str, Any],
         cache_photos: int,
         exit_after: Optional[Tuple[str, int]] = None,
     ) -> None:
         self.error: Optional[BaseException] = None
         try:
-            self.extractor = Extractor(backend, **extractor_options)
-            self.matcher = Matcher(backend, **matcher_options)
+            self.job = _job(**job_settings)
         except ClatchError as e:
             self.error = e
-        self.max_pixels = max_pixels
-        self.corner_radius = corner_radius
         self.cache: "OrderedDict[int, np.ndarray]" = OrderedDict()
         self.cache_photos = cache_photos
         self.fetched = 0
@@ -102,13 +97,7 @@ class _Worker:
 
     def extract(self, paths: List[str], names: List[str]) -> Tuple[Any, ...]:
         self._maybe_exit("extract")
-        photos = extract_photos(
-            self.extractor,
-            paths,
-            names,
-            max_pixels=self.max_pixels,
-            corner_radius=self.corner_radius,
-        )
+        photos = [Photo(*photo) for photo in self.job.extract_photos(paths, names)]
         meta = [(p.name, p.width, p.height, p.focal_35mm, p.keypoints) for p in photos]
         self.done["extract"] += 1
         return (meta, *[p.descriptors for p in photos])
@@ -122,7 +111,7 @@ class _Worker:
         self.fetched += len(missing)
         for i in refs:
             self.cache.move_to_end(i)
-        found = match_block(self.matcher, self.cache, pairs)
+        found = self.job.match_pairs(self.cache, pairs)
         while len(self.cache) > max(self.cache_photos, len(refs)):
             self.cache.popitem(last=False)
         self.done["match"] += 1
@@ -271,7 +260,7 @@ def match_folder(
     database: PathArg,
     *,
     workspace: Optional[PathArg] = None,
-    pairs: Optional[Sequence[Sequence[Union[int, str]]]] = None,
+    pairs: Optional[Sequence[Sequence[PhotoArg]]] = None,
     camera_k: Any = None,
     backend: str = "cpu",
     extractor: Optional[Mapping[str, Any]] = None,
@@ -314,23 +303,22 @@ def match_folder(
     ray = _import_ray()
     block_size = _positive("block_size", block_size)
     photos_per_task = _positive("photos_per_task", photos_per_task)
-    plan = _Plan(
-        images,
-        database,
-        workspace=workspace,
-        pairs=pairs,
-        camera_k=camera_k,
+    # What the actors need of the job: its extraction and matching settings.
+    settings: Dict[str, Any] = dict(
+        images=images,
+        database=database,
         extractor=extractor,
         matcher=matcher,
         subpixel=subpixel,
         subpixel_radius=subpixel_radius,
         max_pixels=max_pixels,
-        force=force,
     )
-    # The settings are checked here, where their errors are plain clatch errors.
-    Extractor("cpu", **plan.extractor_options)
-    Matcher("cpu", **plan.matcher_options)
-    blocks = _blocks(plan.pairs, block_size)
+    # Every check before any work, here, where the errors are plain clatch errors; the driver only
+    # writes, so its job runs on the CPU.
+    job = _job(backend="cpu", workspace=workspace, pairs=pairs, camera_k=camera_k, force=force, **settings)
+    plan = job.plan()
+    pair_list = plan.pairs
+    blocks = _blocks(pair_list, block_size)
     options = dict(actor_options or {"num_cpus": 1})
     cpus = options.get("num_cpus", 1)
     if "runtime_env" not in options and cpus:
@@ -347,21 +335,16 @@ def match_folder(
 
     def make(index: int) -> Any:
         return actor_class.options(**options).remote(
-            backend,
-            plan.extractor_options,
-            plan.matcher_options,
-            plan.max_pixels,
-            plan.corner_radius,
+            dict(settings, backend=backend),
             cache,
             _exit_after if index == 0 else None,
         )
 
     pool = _Pool(ray, make, num_actors, failures, _kill_after_results)
-    staged = plan.open_writer()
+    writer = plan.open_writer()
     try:
-        folder = plan.folder
-        paths = [os.fspath(p) for p in folder.paths]
-        names = folder.names
+        paths = [os.fspath(p) for p in plan.paths]
+        names = plan.names
         total = len(names)
         descriptor_refs: Dict[int, Any] = {}
 
@@ -382,8 +365,7 @@ def match_folder(
             while next_task in waiting:
                 meta, refs = waiting.pop(next_task)
                 for image, (photo, ref) in zip(tasks[next_task], zip(meta, refs)):
-                    name, width, height, focal, keypoints = photo
-                    staged.add_photo(Photo(name, width, height, focal, keypoints, np.empty((0, 0), np.uint8)))
+                    writer.add_photo(*photo)
                     descriptor_refs[image] = ref
                 next_task += 1
                 if progress is not None:
@@ -392,7 +374,7 @@ def match_folder(
 
         # Matching: blocks of pairs; each pair's matches written in the pairs' order.
         def submit_match(actor: Any, k: int) -> Tuple[Any, Any]:
-            block_pairs = [plan.pairs[p] for p in blocks[k]]
+            block_pairs = [pair_list[p] for p in blocks[k]]
             refs = {i: descriptor_refs[i] for pair in block_pairs for i in pair}
             return actor.match.remote(block_pairs, refs), None
 
@@ -401,20 +383,21 @@ def match_folder(
         for k, found, _ in pool.run(len(blocks), submit_match):
             done.update(zip(blocks[k], found))
             while cursor in done:
-                i, j = plan.pairs[cursor]
-                staged.add_matches(i, j, done.pop(cursor))
+                i, j = pair_list[cursor]
+                writer.add_matches(i, j, done.pop(cursor))
                 cursor += 1
             if progress is not None:
-                progress("match", cursor, len(plan.pairs))
+                progress("match", cursor, len(pair_list))
         rerun += pool.rerun
-        return staged.commit(
+        return _result(
+            writer.finish(),
             blocks=len(blocks),
             blocks_rerun=rerun,
             actors_lost=pool.lost,
             descriptor_fetches=pool.fetches(),
         )
     except BaseException:
-        staged.discard()
+        writer.close()
         raise
     finally:
         pool.close()

@@ -146,9 +146,27 @@ pub fn from_colmap(py: Python<'_>, e: clatch::colmap::ColmapError) -> PyErr {
     let class = match e {
         E::Decode(d) => return from_decode(py, d),
         E::Clatch(c) => return from_clatch(py, c),
+        E::Output(o) => return from_output(py, o),
         E::Image { ref source, .. } => class_of(source),
         E::ImageDir { .. } => Class::ImageRead,
         E::Sqlite { .. } | E::DatabaseExists { .. } | E::MatchListIo(_) => Class::Database,
+        _ => Class::InvalidInput,
+    };
+    let debug = format!("{e:?}");
+    let kind = match e {
+        // The kind `clatch.colmap` gave a pair of one photo before the library checked pairs.
+        E::PairOfOnePhoto { .. } => "SamePair",
+        _ => variant_name(&debug),
+    };
+    raise(py, class, kind, e.to_string())
+}
+
+/// An output refused (a folder, an input's path: `InvalidInputError`) or not written
+/// (`DatabaseError`), its kind the variant's name (`OutputPath`, `OutputClash`, `Write`).
+fn from_output(py: Python<'_>, e: clatch::output::OutputError) -> PyErr {
+    use clatch::output::OutputError as E;
+    let class = match e {
+        E::Write { .. } => Class::Database,
         _ => Class::InvalidInput,
     };
     let debug = format!("{e:?}");

@@ -124,6 +124,43 @@ pub enum ColmapError {
     /// More rows than a COLMAP blob (or its `rows` column) can describe.
     #[error("{what}: {count} rows is more than COLMAP can store")]
     TooMany { what: &'static str, count: usize },
+
+    /// An output of the run refused (a folder, an input's path) or not written.
+    #[error("{0}")]
+    Output(#[from] crate::output::OutputError),
+
+    /// A given pair names a photo index the folder does not have.
+    #[error("pair {position}: index {index} is not one of the {photos} photos")]
+    PairOutOfRange {
+        position: usize,
+        index: usize,
+        photos: usize,
+    },
+
+    /// A given pair names a photo by a name the folder does not have.
+    #[error("pair {position}: {name:?} is not an image of the folder")]
+    PairNameUnknown { position: usize, name: String },
+
+    /// A given pair of a photo with itself.
+    #[error("pair {position}: {name} with itself; a pair needs two different photos")]
+    PairOfOnePhoto { position: usize, name: String },
+
+    /// A given pair listed again (in either order).
+    #[error("pair {position}: {first} and {second} are pair {earlier} again; list each pair once")]
+    DuplicatePair {
+        position: usize,
+        earlier: usize,
+        first: String,
+        second: String,
+    },
+
+    /// A pair to match whose photo's descriptors were not given.
+    #[error("pair {position}: no descriptors of photo {image} were given")]
+    MissingDescriptors { position: usize, image: usize },
+
+    /// The progress callback asked the run to stop; nothing was written.
+    #[error("stopped by the progress callback while {stage}")]
+    Stopped { stage: crate::colmap::FolderStage },
 }
 
 impl ColmapError {

@@ -140,6 +140,12 @@ impl ImageFolder {
     pub fn shared_camera(&self, k_text: &str) -> Result<PinholeCamera, ColmapError> {
         let (want_w, want_h) = self.sizes.first().copied().unwrap_or_default();
         let camera = PinholeCamera::from_k_text(k_text, want_w, want_h)?;
+        self.check_one_size((want_w, want_h))?;
+        Ok(camera)
+    }
+
+    /// Refuses a photo whose size is not `(want_w, want_h)`, as one shared camera needs.
+    pub fn check_one_size(&self, (want_w, want_h): (u32, u32)) -> Result<(), ColmapError> {
         for (path, &(got_w, got_h)) in self.paths.iter().zip(&self.sizes) {
             if (got_w, got_h) != (want_w, want_h) {
                 return Err(ColmapError::ImageSizeMismatch {
@@ -151,7 +157,7 @@ impl ImageFolder {
                 });
             }
         }
-        Ok(camera)
+        Ok(())
     }
 }
 
@@ -307,19 +313,40 @@ pub fn extract_photos(
     refinement: Refinement,
     done: &(dyn Fn(usize) + Sync),
 ) -> Result<(Vec<(Photo, DescriptorSet)>, Prefetched), ColmapError> {
-    let n = paths.len().min(names.len());
-    let mut photos = Vec::with_capacity(n);
-    let decoding = extract_decoded(
+    let mut photos = Vec::with_capacity(paths.len().min(names.len()));
+    let decoding = extract_each_photo(
         extractor,
-        n,
-        |i| decode(&paths[i], &names[i], limits),
-        |i, decoded, features| {
-            photos.push(decoded.photo(features, refinement));
+        (paths, names),
+        limits,
+        refinement,
+        |i, photo, descriptors| {
+            photos.push((photo, descriptors));
             done(i);
             Ok(())
         },
     )?;
     Ok((photos, decoding))
+}
+
+/// [`extract_photos`] handing each photo to `each(i, photo, descriptors)` as it is extracted, in
+/// order, on the calling thread, instead of keeping them: an error of `each` stops the extraction and
+/// is returned. Returns the decoders' timings.
+pub fn extract_each_photo(
+    extractor: &Extractor,
+    (paths, names): (&[PathBuf], &[String]),
+    limits: &DecodeLimits,
+    refinement: Refinement,
+    mut each: impl FnMut(usize, Photo, DescriptorSet) -> Result<(), ColmapError>,
+) -> Result<Prefetched, ColmapError> {
+    extract_decoded(
+        extractor,
+        paths.len().min(names.len()),
+        |i| decode(&paths[i], &names[i], limits),
+        |i, decoded, features| {
+            let (photo, descriptors) = decoded.photo(features, refinement);
+            each(i, photo, descriptors)
+        },
+    )
 }
 
 #[cfg(test)]

@@ -1,11 +1,24 @@
 //! Handing keypoints and matches to [COLMAP](https://colmap.github.io) 3.8 for structure from motion
 //! (feature `colmap`, which turns on `image`).
 //!
-//! A folder of photos goes through [`ImageFolder`] (which files, their names and sizes, checked before
-//! any work), [`extract_photos`] (features with the positions refined by a [`Refinement`]),
-//! [`crate::Matcher::match_pairs`] and [`FolderWriter`] (the database and the match list, in one
-//! order): the command-line tool's `clatch colmap` and the Python package's `clatch.colmap` and
-//! `clatch.ray` all take this path, so they write the same bytes.
+//! A folder of photos goes to COLMAP through one function, [`FolderJob::run`]: the command-line
+//! tool's `clatch colmap`, the Python package's `clatch.colmap.match_folder` and its Ray driver
+//! `clatch.ray` all call it or its stages, so they write the same bytes. Its stages:
+//! - [`FolderJob::plan`]: every check before any work ([`FolderPlan`]: the settings, [`ImageFolder`]
+//!   (which files, their names and sizes), the camera, the pairs ([`resolve_pairs`]), the outputs);
+//! - [`FolderPlan::run`]: [`extract_photos`] (features with the positions refined by a
+//!   [`Refinement`]), [`match_photo_pairs`] (any subset of the pairs, wherever their photos'
+//!   descriptors are) and [`FolderOutput`] (the one [`FolderWriter`] of the database and the match
+//!   list, in one order, under temporary names);
+//! - [`WrittenFolder::commit`]: both files renamed into place, only once both are complete.
+//!
+//! ```no_run
+//! use clatch::colmap::FolderJob;
+//!
+//! let report = FolderJob::new("photos/", "out.db").run(None)?;
+//! println!("{} photos, {} pairs", report.counts.photos, report.counts.pairs);
+//! # Ok::<(), clatch::colmap::ColmapError>(())
+//! ```
 //!
 //! COLMAP cannot match binary descriptors and needs none: it gets keypoints in its SQLite database
 //! ([`Database`]) and putative matches as a text file ([`MatchList`]) that
@@ -33,7 +46,13 @@ mod database;
 mod error;
 pub mod exif;
 mod folder;
+mod folder_output;
+mod job;
 mod match_list;
+mod pairs;
+mod plan;
+mod report;
+mod run;
 pub mod schema;
 mod writer;
 
@@ -43,10 +62,15 @@ pub use database::{Database, check_match_indices};
 pub use error::ColmapError;
 pub use folder::{
     DEFAULT_GRID, DEFAULT_MAX_KEYPOINTS, IMAGE_EXTENSIONS, ImageFolder, Photo, check_detectable,
-    extract_photo, extract_photos, image_name, list_images, photo_camera,
+    extract_each_photo, extract_photo, extract_photos, image_name, list_images, photo_camera,
 };
+pub use folder_output::{FolderOutput, WrittenFolder};
+pub use job::{FolderCamera, FolderJob, MATCH_LIST_NAME, Overwrite, default_workspace};
 pub use match_list::MatchList;
-pub use writer::FolderWriter;
+pub use pairs::{PhotoRef, match_photo_pairs, resolve_pairs};
+pub use plan::FolderPlan;
+pub use report::{FolderProgress, FolderReport, FolderStage, FolderTimes};
+pub use writer::{FolderCounts, FolderWriter};
 
 use crate::keypoint::KeyPoint;
 use crate::matching::Match;

@@ -14,6 +14,22 @@ use crate::matching::Match;
 /// A camera's key without a shared K: one camera per image size and EXIF focal length.
 type CameraKey = ((u32, u32), Option<u16>);
 
+/// What a [`FolderWriter`] has written so far.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct FolderCounts {
+    /// Photos (images of the database).
+    pub photos: usize,
+    /// Keypoints over all photos.
+    pub keypoints: usize,
+    /// Pairs whose matches were added, with or without matches.
+    pub pairs: usize,
+    /// Matches over all pairs.
+    pub matches: usize,
+    /// Pairs with at least one match: the pairs of the match list.
+    pub pairs_with_matches: usize,
+}
+
 /// Writes a folder's photos into a new COLMAP 3.8 database and their matches into a match list.
 ///
 /// Photos go in first, in image-id order ([`FolderWriter::add_photo`]), then the matches of each pair
@@ -49,6 +65,7 @@ pub struct FolderWriter<W: Write> {
     cameras: Vec<(CameraKey, u32)>,
     /// Name, image id and keypoint count of each photo written.
     photos: Vec<(String, u32, usize)>,
+    counts: FolderCounts,
 }
 
 impl<W: Write> FolderWriter<W> {
@@ -69,6 +86,7 @@ impl<W: Write> FolderWriter<W> {
             shared,
             cameras: Vec::new(),
             photos: Vec::new(),
+            counts: FolderCounts::default(),
         })
     }
 
@@ -104,6 +122,8 @@ impl<W: Write> FolderWriter<W> {
         self.db.set_keypoints(image_id, &photo.keypoints)?;
         self.photos
             .push((photo.name.clone(), image_id, photo.keypoints.len()));
+        self.counts.photos += 1;
+        self.counts.keypoints += photo.keypoints.len();
         Ok(self.photos.len() - 1)
     }
 
@@ -134,13 +154,21 @@ impl<W: Write> FolderWriter<W> {
         check_match_indices(*id_i, *id_j, matches, *n_i, *n_j)?;
         if !matches.is_empty() {
             self.list.add_pair(name_i, name_j, matches)?;
+            self.counts.pairs_with_matches += 1;
         }
+        self.counts.pairs += 1;
+        self.counts.matches += matches.len();
         Ok(())
     }
 
     /// Photos written so far.
     pub fn photos(&self) -> usize {
         self.photos.len()
+    }
+
+    /// Photos, keypoints, pairs and matches written so far.
+    pub fn counts(&self) -> FolderCounts {
+        self.counts
     }
 
     /// Commits the database, flushes the match list and returns its writer.

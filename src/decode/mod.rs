@@ -17,9 +17,9 @@ mod jpeg_end;
 mod open;
 mod palette;
 
-pub use open::{
-    DecodeError, DecodeLimits, ImageInfo, file_kind, open_gray, open_gray_with_exif, probe,
-};
+/// What a path that is not a regular file is, in words (kept here, where it was first public).
+pub use crate::output::file_kind;
+pub use open::{DecodeError, DecodeLimits, ImageInfo, open_gray, open_gray_with_exif, probe};
 
 use crate::error::{Error, Result};
 use crate::gray_view::GrayView;

@@ -10,6 +10,7 @@ use thiserror::Error;
 use super::jpeg_end::{JpegEnd, find_end};
 use super::palette;
 use crate::gray_view::MAX_IMAGE_SIDE;
+use crate::output::file_kind;
 
 /// How large an image file may be decoded.
 ///
@@ -189,31 +190,6 @@ fn regular_file(path: &Path) -> Result<std::fs::Metadata, DecodeError> {
         path: path.to_path_buf(),
         kind: file_kind(&meta),
     })
-}
-
-/// What a path that is not a regular file is, in words ("a FIFO", "a device", "a socket", "a
-/// folder"), for messages that refuse it; the command-line tool uses it for its other inputs and
-/// outputs too.
-pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        let t = meta.file_type();
-        if t.is_fifo() {
-            return "a FIFO";
-        }
-        if t.is_char_device() || t.is_block_device() {
-            return "a device";
-        }
-        if t.is_socket() {
-            return "a socket";
-        }
-    }
-    if meta.is_dir() {
-        "a folder"
-    } else {
-        "not a file"
-    }
 }
 
 fn reader(path: &Path) -> Result<ImageReader<BufReader<File>>, DecodeError> {

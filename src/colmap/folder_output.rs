@@ -1,0 +1,164 @@
+//! A folder's database and match list written under temporary names beside their final paths, and
+//! renamed into place only once both are complete: a failed run leaves nothing at the outputs, and an
+//! earlier database is replaced only by a complete one.
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use crate::colmap::camera::PinholeCamera;
+use crate::colmap::error::ColmapError;
+use crate::colmap::folder::Photo;
+use crate::colmap::report::{FolderReport, FolderTimes};
+use crate::colmap::writer::{FolderCounts, FolderWriter};
+use crate::matching::Match;
+use crate::output::{OutputError, Staged};
+
+/// The one writer of a folder run ([`FolderWriter`]) over temporary files: the stage every run ends
+/// in, whether it extracted and matched in this process ([`super::FolderPlan::run`]) or gathered the
+/// photos and matches from workers. [`FolderOutput::finish`] completes both files, which
+/// [`WrittenFolder::commit`] then renames into place; dropped before, they are removed.
+pub struct FolderOutput {
+    // Declared before `staged`: the database is closed before its temporary file is removed.
+    writer: FolderWriter<BufWriter<File>>,
+    staged: Staged,
+    /// The temporary database and match list, then their final paths.
+    temp: (PathBuf, PathBuf),
+    outputs: (PathBuf, PathBuf),
+    writing: Duration,
+}
+
+impl FolderOutput {
+    /// Creates the match list's folder if it is missing (it stays, empty, if the run fails), then a
+    /// new database and match list under temporary names beside `database` and `match_list`.
+    /// `camera`: one camera for every photo, or `None` for one per size and focal
+    /// ([`FolderWriter::create`]).
+    pub fn create(
+        database: &Path,
+        match_list: &Path,
+        camera: Option<&PinholeCamera>,
+    ) -> Result<Self, ColmapError> {
+        let began = Instant::now();
+        if let Some(folder) = match_list.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(folder).map_err(OutputError::write(folder))?;
+        }
+        let mut staged = Staged::new();
+        let temp_database = staged.reserve(database)?;
+        // `Database::create` makes the file itself (and never opens an existing one).
+        std::fs::remove_file(&temp_database).map_err(OutputError::write(&temp_database))?;
+        let (temp_list, list) = staged.open(match_list)?;
+        let writer = FolderWriter::create(&temp_database, BufWriter::new(list), camera)?;
+        Ok(Self {
+            writer,
+            staged,
+            temp: (temp_database, temp_list),
+            outputs: (database.to_path_buf(), match_list.to_path_buf()),
+            writing: began.elapsed(),
+        })
+    }
+
+    /// Adds the next photo: [`FolderWriter::add_photo`].
+    pub fn add_photo(&mut self, photo: &Photo) -> Result<usize, ColmapError> {
+        self.timed(|w| w.add_photo(photo))
+    }
+
+    /// Adds the matches of a pair: [`FolderWriter::add_matches`].
+    pub fn add_matches(
+        &mut self,
+        i: usize,
+        j: usize,
+        matches: &[Match],
+    ) -> Result<(), ColmapError> {
+        self.timed(|w| w.add_matches(i, j, matches))
+    }
+
+    /// `write` on the writer, its time added to the writing time.
+    fn timed<T>(&mut self, write: impl FnOnce(&mut FolderWriter<BufWriter<File>>) -> T) -> T {
+        let began = Instant::now();
+        let result = write(&mut self.writer);
+        self.writing += began.elapsed();
+        result
+    }
+
+    /// Photos, keypoints, pairs and matches written so far.
+    pub fn counts(&self) -> FolderCounts {
+        self.writer.counts()
+    }
+
+    /// Time spent writing so far.
+    pub fn writing(&self) -> Duration {
+        self.writing
+    }
+
+    /// Commits the database and writes the match list to disk, both still under their temporary
+    /// names.
+    pub fn finish(self) -> Result<WrittenFolder, ColmapError> {
+        let began = Instant::now();
+        let counts = self.writer.counts();
+        let list = self.writer.finish()?;
+        let file = list
+            .into_inner()
+            .map_err(|e| ColmapError::MatchListIo(e.into_error()))?;
+        file.sync_all().map_err(ColmapError::MatchListIo)?;
+        Ok(WrittenFolder {
+            staged: self.staged,
+            report: FolderReport {
+                database: self.temp.0,
+                match_list: self.temp.1,
+                counts,
+                times: FolderTimes {
+                    writing: self.writing + began.elapsed(),
+                    ..FolderTimes::default()
+                },
+            },
+            outputs: self.outputs,
+        })
+    }
+}
+
+/// A folder's database and match list, complete under temporary names beside their final paths (for
+/// a program that reads them first: `colmap matches_importer` verifies the matches into the
+/// database): [`WrittenFolder::commit`] renames them into place; dropped uncommitted, they are
+/// removed.
+#[derive(Debug)]
+pub struct WrittenFolder {
+    staged: Staged,
+    /// The report, its paths the temporary files'.
+    report: FolderReport,
+    /// The final database and match list.
+    outputs: (PathBuf, PathBuf),
+}
+
+impl WrittenFolder {
+    /// The complete database, under its temporary name.
+    pub fn database(&self) -> &Path {
+        &self.report.database
+    }
+
+    /// The complete match list, under its temporary name.
+    pub fn match_list(&self) -> &Path {
+        &self.report.match_list
+    }
+
+    /// Photos, keypoints, pairs and matches written.
+    pub fn counts(&self) -> FolderCounts {
+        self.report.counts
+    }
+
+    /// The stages' times, known to this process (a run that extracted and matched here fills them in).
+    pub(crate) fn times_mut(&mut self) -> &mut FolderTimes {
+        &mut self.report.times
+    }
+
+    /// Renames the database and the match list into place (replacing older files there) and returns
+    /// the run's report with their final paths.
+    pub fn commit(self) -> Result<FolderReport, ColmapError> {
+        let began = Instant::now();
+        self.staged.commit()?;
+        let mut report = self.report;
+        (report.database, report.match_list) = self.outputs;
+        report.times.writing += began.elapsed();
+        Ok(report)
+    }
+}

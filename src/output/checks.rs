@@ -1,0 +1,173 @@
+//! The checks of output paths before any work: each is a file clatch may replace, and none is the
+//! same file as an input or as another output.
+
+use std::path::{Path, PathBuf};
+
+use crate::output::OutputError;
+
+/// What a path that is not a regular file is, in words ("a FIFO", "a device", "a socket", "a
+/// folder"), for messages that refuse it as an input or an output.
+pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if meta.is_dir() {
+        "a folder"
+    } else {
+        "not a file"
+    }
+}
+
+/// Refuses an output path that exists and is not a regular file (a folder, a device: renaming onto
+/// it would replace it), or that has no file name.
+pub fn check_writable(path: &Path) -> Result<(), OutputError> {
+    let refuse = |reason: String| OutputError::OutputPath {
+        path: path.to_path_buf(),
+        reason,
+    };
+    if path.file_name().is_none() || ends_with_separator(path) {
+        return Err(refuse("the path names a folder, not a file".into()));
+    }
+    match std::fs::metadata(path) {
+        Ok(meta) if !meta.is_file() => Err(refuse(format!(
+            "it is {}, not a regular file",
+            file_kind(&meta)
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// Whether the path is written with a trailing separator (`out/`).
+pub fn ends_with_separator(path: &Path) -> bool {
+    path.as_os_str()
+        .to_string_lossy()
+        .ends_with(std::path::is_separator)
+}
+
+/// What a path refers to: the file it names (links followed) when there is one, else the canonical
+/// folder and the name.
+#[derive(Debug, PartialEq, Eq)]
+enum Identity {
+    File { device: u64, inode: u64 },
+    Path(PathBuf),
+}
+
+fn identity(path: &Path) -> Identity {
+    if let Ok(meta) = std::fs::metadata(path) {
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::MetadataExt;
+            return Identity::File {
+                device: meta.dev(),
+                inode: meta.ino(),
+            };
+        }
+        #[cfg(not(unix))]
+        {
+            let _ = meta;
+            if let Ok(canonical) = std::fs::canonicalize(path) {
+                return Identity::Path(canonical);
+            }
+        }
+    }
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let folder = std::fs::canonicalize(folder).unwrap_or_else(|_| folder.to_path_buf());
+    Identity::Path(folder.join(path.file_name().unwrap_or_default()))
+}
+
+/// Refuses any output that is the same file as an input or as an earlier output (through links
+/// too). Each path comes with its role, for the message (`"picture"`, `"image A"`).
+pub fn check_distinct(
+    inputs: &[(&'static str, &Path)],
+    outputs: &[(&'static str, &Path)],
+) -> Result<(), OutputError> {
+    let inputs: Vec<_> = inputs.iter().map(|&(r, p)| (r, p, identity(p))).collect();
+    let mut seen: Vec<(&'static str, &Path, Identity)> = Vec::new();
+    for &(role, path) in outputs {
+        let id = identity(path);
+        let clash = inputs
+            .iter()
+            .chain(seen.iter())
+            .find(|(_, _, other)| *other == id);
+        if let Some(&(other_role, other, _)) = clash {
+            return Err(OutputError::OutputClash {
+                role,
+                path: path.to_path_buf(),
+                other_role,
+                other: other.to_path_buf(),
+            });
+        }
+        seen.push((role, path, id));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::output::staged::tests::test_dir;
+
+    #[cfg(unix)]
+    #[test]
+    fn outputs_naming_an_input_or_each_other_are_refused() {
+        let d = test_dir("clash");
+        let input = d.join("in.png");
+        std::fs::write(&input, "x").unwrap();
+        let link = d.join("link.png");
+        std::os::unix::fs::symlink(&input, &link).unwrap();
+        let inputs = [("image A", input.as_path())];
+        let clash = |outputs: &[(&'static str, &Path)]| check_distinct(&inputs, outputs);
+        assert!(matches!(
+            clash(&[("picture", &input)]),
+            Err(OutputError::OutputClash {
+                other_role: "image A",
+                ..
+            })
+        ));
+        assert!(clash(&[("picture", &link)]).is_err(), "through a link");
+        let dotted = d.join(".").join("in.png");
+        assert!(clash(&[("picture", &dotted)]).is_err(), "through ./");
+        let new = d.join("new.csv");
+        assert!(matches!(
+            clash(&[
+                ("picture", &new),
+                (
+                    "CSV",
+                    &d.join("..").join(d.file_name().unwrap()).join("new.csv")
+                )
+            ]),
+            Err(OutputError::OutputClash {
+                role: "CSV",
+                other_role: "picture",
+                ..
+            })
+        ));
+        assert!(clash(&[("picture", &d.join("p.png")), ("CSV", &new)]).is_ok());
+        std::fs::remove_dir_all(&d).ok();
+    }
+
+    #[test]
+    fn folders_and_devices_are_not_output_files() {
+        let d = test_dir("kinds");
+        assert!(check_writable(&d).is_err());
+        assert!(check_writable(Path::new("out/")).is_err());
+        #[cfg(unix)]
+        assert!(check_writable(Path::new("/dev/null")).is_err());
+        assert!(check_writable(&d.join("new.png")).is_ok());
+        std::fs::remove_dir_all(&d).ok();
+    }
+}

@@ -1,0 +1,325 @@
+//! The library's one COLMAP folder run, [`FolderJob`]: the same folder and job write the same bytes
+//! every time; its stages run apart, as a cluster runs them (photos extracted and pairs matched in
+//! any grouping and order), write those bytes too; every refusal comes before any work and leaves
+//! nothing behind, and a run that fails keeps the old database.
+
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+
+use clatch::colmap::{
+    ColmapError, FolderCamera, FolderJob, FolderProgress, FolderStage, Overwrite, PhotoRef,
+    PinholeCamera, extract_photos, match_photo_pairs,
+};
+use clatch::{Backend, Extractor, Matcher};
+
+const PHOTOS: usize = 4;
+const PAIRS: usize = PHOTOS * (PHOTOS - 1) / 2;
+
+/// A fresh folder for one test, with `images/` holding [`PHOTOS`] overlapping crops of one generated
+/// picture as binary PGM files.
+fn workdir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "clatch-colmap-folder-{}-{name}",
+        std::process::id()
+    ));
+    std::fs::remove_dir_all(&dir).ok();
+    let images = dir.join("images");
+    std::fs::create_dir_all(&images).unwrap();
+    let (width, height) = (480, 400);
+    let picture = clatch::synthetic::rectangles(width, height, 7).unwrap();
+    let (side_x, side_y) = (320, 300);
+    for i in 0..PHOTOS {
+        let (x0, y0) = (i * 40, i * 25);
+        let mut pgm = format!("P5\n{side_x} {side_y}\n255\n").into_bytes();
+        for y in y0..y0 + side_y {
+            pgm.extend_from_slice(&picture[y * width + x0..y * width + x0 + side_x]);
+        }
+        std::fs::write(images.join(format!("view{i}.pgm")), pgm).unwrap();
+    }
+    dir
+}
+
+/// Every file and folder under `dir`, with the files' bytes, in order.
+fn snapshot(dir: &Path) -> Vec<(PathBuf, Option<Vec<u8>>)> {
+    let mut entries = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path.clone());
+                entries.push((path, None));
+            } else {
+                let bytes = std::fs::read(&path).unwrap();
+                entries.push((path, Some(bytes)));
+            }
+        }
+    }
+    entries.sort();
+    entries
+}
+
+fn names_in(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+fn bytes(path: &Path) -> Vec<u8> {
+    std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+#[test]
+fn a_folder_written_twice_gives_identical_bytes() {
+    let dir = workdir("twice");
+    let run = |db: &str| {
+        FolderJob::new(dir.join("images"), dir.join(db))
+            .run(None)
+            .unwrap()
+    };
+    let (one, two) = (run("one.db"), run("two.db"));
+    assert_eq!(one.database, dir.join("one.db"));
+    assert_eq!(one.match_list, dir.join("one-colmap").join("matches.txt"));
+    assert_eq!(bytes(&one.database), bytes(&two.database));
+    assert_eq!(bytes(&one.match_list), bytes(&two.match_list));
+    assert_eq!(one.counts, two.counts);
+    let counts = one.counts;
+    assert_eq!((counts.photos, counts.pairs), (PHOTOS, PAIRS));
+    assert!(counts.keypoints > 100 * PHOTOS, "{counts:?}");
+    assert!(
+        counts.pairs_with_matches >= PAIRS - 1 && counts.matches > 100,
+        "overlapping photos match: {counts:?}"
+    );
+    assert_eq!(
+        names_in(&dir),
+        ["images", "one-colmap", "one.db", "two-colmap", "two.db"],
+        "no temporary file left"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The stages as a cluster's driver and workers run them: extraction in two groups, the pairs
+/// matched in another grouping and order, each worker holding only the descriptors it needs, the
+/// results written in the pairs' order through the plan's output.
+#[test]
+fn the_stages_run_apart_write_the_single_run_s_bytes() {
+    let dir = workdir("apart");
+    let job = FolderJob::new(dir.join("images"), dir.join("one.db"));
+    let single = job.run(None).unwrap();
+
+    let job = FolderJob::new(dir.join("images"), dir.join("apart.db"))
+        .with_workspace(dir.join("apart-colmap"));
+    let plan = job.plan().unwrap();
+    let mut output = plan.open_output().unwrap();
+    let extractor = Extractor::new(job.backend, job.extractor_config()).unwrap();
+    let folder = plan.folder();
+    let mut descriptors = Vec::new();
+    for group in [0..3, 3..PHOTOS] {
+        let (photos, _) = extract_photos(
+            &extractor,
+            (&folder.paths[group.clone()], &folder.names[group]),
+            &job.limits,
+            job.refinement,
+            &|_| {},
+        )
+        .unwrap();
+        for (photo, set) in photos {
+            output.add_photo(&photo).unwrap();
+            descriptors.push(set);
+        }
+    }
+    let matcher = Matcher::new(Backend::Cpu, job.matching.clone()).unwrap();
+    let pairs = plan.pairs().to_vec();
+    let mut found = vec![Vec::new(); pairs.len()];
+    for group in [vec![5, 1], vec![4, 0, 2], vec![3]] {
+        let held: Vec<(usize, usize)> = group.iter().map(|&p| pairs[p]).collect();
+        let worker = |i: usize| {
+            held.iter()
+                .any(|&(a, b)| a == i || b == i)
+                .then(|| &descriptors[i])
+        };
+        for (&p, matches) in group
+            .iter()
+            .zip(match_photo_pairs(&matcher, worker, &held).unwrap())
+        {
+            found[p] = matches;
+        }
+    }
+    for (&(i, j), matches) in pairs.iter().zip(&found) {
+        output.add_matches(i, j, matches).unwrap();
+    }
+    let apart = output.finish().unwrap().commit().unwrap();
+    assert_eq!(apart.counts, single.counts);
+    assert_eq!(bytes(&apart.database), bytes(&single.database));
+    assert_eq!(bytes(&apart.match_list), bytes(&single.match_list));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn progress_is_told_in_order_and_can_stop_the_run() {
+    let dir = workdir("progress");
+    let job = FolderJob::new(dir.join("images"), dir.join("out.db"));
+    let mut heard: Vec<FolderProgress> = Vec::new();
+    job.run(Some(&mut |p| {
+        heard.push(p);
+        ControlFlow::Continue(())
+    }))
+    .unwrap();
+    let told = |stage| -> Vec<(usize, usize)> {
+        heard
+            .iter()
+            .filter(|p| p.stage == stage)
+            .map(|p| (p.done, p.total))
+            .collect()
+    };
+    assert_eq!(
+        told(FolderStage::Extraction),
+        (0..=PHOTOS).map(|i| (i, PHOTOS)).collect::<Vec<_>>()
+    );
+    assert_eq!(told(FolderStage::Matching), [(0, PAIRS), (PAIRS, PAIRS)]);
+    assert_eq!(heard[0].stage, FolderStage::Extraction);
+
+    // Stopped while matching: nothing at the outputs, the old database kept.
+    let db = dir.join("out.db");
+    let old = bytes(&db);
+    let replace = job.clone().with_overwrite(Overwrite::Replace);
+    let e = replace
+        .run(Some(&mut |p| match p.stage {
+            FolderStage::Matching => ControlFlow::Break(()),
+            _ => ControlFlow::Continue(()),
+        }))
+        .unwrap_err();
+    assert!(
+        matches!(
+            e,
+            ColmapError::Stopped {
+                stage: FolderStage::Matching
+            }
+        ),
+        "{e}"
+    );
+    assert_eq!(bytes(&db), old);
+    assert_eq!(names_in(&dir), ["images", "out-colmap", "out.db"]);
+    assert_eq!(names_in(&dir.join("out-colmap")), ["matches.txt"]);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn given_pairs_by_index_or_name_are_written_in_their_order() {
+    let dir = workdir("pairs");
+    let given = [
+        (PhotoRef::from(3), PhotoRef::from("view0.pgm")),
+        (PhotoRef::from("view1.pgm"), PhotoRef::from(2)),
+    ];
+    let report = FolderJob::new(dir.join("images"), dir.join("out.db"))
+        .with_pairs(given)
+        .run(None)
+        .unwrap();
+    assert_eq!(report.counts.pairs, 2);
+    let list = String::from_utf8(bytes(&report.match_list)).unwrap();
+    let headers: Vec<&str> = list
+        .split("\n\n")
+        .filter_map(|block| block.lines().next())
+        .collect();
+    assert_eq!(headers, ["view3.pgm view0.pgm", "view1.pgm view2.pgm"]);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Each refusal: an error before any work, nothing written, nothing removed.
+#[test]
+fn refusals_come_before_any_work_and_leave_nothing_behind() {
+    let dir = workdir("refusals");
+    let images = dir.join("images");
+    let db = dir.join("out.db");
+    std::fs::write(&db, "an older database").unwrap();
+    let k = dir.join("K.txt");
+    std::fs::write(&k, "300 0 160 0 300 150 0 0 1").unwrap();
+    let before = snapshot(&dir);
+    let job = FolderJob::new(&images, &db);
+    let refused = |job: FolderJob, what: &str| {
+        let e = job.run(None).unwrap_err();
+        assert_eq!(snapshot(&dir), before, "{what}: {e}");
+        e
+    };
+
+    let e = refused(job.clone(), "an existing database");
+    assert!(matches!(e, ColmapError::DatabaseExists { .. }), "{e}");
+    let photo = images.join("view1.pgm");
+    let e = refused(
+        FolderJob::new(&images, &photo).with_overwrite(Overwrite::Replace),
+        "a database that is a photo",
+    );
+    assert!(
+        e.to_string().contains("is the same file as the image"),
+        "{e}"
+    );
+    let e = refused(
+        job.clone()
+            .with_overwrite(Overwrite::Replace)
+            .with_match_list(&k)
+            .with_camera(FolderCamera::KText {
+                text: std::fs::read_to_string(&k).unwrap(),
+                file: Some(k.clone()),
+            }),
+        "a match list that is the camera matrix file",
+    );
+    assert!(e.to_string().contains("camera matrix"), "{e}");
+    let e = refused(
+        job.clone().with_match_list(dir.join("images/")),
+        "a match list that names a folder",
+    );
+    assert!(matches!(e, ColmapError::Output(_)), "{e}");
+    let e = refused(
+        job.clone().with_pairs([(0usize, PHOTOS)]),
+        "a pair out of range",
+    );
+    assert!(matches!(e, ColmapError::PairOutOfRange { .. }), "{e}");
+    let camera = PinholeCamera::guess(640, 480).unwrap();
+    let e = refused(
+        job.clone().with_camera(FolderCamera::Shared(camera)),
+        "a camera of another size",
+    );
+    assert!(matches!(e, ColmapError::ImageSizeMismatch { .. }), "{e}");
+    let mut extractor = FolderJob::default_extractor();
+    extractor.detector.threshold = 0;
+    let e = refused(job.clone().with_extractor(extractor), "a bad setting");
+    assert!(matches!(e, ColmapError::Clatch(_)), "{e}");
+    std::fs::write(images.join("broken.pgm"), "P5\n").unwrap();
+    let before = snapshot(&dir);
+    let e = job
+        .with_overwrite(Overwrite::Replace)
+        .run(None)
+        .unwrap_err();
+    assert!(e.to_string().contains("broken.pgm"), "{e}");
+    assert_eq!(
+        snapshot(&dir),
+        before,
+        "a photo whose header cannot be read"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A photo whose header reads but whose pixels are cut short fails during extraction: the temporary
+/// files are removed, the old database kept, the workspace folder left empty.
+#[test]
+fn a_run_that_fails_keeps_the_old_database_and_leaves_no_file() {
+    let dir = workdir("fails");
+    let images = dir.join("images");
+    let db = dir.join("out.db");
+    std::fs::write(&db, "an older database").unwrap();
+    let last = images.join(format!("view{}.pgm", PHOTOS - 1));
+    let pixels = bytes(&last);
+    std::fs::write(&last, &pixels[..pixels.len() - 5000]).unwrap();
+    let e = FolderJob::new(&images, &db)
+        .with_overwrite(Overwrite::Replace)
+        .run(None)
+        .unwrap_err();
+    assert!(e.to_string().contains(&*last.to_string_lossy()), "{e}");
+    assert_eq!(bytes(&db), b"an older database");
+    assert_eq!(names_in(&dir), ["images", "out-colmap", "out.db"]);
+    assert!(names_in(&dir.join("out-colmap")).is_empty());
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -17,7 +17,13 @@ fn write_photos(images: &Path, size: u32) {
     }
 }
 
+/// `clatch colmap` on the CPU without COLMAP.
 fn colmap(images: &Path, db: &Path, extra: &[&str]) -> std::process::Output {
+    colmap_with(images, db, &["--no-colmap"], extra)
+}
+
+/// `clatch colmap --images IMAGES --database DB --backend cpu` with `how` and `extra` after.
+fn colmap_with(images: &Path, db: &Path, how: &[&str], extra: &[&str]) -> std::process::Output {
     let mut args = vec![
         "colmap",
         "--images",
@@ -26,8 +32,8 @@ fn colmap(images: &Path, db: &Path, extra: &[&str]) -> std::process::Output {
         str(db),
         "--backend",
         "cpu",
-        "--no-colmap",
     ];
+    args.extend_from_slice(how);
     args.extend_from_slice(extra);
     clatch(&args)
 }
@@ -171,19 +177,7 @@ fn a_successful_run_never_removes_what_the_user_put_in_the_workspace() {
     let dir = workdir("colmap-safety", "workspace");
     let fake = succeeding_colmap(&dir);
     let run = |images: &Path, db: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "colmap",
-            "--images",
-            str(images),
-            "--database",
-            str(db),
-            "--backend",
-            "cpu",
-            "--colmap",
-            str(&fake),
-        ];
-        args.extend_from_slice(extra);
-        clatch(&args)
+        colmap_with(images, db, &["--colmap", str(&fake)], extra)
     };
 
     // Photos in WORKSPACE/sparse: refused before any work, every photo kept.

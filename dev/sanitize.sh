@@ -100,7 +100,7 @@ sequence() {
         echo "nvidia-smi not found"
     fi
     "$san" --version | grep -i version | tail -1
-    echo "commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown), $(date -u +%Y-%m-%dT%H:%MZ)"
+    echo "commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown), $(date -u +%Y-%m-%dT%H:%MZ)${BINARIES:+ (test binaries built elsewhere: $BINARIES; the commit is the checkout's, not theirs)}"
 } > "$OUT/summary.txt"
 for tool in $TOOLS; do
     mkdir -p "$OUT/$tool"

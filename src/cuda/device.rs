@@ -267,7 +267,8 @@ impl GpuDevice {
         Ok(kernel)
     }
 
-    /// Whether the tensor-core kNN kernels are loaded on this device.
+    /// Whether the tensor-core kNN kernels are loaded on this device (test hooks).
+    #[cfg(feature = "internals")]
     pub fn has_tensor_matcher(&self) -> bool {
         self.tensor_cores
     }

@@ -4,9 +4,11 @@
 use std::ops::ControlFlow;
 use std::time::{Duration, Instant};
 
+use crate::collection::DescriptorCollection;
 use crate::colmap::error::ColmapError;
 use crate::colmap::folder::extract_each_photo;
 use crate::colmap::folder_output::{FolderOutput, WrittenFolder};
+#[cfg(doc)]
 use crate::colmap::pairs::match_photo_pairs;
 use crate::colmap::plan::FolderPlan;
 use crate::colmap::report::{FolderProgress, FolderStage};
@@ -48,7 +50,7 @@ impl FolderPlan {
     /// Runs the stages in this process: opens the output ([`FolderPlan::open_output`]), extracts
     /// every photo with its decoding on worker threads ahead of the extractor
     /// ([`super::extract_each_photo`]) and writes it as it comes, waits for the backend's set-up,
-    /// matches the pairs a group at a time ([`match_photo_pairs`]) and writes each group's matches in
+    /// matches the pairs a group at a time (as [`match_photo_pairs`] would) and writes each group's matches in
     /// the pairs' order, then finishes both files under their temporary names: the caller commits
     /// them ([`WrittenFolder::commit`]), after running a program on them if it likes. `progress`:
     /// as [`super::FolderJob::run`]. On any error nothing is left at the outputs.
@@ -105,7 +107,9 @@ impl FolderPlan {
 }
 
 /// Matches `pairs` a group at a time and writes each group's matches into `output`, in order;
-/// returns the stage's time (writing excluded).
+/// returns the stage's time (writing excluded). The descriptors are held by one collection on the
+/// matcher's backend for the whole stage (on a GPU: uploaded once, not once per group); a pair's
+/// matches are those of [`match_photo_pairs`], which runs spread over workers use.
 fn match_into(
     matcher: &Matcher,
     descriptors: &[DescriptorSet],
@@ -116,9 +120,14 @@ fn match_into(
     let total = pairs.len();
     progress.tell(FolderStage::Matching, 0, total)?;
     let (began, wrote) = (Instant::now(), output.writing());
+    let Some(width) = descriptors.first().map(DescriptorSet::width) else {
+        return Ok(began.elapsed()); // no photos, so no pairs
+    };
+    let mut collection = DescriptorCollection::new(matcher, width)?;
+    collection.add(&descriptors.iter().collect::<Vec<_>>())?;
     let mut done = 0;
     for group in pairs.chunks(pairs_per_call(total)) {
-        let found = match_photo_pairs(matcher, |i| descriptors.get(i), group)?;
+        let found = collection.match_pairs(group)?;
         for (&(i, j), matches) in group.iter().zip(&found) {
             output.add_matches(i, j, matches)?;
         }

@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use crate::error::{EvalError, IoContext};
 use crate::pairs::{EvalPair, read_homography};
 
-/// Image extensions a sequence may use, in the order they are looked for.
-pub const IMAGE_EXTENSIONS: [&str; 4] = ["ppm", "pgm", "png", "jpg"];
+/// Image extensions a sequence may use, in the order they are looked for, in any case (`img1.JPG`).
+pub const IMAGE_EXTENSIONS: [&str; 5] = ["ppm", "pgm", "png", "jpg", "jpeg"];
 
 /// How a sequence folder names its images and homographies.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -76,12 +76,22 @@ pub fn sequence_of_group(group: &str) -> Option<&str> {
         .or_else(|| group.strip_prefix(GROUP_PREFIX_HPATCHES))
 }
 
-/// The first file among `dir/stem.{extensions}` that exists.
+/// The first file among `dir/stem.{extensions}` that exists, the extension in any case.
 fn image_file(dir: &Path, stem: &str) -> Option<PathBuf> {
-    IMAGE_EXTENSIONS
-        .iter()
-        .map(|ext| dir.join(format!("{stem}.{ext}")))
-        .find(|p| p.is_file())
+    let files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|entry| Some(entry.ok()?.path()))
+        .filter(|path| path.file_stem().is_some_and(|s| s == stem) && path.is_file())
+        .collect();
+    IMAGE_EXTENSIONS.iter().find_map(|ext| {
+        files
+            .iter()
+            .find(|path| {
+                path.extension()
+                    .is_some_and(|e| e.to_string_lossy().eq_ignore_ascii_case(ext))
+            })
+            .cloned()
+    })
 }
 
 /// The layout of `dir` if it holds a first image (`img1.*` for Oxford, else `1.*` for HPatches).
@@ -324,6 +334,15 @@ mod tests {
         let pairs = sequences_under(&root).unwrap().0;
         assert_eq!(pairs.len(), 2);
         assert_eq!(pairs[1].image_b, dir.join("img3.jpg"));
+
+        // Extensions in any case: a camera's `.JPG`, a `.jpeg`.
+        let upper = root.join("upper/boat");
+        write_sequence(&upper, Layout::Oxford, 2, "JPG");
+        std::fs::rename(upper.join("img2.JPG"), upper.join("img2.jpeg")).unwrap();
+        let pairs = sequences_under(&root.join("upper")).unwrap().0;
+        assert_eq!(pairs.len(), 1);
+        assert_eq!(pairs[0].image_a, upper.join("img1.JPG"));
+        assert_eq!(pairs[0].image_b, upper.join("img2.jpeg"));
 
         assert!(matches!(
             sequences_under(&root.join("nope")),

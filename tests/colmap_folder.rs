@@ -319,6 +319,14 @@ fn a_run_that_fails_keeps_the_old_database_and_leaves_no_file() {
         .unwrap_err();
     assert!(e.to_string().contains(&*last.to_string_lossy()), "{e}");
     assert_eq!(bytes(&db), b"an older database");
+    // The match list's folder the run made is gone again: no empty workspace left behind.
+    assert_eq!(names_in(&dir), ["images", "out.db"]);
+    // A folder that was there before stays, empty or not.
+    std::fs::create_dir(dir.join("out-colmap")).unwrap();
+    FolderJob::new(&images, &db)
+        .with_overwrite(Overwrite::Replace)
+        .run(None)
+        .unwrap_err();
     assert_eq!(names_in(&dir), ["images", "out-colmap", "out.db"]);
     assert!(names_in(&dir.join("out-colmap")).is_empty());
     std::fs::remove_dir_all(&dir).ok();

@@ -3,6 +3,8 @@ byte, with the command-line tool's own defaults and with its options; given pair
 
 from __future__ import annotations
 
+import os
+import stat
 import subprocess
 import sys
 from pathlib import Path
@@ -167,7 +169,20 @@ def test_an_unreadable_photo_leaves_no_output(backend, folder, tmp_path):
         clatch.colmap.match_folder(broken, db, backend=backend)
     assert last.name in str(e.value)
     assert not db.exists()
-    assert list((tmp_path / "out-colmap").iterdir()) == []
+    # The workspace the run made is gone again, not left empty.
+    assert not (tmp_path / "out-colmap").exists()
+
+
+def test_outputs_are_readable_by_other_users(backend, folder, tmp_path):
+    # As the command-line tool writes them (a COLMAP run under another uid reads them): 0644 under the
+    # usual umask 022, not a temporary file's 0600.
+    old = os.umask(0o022)
+    try:
+        clatch.colmap.match_folder(folder, tmp_path / "out.db", backend=backend)
+    finally:
+        os.umask(old)
+    for path in [tmp_path / "out.db", tmp_path / "out-colmap" / "matches.txt"]:
+        assert stat.S_IMODE(path.stat().st_mode) == 0o644, path
 
 
 def test_the_writer_checks_every_index(tmp_path):

@@ -27,11 +27,49 @@ pub struct FolderOutput {
     temp: (PathBuf, PathBuf),
     outputs: (PathBuf, PathBuf),
     writing: Duration,
+    /// Declared last: removed (if still empty) after the temporary files.
+    made: MadeFolders,
+}
+
+/// The folders a run created for its outputs, innermost first: removed again, each only while empty,
+/// when the run ends without putting its files in place (so a failed run leaves no empty workspace
+/// behind, and never removes a file).
+#[derive(Debug, Default)]
+struct MadeFolders(Vec<PathBuf>);
+
+impl MadeFolders {
+    /// Creates `folder` and whatever of its ancestors is missing, remembering which.
+    fn create(folder: &Path) -> Result<Self, ColmapError> {
+        let missing: Vec<PathBuf> = folder
+            .ancestors()
+            .take_while(|p| !p.as_os_str().is_empty() && std::fs::symlink_metadata(p).is_err())
+            .map(Path::to_path_buf)
+            .collect();
+        std::fs::create_dir_all(folder).map_err(OutputError::write(folder))?;
+        Ok(Self(missing))
+    }
+
+    /// The run put its files in place: the folders stay.
+    fn keep(mut self) {
+        self.0.clear();
+    }
+}
+
+impl Drop for MadeFolders {
+    fn drop(&mut self) {
+        for folder in &self.0 {
+            // Fails, leaving the folder, when anything is in it.
+            if std::fs::remove_dir(folder).is_err() {
+                break;
+            }
+        }
+    }
 }
 
 impl FolderOutput {
-    /// Creates the match list's folder if it is missing (it stays, empty, if the run fails), then a
-    /// new database and match list under temporary names beside `database` and `match_list`.
+    /// Creates the match list's folder if it is missing (removed again, if still empty, when the run
+    /// fails), then a new database and match list under temporary names beside `database` and
+    /// `match_list`.
     /// `camera`: one camera for every photo, or `None` for one per size and focal
     /// ([`FolderWriter::create`]).
     pub fn create(
@@ -40,9 +78,10 @@ impl FolderOutput {
         camera: Option<&PinholeCamera>,
     ) -> Result<Self, ColmapError> {
         let began = Instant::now();
-        if let Some(folder) = match_list.parent().filter(|p| !p.as_os_str().is_empty()) {
-            std::fs::create_dir_all(folder).map_err(OutputError::write(folder))?;
-        }
+        let made = match match_list.parent().filter(|p| !p.as_os_str().is_empty()) {
+            Some(folder) => MadeFolders::create(folder)?,
+            None => MadeFolders::default(),
+        };
         let mut staged = Staged::new();
         let temp_database = staged.reserve(database)?;
         // `Database::create` makes the file itself (and never opens an existing one).
@@ -55,6 +94,7 @@ impl FolderOutput {
             temp: (temp_database, temp_list),
             outputs: (database.to_path_buf(), match_list.to_path_buf()),
             writing: began.elapsed(),
+            made,
         })
     }
 
@@ -113,6 +153,7 @@ impl FolderOutput {
                 },
             },
             outputs: self.outputs,
+            made: self.made,
         })
     }
 }
@@ -128,6 +169,8 @@ pub struct WrittenFolder {
     report: FolderReport,
     /// The final database and match list.
     outputs: (PathBuf, PathBuf),
+    /// Declared last: removed (if still empty) after the temporary files.
+    made: MadeFolders,
 }
 
 impl WrittenFolder {
@@ -156,6 +199,7 @@ impl WrittenFolder {
     pub fn commit(self) -> Result<FolderReport, ColmapError> {
         let began = Instant::now();
         self.staged.commit()?;
+        self.made.keep();
         let mut report = self.report;
         (report.database, report.match_list) = self.outputs;
         report.times.writing += began.elapsed();

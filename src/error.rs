@@ -485,8 +485,15 @@ mod tests {
         ];
         assert_eq!(errors.len(), expected.len());
         for (error, kind) in errors.iter().zip(expected) {
-            assert_eq!(error.kind(), kind, "{error:?}");
+            assert_eq!(error.kind(), kind);
             // The name is the variant's, as its Debug form begins (what bindings showed before).
+            // Not formatted for `Cuda`: the driver error's Debug asks the driver (cudarc panics
+            // without one, as on CI; a real `Cuda` error only ever comes from a loaded driver).
+            #[cfg(feature = "cuda")]
+            if matches!(error, Error::Cuda { .. }) {
+                assert_eq!(kind.name(), "Cuda");
+                continue;
+            }
             let debug = format!("{error:?}");
             let variant = debug.split([' ', '{', '(']).next().unwrap_or_default();
             assert_eq!(kind.name(), variant, "{error:?}");

@@ -132,13 +132,7 @@ impl Free {
     /// than `largest` bytes, and of the rest those beyond the first `total` bytes, smallest kept first
     /// (a size is kept whole or not at all). `split_off(0, 0)` takes everything.
     fn split_off(&mut self, largest: usize, total: usize) -> Free {
-        let mut sizes = Vec::new();
-        self.bytes.sizes(&mut sizes);
-        self.words.sizes(&mut sizes);
-        self.ints.sizes(&mut sizes);
-        self.longs.sizes(&mut sizes);
-        self.keypoints.sizes(&mut sizes);
-        let keep = kept_size(sizes, largest, total);
+        let keep = kept_size(self.sizes(), largest, total);
         let mut gone = Free::default();
         self.bytes.split_off(keep, &mut gone.bytes);
         self.words.split_off(keep, &mut gone.words);
@@ -158,15 +152,20 @@ impl Free {
             + both(self.keypoints.device.len(), self.keypoints.host.len())
     }
 
-    /// The bytes of every buffer the lists hold.
-    fn bytes(&self) -> usize {
+    /// The size in bytes of every buffer the lists hold.
+    fn sizes(&self) -> Vec<usize> {
         let mut sizes = Vec::new();
         self.bytes.sizes(&mut sizes);
         self.words.sizes(&mut sizes);
         self.ints.sizes(&mut sizes);
         self.longs.sizes(&mut sizes);
         self.keypoints.sizes(&mut sizes);
-        sizes.iter().sum()
+        sizes
+    }
+
+    /// The bytes of every buffer the lists hold.
+    fn bytes(&self) -> usize {
+        self.sizes().iter().sum()
     }
 
     /// Whether a texture object is kept with one of the device buffers.

@@ -173,9 +173,9 @@ pub(crate) fn upload_rows(
     Ok(())
 }
 
-/// Drops the idle staging buffers of device `ordinal` (each once its copy has run) and returns how
-/// many: [`crate::cuda::release_cached_memory`]. Buffers of uploads in progress come back later.
-pub(crate) fn release_idle_staging(ordinal: usize) -> usize {
+/// Drops the idle staging buffers of device `ordinal`, each once its copy has run:
+/// [`crate::cuda::release_cached_memory`]. Buffers of uploads in progress come back later.
+pub(crate) fn release_idle_staging(ordinal: usize) {
     let idle = {
         let mut pool = pool().lock().unwrap_or_else(|p| p.into_inner());
         let idle = pool.idle.remove(&ordinal).unwrap_or_default();
@@ -183,7 +183,7 @@ pub(crate) fn release_idle_staging(ordinal: usize) -> usize {
         idle
     };
     // Dropped outside the lock: each waits for its last copy.
-    idle.len()
+    drop(idle);
 }
 
 /// The staging buffers of device `ordinal` (idle or in use) and, of them, the idle ones.

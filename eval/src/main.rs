@@ -6,6 +6,7 @@
 mod chart;
 mod degrade;
 mod error;
+mod facade;
 mod geometry;
 mod harness;
 mod inputs;
@@ -93,6 +94,7 @@ fn main() -> ExitCode {
     // Subcommands ahead of the descriptor evaluation's flags, which stay as they were.
     let first = std::env::args().nth(1);
     let result = match first.as_deref() {
+        Some("facade") => facade::run(&facade::FacadeArgs::parse_from(std::env::args().skip(1))),
         Some("geometry") => geometry::run(&geometry::GeometryArgs::parse_from(
             std::env::args().skip(1),
         )),

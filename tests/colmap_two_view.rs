@@ -402,7 +402,7 @@ fn write_match_list(path: &Path, matches: impl Fn(usize, usize) -> Vec<[u32; 2]>
 /// Inliers of a pair: every third point, offset by the pair so that the pairs differ.
 fn chosen_inliers(a: usize, b: usize) -> Vec<[u32; 2]> {
     (0..POINTS as u32)
-        .filter(|k| (k + a as u32 + 2 * b as u32) % 3 == 0)
+        .filter(|k| (k + a as u32 + 2 * b as u32).is_multiple_of(3))
         .map(|k| [k, k])
         .collect()
 }

@@ -313,3 +313,34 @@ fn framing_distance(planes: &[Plane], target: Vec3, k: Mat3, width: u32, height:
         distance *= 1.02;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cameras_look_at_their_target_and_frame_the_planes() {
+        let planes = scene_planes(true, 10.0, 6.0);
+        let target = [0.0, 0.0, -3.0];
+        let k = [[900.0, 0.0, 500.0], [0.0, 900.0, 300.0], [0.0, 0.0, 1.0]];
+        let d = framing_distance(&planes, target, k, 1000, 600);
+        let centre = add(target, [0.0, 0.0, -d]);
+        let r = look_at(centre, target, 0.0);
+        let camera = TrueCamera {
+            name: String::new(),
+            width: 1000,
+            height: 600,
+            k,
+            r,
+            t: scale(apply(&r, centre), -1.0),
+        };
+        let [u, v] = camera.project(target).unwrap();
+        assert!((u - 500.0).abs() < 1e-9 && (v - 300.0).abs() < 1e-9);
+        for p in &planes {
+            let [u, v] = camera.project(p.point([p.width, p.height])).unwrap();
+            assert!((0.0..1000.0).contains(&u) && (0.0..600.0).contains(&v));
+        }
+        assert_eq!(parse_crop("1,2,30,40"), Ok((1, 2, 30, 40)));
+        assert!(parse_crop("1,2,3").is_err());
+    }
+}

@@ -311,3 +311,64 @@ fn render(report: &GeometryReport, every_pair: bool, with_surface: bool) -> Stri
     }
     text
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::linalg::{add, axis_angle, scale};
+    use crate::geometry::truth::{Plane, TrueCamera};
+    use clap::CommandFactory;
+
+    fn camera(name: &str, yaw: f64, centre: [f64; 3]) -> TrueCamera {
+        let r = axis_angle([0.0, 1.0, 0.0], yaw);
+        TrueCamera {
+            name: name.into(),
+            width: 800,
+            height: 600,
+            k: [[700.0, 0.0, 400.0], [0.0, 710.0, 300.0], [0.0, 0.0, 1.0]],
+            r,
+            t: scale(apply(&r, centre), -1.0),
+        }
+    }
+
+    #[test]
+    fn true_projections_are_on_the_true_epipolar_lines_and_transfer() {
+        let a = camera("a", 0.0, [0.0, 0.0, -10.0]);
+        let b = camera("b", -15.0, [3.0, 0.5, -9.5]);
+        let plane = Plane {
+            origin: [-4.0, -3.0, 0.0],
+            u: [1.0, 0.0, 0.0],
+            v: [0.0, 1.0, 0.0],
+            width: 8.0,
+            height: 6.0,
+        };
+        let truth = Truth {
+            description: String::new(),
+            cameras: vec![a.clone(), b.clone()],
+            planes: vec![plane.clone()],
+        };
+        let f = fundamental(&a, &b).unwrap();
+        for ab in [[1.0, 1.0], [4.0, 3.0], [7.5, 5.0]] {
+            let x = plane.point(ab);
+            let (xa, xb) = (a.project(x).unwrap(), b.project(x).unwrap());
+            assert!(symmetric_epipolar_distance(&f, xa, xb) < 1e-9);
+            assert!(transfer_error(&truth, (&a, xa), (&b, xb)).unwrap() < 1e-6);
+            // One pixel across the epipolar line is one pixel off in image b.
+            let line = apply(&f, [xa[0], xa[1], 1.0]);
+            let n = (line[0] * line[0] + line[1] * line[1]).sqrt();
+            let off = [xb[0] + line[0] / n, xb[1] + line[1] / n];
+            let d = symmetric_epipolar_distance(&f, xa, off);
+            assert!(d >= 1.0 - 1e-9, "{d}");
+            // A point off the plane is not on the surface seen there.
+            let behind = add(x, [0.0, 0.0, 2.0]);
+            let (ya, yb) = (a.project(behind).unwrap(), b.project(behind).unwrap());
+            assert!(transfer_error(&truth, (&a, ya), (&b, yb)).unwrap() > 1.0);
+        }
+    }
+
+    #[test]
+    fn the_command_line_is_consistent() {
+        GeometryArgs::command().debug_assert();
+        crate::facade::FacadeArgs::command().debug_assert();
+    }
+}

@@ -48,6 +48,10 @@ fn main() {
             "colmap_estimated_geometry_reads_as_truth_and_writes_back",
             estimated_geometry_round_trip,
         ),
+        Trial::test(
+            "colmap_failed_pair_is_stored_as_colmap_stores_it",
+            failed_pair_as_colmap,
+        ),
     ];
     if let Err(reason) = colmap_version() {
         println!("skipped: colmap not installed ({reason})");
@@ -260,7 +264,11 @@ fn s(path: &Path) -> &str {
 fn mapper_registers_images() -> Result<(), Failed> {
     let dir = workspace("mapper");
     let scene = scene();
-    let (path, mut db, ids) = scene_database(&dir, "written.db", &scene);
+    // As a verifier would: the database written first (as `clatch colmap --no-colmap` does), opened
+    // again for the geometries.
+    let (path, db, ids) = scene_database(&dir, "written.db", &scene);
+    db.finish()?;
+    let mut db = Database::open_existing(&path)?;
     for (a, b) in pairs() {
         let (e, f, pose) = scene.geometry(a, b);
         db.add_two_view_geometry(&TwoViewGeometry {
@@ -371,13 +379,13 @@ fn read_rows(path: &Path) -> Vec<(i64, Row)> {
                 Row {
                     rows: r.get(1)?,
                     cols: r.get(2)?,
-                    data: r.get(3)?,
+                    data: r.get::<_, Option<Vec<u8>>>(3)?.unwrap_or_default(),
                     config: r.get(4)?,
-                    f: r.get(5)?,
-                    e: r.get(6)?,
-                    h: r.get(7)?,
-                    qvec: r.get(8)?,
-                    tvec: r.get(9)?,
+                    f: r.get::<_, Option<Vec<u8>>>(5)?.unwrap_or_default(),
+                    e: r.get::<_, Option<Vec<u8>>>(6)?.unwrap_or_default(),
+                    h: r.get::<_, Option<Vec<u8>>>(7)?.unwrap_or_default(),
+                    qvec: r.get::<_, Option<Vec<u8>>>(8)?.unwrap_or_default(),
+                    tvec: r.get::<_, Option<Vec<u8>>>(9)?.unwrap_or_default(),
                 },
             ))
         })
@@ -668,6 +676,66 @@ fn estimated_geometry_round_trip() -> Result<(), Failed> {
                 return Err(format!("pair {pair}: turned {name} {y:?}, COLMAP's {x:?}").into());
             }
         }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+    Ok(())
+}
+
+/// A pair that fails verification (3 matches): COLMAP stores `rows` 0, `cols` 2, config 1 and NULL
+/// blobs; so does the writer for a pair without inliers.
+fn failed_pair_as_colmap() -> Result<(), Failed> {
+    let dir = workspace("failed");
+    let scene = scene();
+    let (imported, db, ids) = scene_database(&dir, "imported.db", &scene);
+    db.finish()?;
+    let list = dir.join("matches.txt");
+    std::fs::write(
+        &list,
+        format!("{} {}\n0 0\n1 1\n2 2\n\n", image_name(0), image_name(1)),
+    )?;
+    colmap(&[
+        "matches_importer",
+        "--database_path",
+        s(&imported),
+        "--match_list_path",
+        s(&list),
+        "--match_type",
+        "raw",
+        "--SiftMatching.use_gpu",
+        "0",
+    ])?;
+    let (written, db, _) = scene_database(&dir, "written.db", &scene);
+    db.finish()?;
+    let mut db = Database::open_existing(&written)?;
+    db.add_two_view_geometry(&TwoViewGeometry::new(
+        ids[0],
+        ids[1],
+        vec![],
+        TwoViewConfig::Degenerate,
+    ))?;
+    db.finish()?;
+    let describe = |path: &Path| -> Vec<String> {
+        let sql = Connection::open(path).unwrap();
+        let mut statement = sql
+            .prepare(
+                "SELECT pair_id, rows, cols, config, typeof(data), typeof(F), typeof(E), \
+                 typeof(H), typeof(qvec), typeof(tvec) FROM two_view_geometries",
+            )
+            .unwrap();
+        statement
+            .query_map([], |r| {
+                Ok((0..10)
+                    .map(|i| r.get_ref(i).map(|v| format!("{v:?}")))
+                    .collect::<Result<Vec<_>, _>>()?
+                    .join(" "))
+            })
+            .unwrap()
+            .map(Result::unwrap)
+            .collect()
+    };
+    let (theirs, ours) = (describe(&imported), describe(&written));
+    if theirs.len() != 1 || theirs != ours {
+        return Err(format!("COLMAP {theirs:?}\nours   {ours:?}").into());
     }
     std::fs::remove_dir_all(&dir).ok();
     Ok(())

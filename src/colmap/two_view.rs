@@ -11,7 +11,8 @@
 //!   `x_max ~ H x_min`);
 //! - `qvec` (w, x, y, z, four float64) and `tvec` (three float64): the pose of the larger id's camera
 //!   relative to the smaller's (`X_max = R(qvec) X_min + tvec`);
-//! - a pair without inliers gets empty matrix blobs, as COLMAP writes it;
+//! - a pair without inliers (a failed verification, config [`TwoViewConfig::Degenerate`] for
+//!   COLMAP) has `rows` 0, `cols` 2 and NULL in `data` and every matrix column, as COLMAP writes it;
 //! - a matrix or pose not given is stored as zeros: what COLMAP 3.8 stores for a geometry it did not
 //!   estimate (`matches_importer --match_type inliers` writes zero F, E, H, qvec and tvec, and
 //!   config [`TwoViewConfig::Calibrated`]).
@@ -248,48 +249,49 @@ impl TwoViewGeometry {
     }
 }
 
-/// The blobs of one `two_view_geometries` row, in COLMAP's orientation (smaller id first).
+/// The blobs of one `two_view_geometries` row, in COLMAP's orientation (smaller id first). A pair
+/// without inliers has NULL in every blob column, as COLMAP binds its empty matrices (a null data
+/// pointer).
 pub(crate) struct TwoViewBlobs {
-    pub inliers: Vec<u8>,
-    pub f: Vec<u8>,
-    pub e: Vec<u8>,
-    pub h: Vec<u8>,
-    pub qvec: Vec<u8>,
-    pub tvec: Vec<u8>,
+    pub inliers: Option<Vec<u8>>,
+    pub f: Option<Vec<u8>>,
+    pub e: Option<Vec<u8>>,
+    pub h: Option<Vec<u8>>,
+    pub qvec: Option<Vec<u8>>,
+    pub tvec: Option<Vec<u8>>,
 }
 
 impl TwoViewBlobs {
     /// The blobs of a geometry already in COLMAP's order (see [`TwoViewGeometry::in_colmap_order`]).
     pub(crate) fn of(geometry: &TwoViewGeometry) -> Self {
+        if geometry.inliers.is_empty() {
+            return Self {
+                inliers: None,
+                f: None,
+                e: None,
+                h: None,
+                qvec: None,
+                tvec: None,
+            };
+        }
         let inliers = geometry
             .inliers
             .iter()
             .flatten()
             .flat_map(|v| v.to_le_bytes())
             .collect();
-        if geometry.inliers.is_empty() {
-            // COLMAP binds 0x0 matrices: empty blobs.
-            return Self {
-                inliers,
-                f: Vec::new(),
-                e: Vec::new(),
-                h: Vec::new(),
-                qvec: Vec::new(),
-                tvec: Vec::new(),
-            };
-        }
         let zero = [[0.0; 3]; 3];
         let pose = geometry.pose.unwrap_or(RelativePose {
             qvec: [0.0; 4],
             tvec: [0.0; 3],
         });
         Self {
-            inliers,
-            f: matrix_blob(&geometry.f.unwrap_or(zero)),
-            e: matrix_blob(&geometry.e.unwrap_or(zero)),
-            h: matrix_blob(&geometry.h.unwrap_or(zero)),
-            qvec: f64s_blob(&pose.qvec),
-            tvec: f64s_blob(&pose.tvec),
+            inliers: Some(inliers),
+            f: Some(matrix_blob(&geometry.f.unwrap_or(zero))),
+            e: Some(matrix_blob(&geometry.e.unwrap_or(zero))),
+            h: Some(matrix_blob(&geometry.h.unwrap_or(zero))),
+            qvec: Some(f64s_blob(&pose.qvec)),
+            tvec: Some(f64s_blob(&pose.tvec)),
         }
     }
 }
@@ -424,27 +426,15 @@ mod tests {
     }
 
     #[test]
-    fn a_pair_without_inliers_has_empty_matrix_blobs() {
-        let blobs = TwoViewBlobs::of(&TwoViewGeometry::new(
-            1,
-            2,
-            vec![],
-            TwoViewConfig::Degenerate,
-        ));
-        assert!(
-            blobs.inliers.is_empty()
-                && blobs.f.is_empty()
-                && blobs.qvec.is_empty()
-                && blobs.tvec.is_empty()
-        );
-        let blobs = TwoViewBlobs::of(&TwoViewGeometry::new(
-            1,
-            2,
-            vec![[0, 1]],
-            TwoViewConfig::Uncalibrated,
-        ));
-        assert_eq!(blobs.inliers, [0, 0, 0, 0, 1, 0, 0, 0]);
-        assert_eq!(f64s_of_blob(&blobs.qvec), [0.0; 4]);
-        assert_eq!(f64s_of_blob(&blobs.f), [0.0; 9]);
+    fn a_pair_without_inliers_has_null_blobs() {
+        let empty = TwoViewGeometry::new(1, 2, vec![], TwoViewConfig::Degenerate);
+        let blobs = TwoViewBlobs::of(&empty);
+        assert!(blobs.inliers.is_none() && blobs.f.is_none() && blobs.h.is_none());
+        assert!(blobs.qvec.is_none() && blobs.tvec.is_none());
+        let one = TwoViewGeometry::new(1, 2, vec![[0, 1]], TwoViewConfig::Uncalibrated);
+        let blobs = TwoViewBlobs::of(&one);
+        assert_eq!(blobs.inliers.unwrap(), [0, 0, 0, 0, 1, 0, 0, 0]);
+        assert_eq!(f64s_of_blob(&blobs.qvec.unwrap()), [0.0; 4]);
+        assert_eq!(f64s_of_blob(&blobs.f.unwrap()), [0.0; 9]);
     }
 }

@@ -88,6 +88,21 @@ fn colmap(args: &[&str]) -> Result<String, Failed> {
     Ok(text)
 }
 
+/// `colmap matches_importer` of a match list (`raw`: COLMAP verifies; `inliers`: taken as verified).
+fn import_matches(database: &Path, list: &Path, match_type: &str) -> Result<String, Failed> {
+    colmap(&[
+        "matches_importer",
+        "--database_path",
+        s(database),
+        "--match_list_path",
+        s(list),
+        "--match_type",
+        match_type,
+        "--SiftMatching.use_gpu",
+        "0",
+    ])
+}
+
 /// A fresh folder for one test.
 fn workspace(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("clatch-two-view-{}-{name}", std::process::id()));
@@ -422,17 +437,7 @@ fn inliers_import_writes_our_rows() -> Result<(), Failed> {
     db.finish()?;
     let list = dir.join("matches.txt");
     write_match_list(&list, chosen_inliers);
-    colmap(&[
-        "matches_importer",
-        "--database_path",
-        s(&imported),
-        "--match_list_path",
-        s(&list),
-        "--match_type",
-        "inliers",
-        "--SiftMatching.use_gpu",
-        "0",
-    ])?;
+    import_matches(&imported, &list, "inliers")?;
     let (written, mut db, ids) = scene_database(&dir, "written.db", &scene);
     for (a, b) in pairs() {
         db.add_two_view_geometry(&TwoViewGeometry::new(
@@ -552,17 +557,7 @@ fn estimated_geometry_round_trip() -> Result<(), Failed> {
     db.finish()?;
     let list = dir.join("matches.txt");
     write_match_list(&list, putative);
-    colmap(&[
-        "matches_importer",
-        "--database_path",
-        s(&verified),
-        "--match_list_path",
-        s(&list),
-        "--match_type",
-        "raw",
-        "--SiftMatching.use_gpu",
-        "0",
-    ])?;
+    import_matches(&verified, &list, "raw")?;
     let theirs = read_rows(&verified);
     if theirs.len() != pairs().len() {
         return Err(format!(
@@ -693,17 +688,7 @@ fn failed_pair_as_colmap() -> Result<(), Failed> {
         &list,
         format!("{} {}\n0 0\n1 1\n2 2\n\n", image_name(0), image_name(1)),
     )?;
-    colmap(&[
-        "matches_importer",
-        "--database_path",
-        s(&imported),
-        "--match_list_path",
-        s(&list),
-        "--match_type",
-        "raw",
-        "--SiftMatching.use_gpu",
-        "0",
-    ])?;
+    import_matches(&imported, &list, "raw")?;
     let (written, db, _) = scene_database(&dir, "written.db", &scene);
     db.finish()?;
     let mut db = Database::open_existing(&written)?;

@@ -287,20 +287,8 @@ impl Database {
             self.keypoint_count(image_id1)?,
             self.keypoint_count(image_id2)?,
         );
-        for (index, &[k1, k2]) in geometry.inliers.iter().enumerate() {
-            for (image_id, keypoint, keypoints) in [(image_id1, k1, n1), (image_id2, k2, n2)] {
-                if keypoint as usize >= keypoints {
-                    return Err(ColmapError::MatchOutOfRange {
-                        index,
-                        image_id1,
-                        image_id2,
-                        image_id,
-                        keypoint,
-                        keypoints,
-                    });
-                }
-            }
-        }
+        let pairs = geometry.inliers.iter().map(|&[k1, k2]| (k1, k2));
+        check_index_pairs(image_id1, image_id2, pairs, n1, n2)?;
         let rows = i64::try_from(geometry.inliers.len()).map_err(|_| ColmapError::TooMany {
             what: "inlier matches",
             count: geometry.inliers.len(),
@@ -356,9 +344,20 @@ pub fn check_match_indices(
     n1: usize,
     n2: usize,
 ) -> Result<(), ColmapError> {
-    for (index, m) in matches.iter().enumerate() {
-        for (image_id, keypoint, keypoints) in [(image_id1, m.query, n1), (image_id2, m.train, n2)]
-        {
+    let pairs = matches.iter().map(|m| (m.query, m.train));
+    check_index_pairs(image_id1, image_id2, pairs, n1, n2)
+}
+
+/// Checks index pairs `(keypoint of image 1, keypoint of image 2)` against the keypoint counts.
+fn check_index_pairs(
+    image_id1: u32,
+    image_id2: u32,
+    pairs: impl Iterator<Item = (u32, u32)>,
+    n1: usize,
+    n2: usize,
+) -> Result<(), ColmapError> {
+    for (index, (k1, k2)) in pairs.enumerate() {
+        for (image_id, keypoint, keypoints) in [(image_id1, k1, n1), (image_id2, k2, n2)] {
             if keypoint as usize >= keypoints {
                 return Err(ColmapError::MatchOutOfRange {
                     index,

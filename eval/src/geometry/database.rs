@@ -52,21 +52,13 @@ pub fn read_database(path: &Path) -> Result<DatabaseContents, EvalError> {
         images.insert(id as u32, name);
     }
     let mut keypoints = HashMap::new();
-    let mut statement = sql
-        .prepare("SELECT image_id, rows, cols, data FROM keypoints")
-        .map_err(&fail)?;
-    let rows = statement
-        .query_map([], |r| {
-            Ok((
-                r.get::<_, i64>(0)?,
-                r.get::<_, i64>(1)?,
-                r.get::<_, i64>(2)?,
-                r.get::<_, Vec<u8>>(3)?,
-            ))
-        })
-        .map_err(&fail)?;
-    for row in rows {
-        let (id, n, cols, data) = row.map_err(&fail)?;
+    let rows = four_columns(
+        &sql,
+        "SELECT image_id, rows, cols, data FROM keypoints",
+        &fail,
+    )?;
+    for (id, n, cols, data) in rows {
+        let data = data.unwrap_or_default();
         let (n, cols) = (n as usize, cols as usize);
         if cols < 2 || data.len() != n * cols * 4 {
             return Err(EvalError::Input {
@@ -88,21 +80,12 @@ pub fn read_database(path: &Path) -> Result<DatabaseContents, EvalError> {
         keypoints.insert(id as u32, positions);
     }
     let mut pairs = Vec::new();
-    let mut statement = sql
-        .prepare("SELECT pair_id, rows, data, config FROM two_view_geometries ORDER BY pair_id")
-        .map_err(&fail)?;
-    let rows = statement
-        .query_map([], |r| {
-            Ok((
-                r.get::<_, i64>(0)?,
-                r.get::<_, i64>(1)?,
-                r.get::<_, Option<Vec<u8>>>(2)?,
-                r.get::<_, i64>(3)?,
-            ))
-        })
-        .map_err(&fail)?;
-    for row in rows {
-        let (pair_id, n, data, config) = row.map_err(&fail)?;
+    let rows = four_columns(
+        &sql,
+        "SELECT pair_id, rows, config, data FROM two_view_geometries ORDER BY pair_id",
+        &fail,
+    )?;
+    for (pair_id, n, config, data) in rows {
         let data = data.unwrap_or_default();
         if data.len() != n as usize * 8 {
             return Err(EvalError::Input {
@@ -127,4 +110,17 @@ pub fn read_database(path: &Path) -> Result<DatabaseContents, EvalError> {
         keypoints,
         pairs,
     })
+}
+
+/// The rows of a query of three integers and a blob (NULL as `None`).
+fn four_columns(
+    sql: &Connection,
+    query: &str,
+    fail: &impl Fn(rusqlite::Error) -> EvalError,
+) -> Result<Vec<(i64, i64, i64, Option<Vec<u8>>)>, EvalError> {
+    let mut statement = sql.prepare(query).map_err(fail)?;
+    let rows = statement
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)))
+        .map_err(fail)?;
+    rows.collect::<Result<_, _>>().map_err(fail)
 }

@@ -64,26 +64,8 @@ pub fn invert(m: &Mat3) -> Option<Mat3> {
         .then(|| [0, 1, 2].map(|r| [0, 1, 2].map(|c| cofactor(c, r) / det)))
 }
 
-/// The rotation of a unit quaternion `(w, x, y, z)`.
-pub fn quaternion_to_rotation([w, x, y, z]: [f64; 4]) -> Mat3 {
-    [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ]
-}
+/// The rotation of a unit quaternion `(w, x, y, z)`, as COLMAP defines it.
+pub use clatch::colmap::two_view::quaternion_rotation as quaternion_to_rotation;
 
 /// The angle of a rotation matrix, degrees.
 pub fn rotation_angle_degrees(r: &Mat3) -> f64 {

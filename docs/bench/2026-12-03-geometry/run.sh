@@ -20,7 +20,12 @@ run() { # run NAME IMAGES K SCENE
     $eval geometry --scene "$scene" --database clatch_$name.db --model clatch_$name-colmap/sparse/0 --pairs \
         --json clatch_$name.geometry.json
     "$repo"/eval/scripts/colmap_sift_baseline.sh "$images" "$k" sift_$name | tee sift_$name.out
-    $eval geometry --scene "$scene" --database sift_$name/database.db --model sift_$name/sparse/0 --pairs \
+    # K kept fixed, as clatch colmap maps (the script's mapping refines the focal length)
+    rm -rf sift_$name/sparse_fixedf && mkdir -p sift_$name/sparse_fixedf
+    /usr/bin/time -f "%e %U %S" -o sift_$name.fixedf.time colmap mapper --database_path sift_$name/database.db \
+        --image_path "$images" --output_path sift_$name/sparse_fixedf --Mapper.ba_refine_focal_length 0 \
+        > sift_$name.fixedf.log 2>&1
+    $eval geometry --scene "$scene" --database sift_$name/database.db --model sift_$name/sparse_fixedf/0 --pairs \
         --json sift_$name.geometry.json
 }
 run herz "$H/images" "$H/K.txt" "$H"

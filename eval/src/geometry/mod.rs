@@ -11,8 +11,9 @@
 //!   this is the stricter test: a match one period off along the epipolar line passes the epipolar
 //!   test but not this one.
 //!
-//! With `--model`, the model's registered images, 3-D points, and camera centre and rotation errors
-//! after a least-squares similarity alignment of the centres.
+//! With `--model`, the model's registered images, 3-D points, the relative rotation error of every
+//! pair of images (no alignment needed), and camera centre and rotation errors after a least-squares
+//! similarity alignment of the centres.
 
 pub mod linalg;
 pub mod truth;
@@ -297,12 +298,17 @@ fn render(report: &GeometryReport, every_pair: bool, with_surface: bool) -> Stri
     if let Some(model) = &report.model {
         let (centre_mean, centre_max) = model.centre_mean_max();
         let (rotation_mean, rotation_max) = model.rotation_mean_max();
+        let (relative_mean, relative_max) = model.relative_rotation_mean_max();
         text += &format!(
-            "\nmodel: {}/{} images registered, {} points; camera centre error mean {:.4} max {:.4} \
-             (scene units), rotation error mean {:.3}° max {:.3}° (after a similarity alignment)\n",
+            "\nmodel: {}/{} images registered, {} points\n\
+             relative rotation error (every pair of images, no alignment): mean {:.3}° max {:.3}°\n\
+             after a similarity alignment of the camera centres: centre error mean {:.4} max {:.4} \
+             (scene units), rotation error mean {:.3}° max {:.3}°\n",
             model.registered,
             model.images,
             model.points,
+            relative_mean,
+            relative_max,
             centre_mean,
             centre_max,
             rotation_mean,

@@ -29,6 +29,10 @@ pub struct PoseErrors {
     /// Per registered image with a true camera: name, centre error (truth's units), rotation error
     /// (degrees), after the alignment.
     pub per_image: Vec<(String, f64, f64)>,
+    /// Per pair of registered images: the angle between the model's relative rotation and the
+    /// truth's, degrees. Needs no alignment, so it also holds where the centres fix the alignment
+    /// poorly (cameras nearly on a line, as on an arc of a few tens of degrees).
+    pub relative_rotation_errors: Vec<f64>,
 }
 
 impl PoseErrors {
@@ -37,6 +41,9 @@ impl PoseErrors {
     }
     pub fn rotation_mean_max(&self) -> (f64, f64) {
         mean_max(self.per_image.iter().map(|e| e.2))
+    }
+    pub fn relative_rotation_mean_max(&self) -> (f64, f64) {
+        mean_max(self.relative_rotation_errors.iter().copied())
     }
 }
 
@@ -145,7 +152,17 @@ fn compare(images: &[ModelImage], points: usize, truth: &Truth) -> PoseErrors {
             .collect(),
         None => Vec::new(),
     };
+    let mut relative_rotation_errors = Vec::new();
+    for (i, (image_a, camera_a)) in matched.iter().enumerate() {
+        for (image_b, camera_b) in &matched[i + 1..] {
+            let estimated = mul(&image_b.r, &transpose(&image_a.r));
+            let true_relative = mul(&camera_b.r, &transpose(&camera_a.r));
+            let error = mul(&estimated, &transpose(&true_relative));
+            relative_rotation_errors.push(rotation_angle_degrees(&error));
+        }
+    }
     PoseErrors {
+        relative_rotation_errors,
         registered: images.len(),
         images: truth.cameras.len(),
         points,

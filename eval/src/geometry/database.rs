@@ -112,12 +112,15 @@ pub fn read_database(path: &Path) -> Result<DatabaseContents, EvalError> {
     })
 }
 
-/// The rows of a query of three integers and a blob (NULL as `None`).
+/// Three integers and a blob (NULL as `None`): a keypoints or two_view_geometries row.
+type BlobRow = (i64, i64, i64, Option<Vec<u8>>);
+
+/// The rows of a query of three integers and a blob.
 fn four_columns(
     sql: &Connection,
     query: &str,
     fail: &impl Fn(rusqlite::Error) -> EvalError,
-) -> Result<Vec<(i64, i64, i64, Option<Vec<u8>>)>, EvalError> {
+) -> Result<Vec<BlobRow>, EvalError> {
     let mut statement = sql.prepare(query).map_err(fail)?;
     let rows = statement
         .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)))

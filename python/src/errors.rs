@@ -30,6 +30,8 @@ pub enum Class {
     ImageRead,
     /// The COLMAP database or match list could not be written (also an `OSError`).
     Database,
+    /// An argument of the wrong Python type (also a `TypeError`).
+    ArgumentType,
 }
 
 impl Class {
@@ -42,11 +44,13 @@ impl Class {
             Class::DeviceOutOfMemory => "DeviceOutOfMemoryError",
             Class::ImageRead => "ImageReadError",
             Class::Database => "DatabaseError",
+            Class::ArgumentType => "ArgumentTypeError",
         }
     }
 
     fn cell(self) -> &'static PyOnceLock<Py<PyType>> {
-        static CELLS: [PyOnceLock<Py<PyType>>; 7] = [
+        static CELLS: [PyOnceLock<Py<PyType>>; 8] = [
+            PyOnceLock::new(),
             PyOnceLock::new(),
             PyOnceLock::new(),
             PyOnceLock::new(),
@@ -128,8 +132,38 @@ fn class_of(e: &clatch::Error) -> Class {
 
 /// A library error as its Python exception, with the error's `Display` message and its
 /// [`clatch::Error::kind`] as `kind`.
+///
+/// Image sizes are written as numpy writes shapes, `(H, W)`, rather than the library's `W x H`.
 pub fn from_clatch(py: Python<'_>, e: clatch::Error) -> PyErr {
-    raise(py, class_of(&e), e.kind().name(), e.to_string())
+    use clatch::Error as E;
+    let message = match e {
+        E::EmptyImage { width, height } => format!(
+            "image is empty: shape ({height}, {width}); height and width must both be at least 1"
+        ),
+        E::ImageTooSmall { width, height, min } => format!(
+            "image of shape ({height}, {width}) is smaller than the {min}x{min} descriptor window"
+        ),
+        E::ImageTooLarge { width, height, max } => format!(
+            "image of shape ({height}, {width}) exceeds the largest supported side of {max} pixels"
+        ),
+        _ => e.to_string(),
+    };
+    raise(py, class_of(&e), e.kind().name(), message)
+}
+
+/// An `ArgumentTypeError` (a `ClatchError` and a `TypeError`): argument `name` is not `expected`.
+pub fn wrong_type(obj: &Bound<'_, PyAny>, name: &str, expected: &str) -> PyErr {
+    let type_name = obj
+        .get_type()
+        .name()
+        .map(|n| n.to_string())
+        .unwrap_or_else(|_| "?".into());
+    raise(
+        obj.py(),
+        Class::ArgumentType,
+        "WrongType",
+        format!("{name} must be {expected}, got {type_name}"),
+    )
 }
 
 /// An image decoding error (`clatch.imread`) as an `ImageReadError`.

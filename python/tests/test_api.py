@@ -17,7 +17,7 @@ from clatch import _clatch
 from helpers import ASTRONAUT, synthetic
 
 STUB = Path(_clatch.__file__).with_name("_clatch.pyi")
-PUBLIC_CLASSES = [clatch.Extractor, clatch.Matcher, clatch.colmap.ImageFolder]
+PUBLIC_CLASSES = [clatch.Extractor, clatch.Matcher, clatch.OpencvLatch, clatch.colmap.ImageFolder]
 # Made by the package only (no constructor): documented and in the stub all the same.
 MADE_CLASSES = [clatch.colmap.PinholeCamera]
 
@@ -59,7 +59,8 @@ def test_the_stub_lists_what_the_module_has():
     for cls in PUBLIC_CLASSES + MADE_CLASSES:
         runtime = {n for n in vars(cls) if not n.startswith("_")}
         assert runtime == {n for n in classes[cls.__name__] if not n.startswith("_")}, cls.__name__
-    assert set(clatch.__all__) <= names | {n for n in dir(clatch._exceptions) if not n.startswith("_")}
+    python_side = set(clatch._exceptions.__all__) | set(clatch._interop.__all__)
+    assert set(clatch.__all__) <= names | python_side
 
 
 def test_signatures_follow_the_stub():

@@ -7,7 +7,7 @@ use pyo3::types::{PyBool, PyDict, PyList, PyTuple};
 use crate::args;
 use crate::arrays::{Channels, ImageInput, descriptors_out, keypoints_in, keypoints_out};
 use crate::backend::{backend_error, parse_backend};
-use crate::errors::{OrRaise, compute, invalid_input};
+use crate::errors::{OrRaise, compute, invalid_input, wrong_type};
 
 /// Finds FAST keypoints and computes their 512-bit CLATCH descriptors.
 ///
@@ -380,7 +380,7 @@ impl Extractor {
     fn describe_opencv<'py>(
         &self,
         py: Python<'py>,
-        latch: PyRef<'py, OpencvLatch>,
+        #[pyo3(from_py_with = latch_arg)] latch: Bound<'py, OpencvLatch>,
         image: &Bound<'py, PyAny>,
         keypoints: &Bound<'py, PyAny>,
         #[pyo3(from_py_with = args::channels)] channels: String,
@@ -388,10 +388,17 @@ impl Extractor {
         let input = ImageInput::new(image, "image", Channels::parse(py, &channels)?)?;
         let keypoints = keypoints_in(keypoints, "keypoints")?;
         let view = input.view().or_raise(py)?;
-        let latch = &latch.inner;
+        let latch = &latch.get().inner;
         let features = compute(py, || self.inner.describe_opencv(latch, &view, &keypoints))?;
         Self::described_out(py, features)
     }
+}
+
+/// `latch=`: an `OpencvLatch`, or an `ArgumentTypeError`.
+fn latch_arg<'py>(obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, OpencvLatch>> {
+    obj.cast::<OpencvLatch>()
+        .cloned()
+        .map_err(|_| wrong_type(obj, "latch", "a clatch.OpencvLatch"))
 }
 
 /// OpenCV's LATCH settings (``cv2.xfeatures2d.LATCH_create(bytes, rotationInvariance,

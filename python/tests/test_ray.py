@@ -244,10 +244,18 @@ def test_actors_that_cannot_start_in_time_are_a_cluster_error(cluster, folder, t
     assert not (tmp_path / "out.db").exists()
 
 
+# As in an interactive session: the error is shown, and the session goes on (Ray prints what it
+# finds unhandled a moment later).
 FAILING_RUN = """
+import time, traceback
 import ray, clatch.ray
 ray.init(num_cpus=2, include_dashboard=False)
-clatch.ray.match_folder({folder!r}, {db!r}, num_actors=2, photos_per_task=3)
+try:
+    clatch.ray.match_folder({folder!r}, {db!r}, num_actors=2, photos_per_task=3)
+except clatch.ClatchError:
+    traceback.print_exc()
+import gc; gc.collect()
+time.sleep(3)
 """
 
 
@@ -268,7 +276,7 @@ def test_a_failing_task_prints_one_traceback(folder, tmp_path):
         timeout=300,
         env=env,
     )
-    assert run.returncode == 1
+    assert run.returncode == 0, run.stderr
     err = run.stderr
     assert err.count("Traceback") == 1 and "Unhandled error" not in err, err
-    assert err.rstrip().splitlines()[-1].startswith("clatch._exceptions.ImageReadError") and last.name in err
+    assert "clatch._exceptions.ImageReadError" in err and last.name in err

@@ -12,9 +12,10 @@
 //!   the library's `Vec<Match>`.
 
 use std::mem::{offset_of, size_of};
+use std::ops::Range;
 
 use clatch::{DescriptorSet, DescriptorWidth, GrayView, KeyPoint, Match};
-use numpy::ndarray::{ArrayView2, ArrayViewD, Ix2};
+use numpy::ndarray::{ArrayView2, ArrayViewD, Ix2, s};
 use numpy::{
     Element, IntoPyArray, PyArray1, PyArrayDescr, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods,
     PyReadonlyArray1, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods,
@@ -318,7 +319,7 @@ impl<'py> ImageInput<'py> {
             if gray {
                 // Rows not contiguous (a transposed view, a column step, a broadcast): one
                 // row-major copy.
-                view.iter().copied().collect()
+                gray_copy(view)
             } else {
                 to_luma(view, channels)
             }
@@ -382,13 +383,46 @@ fn to_luma(view: ArrayViewD<'_, u8>, channels: Channels) -> Vec<u8> {
             .map(|p| clatch::decode::luma(p[r], p[g], p[b]))
             .collect();
     }
-    let mut out = Vec::with_capacity(view.shape()[0] * view.shape()[1]);
-    for row in view.outer_iter() {
-        for pixel in row.outer_iter() {
-            out.push(clatch::decode::luma(pixel[r], pixel[g], pixel[b]));
+    let (height, width) = (view.shape()[0], view.shape()[1]);
+    let mut out = vec![0; height * width];
+    for_tiles(height, width, |rows, columns| {
+        let tile = view.slice(s![rows.clone(), columns.clone(), ..]);
+        for (y, row) in rows.zip(tile.outer_iter()) {
+            let line = &mut out[y * width..][columns.clone()];
+            for (value, pixel) in line.iter_mut().zip(row.outer_iter()) {
+                *value = clatch::decode::luma(pixel[r], pixel[g], pixel[b]);
+            }
+        }
+    });
+    out
+}
+
+/// A 2-D `uint8` array's pixels, row-major, whatever its strides.
+fn gray_copy(view: ArrayViewD<'_, u8>) -> Vec<u8> {
+    let (height, width) = (view.shape()[0], view.shape()[1]);
+    let mut out = vec![0; height * width];
+    for_tiles(height, width, |rows, columns| {
+        let tile = view.slice(s![rows.clone(), columns.clone()]);
+        for (y, row) in rows.zip(tile.outer_iter()) {
+            out[y * width..][columns.clone()]
+                .iter_mut()
+                .zip(row)
+                .for_each(|(o, &v)| *o = v);
+        }
+    });
+    out
+}
+
+/// Calls `f(rows, columns)` for the 64 x 64 tiles of a `height` x `width` image, row by row: a
+/// transposed or Fortran-order array is then read a cache-sized block at a time, not a column of
+/// cache misses per row.
+fn for_tiles(height: usize, width: usize, mut f: impl FnMut(Range<usize>, Range<usize>)) {
+    const TILE: usize = 64;
+    for y in (0..height).step_by(TILE) {
+        for x in (0..width).step_by(TILE) {
+            f(y..(y + TILE).min(height), x..(x + TILE).min(width));
         }
     }
-    out
 }
 
 /// Where a 2-D `uint8` array's rows lie when each row is contiguous and rows follow at a positive

@@ -73,11 +73,11 @@ def test_no_layout_holds_the_gil(big_images, layout):
     # call). Released, the stall is a switch interval or the operating system's scheduling on a busy
     # machine (ticks of 4 ms: 2-25 ms seen on 2 loaded cores), so the best of five runs is compared
     # with the call's length, not with 5 ms.
+    # A call shorter than a few switch intervals may pass whole before the other thread runs: a
+    # stall under 6 ms passes whatever the call's length.
     runs = [longest_stall(call) for _ in range(5)]
-    stall, seconds = min(runs, key=lambda r: r[0] / r[1])
-    assert stall < 0.3 * seconds and stall < 0.1, (
-        f"{layout}: another thread stalled {stall * 1000:.1f} ms of a {seconds * 1000:.1f} ms call"
-    )
+    passed = [(stall, seconds) for stall, seconds in runs if stall < max(0.3 * seconds, 0.006) and stall < 0.1]
+    assert passed, f"{layout}: another thread stalled " + ", ".join(f"{a * 1000:.1f} ms of a {b * 1000:.1f} ms call" for a, b in runs)
 
 
 def test_every_layout_gives_the_same_gray(big_images):

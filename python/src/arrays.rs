@@ -24,7 +24,7 @@ use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::PyDict;
 
-use crate::errors::{Class, OrRaise, invalid_input, raise};
+use crate::errors::{Class, OrRaise, invalid_input, raise, type_name};
 
 /// A structured dtype with `fields` (name, numpy type code, byte offset) and `itemsize` bytes.
 fn record_dtype<'py>(
@@ -158,11 +158,7 @@ fn ndarray<'a, 'py>(
     what: &str,
 ) -> PyResult<&'a Bound<'py, PyUntypedArray>> {
     obj.cast::<PyUntypedArray>().map_err(|_| {
-        let type_name = obj
-            .get_type()
-            .name()
-            .map(|n| n.to_string())
-            .unwrap_or_else(|_| "?".into());
+        let type_name = type_name(obj);
         invalid_input(
             obj.py(),
             "NotAnArray",

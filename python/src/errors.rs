@@ -151,13 +151,17 @@ pub fn from_clatch(py: Python<'_>, e: clatch::Error) -> PyErr {
     raise(py, class_of(&e), e.kind().name(), message)
 }
 
-/// An `ArgumentTypeError` (a `ClatchError` and a `TypeError`): argument `name` is not `expected`.
-pub fn wrong_type(obj: &Bound<'_, PyAny>, name: &str, expected: &str) -> PyErr {
-    let type_name = obj
-        .get_type()
+/// The name of `obj`'s Python type, for messages.
+pub fn type_name(obj: &Bound<'_, PyAny>) -> String {
+    obj.get_type()
         .name()
         .map(|n| n.to_string())
-        .unwrap_or_else(|_| "?".into());
+        .unwrap_or_else(|_| "?".into())
+}
+
+/// An `ArgumentTypeError` (a `ClatchError` and a `TypeError`): argument `name` is not `expected`.
+pub fn wrong_type(obj: &Bound<'_, PyAny>, name: &str, expected: &str) -> PyErr {
+    let type_name = type_name(obj);
     raise(
         obj.py(),
         Class::ArgumentType,

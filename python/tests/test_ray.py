@@ -18,7 +18,7 @@ import pytest
 
 import clatch
 import clatch.colmap
-from helpers import photo_folder
+from helpers import broken_copy, photo_folder
 
 try:
     import ray
@@ -168,12 +168,7 @@ def test_bad_input_is_refused_before_any_work(cluster, folder, tmp_path):
 
 
 def test_a_photo_that_fails_on_an_actor_raises_its_own_error(cluster, backend, folder, tmp_path):
-    broken = tmp_path / "broken"
-    broken.mkdir()
-    for photo in folder.iterdir():
-        (broken / photo.name).write_bytes(photo.read_bytes())
-    last = sorted(broken.iterdir())[-1]
-    last.write_bytes(last.read_bytes()[:-5000])  # the header probes fine; decoding fails
+    broken, last = broken_copy(folder, tmp_path / "broken")
     db = tmp_path / "out.db"
     with pytest.raises(clatch.ImageReadError) as e:
         clatch.ray.match_folder(broken, db, backend=backend, num_actors=2)
@@ -262,12 +257,7 @@ time.sleep(3)
 def test_a_failing_task_prints_one_traceback(folder, tmp_path):
     """Finding P12, second half: a photo that fails on an actor printed Ray's "Unhandled error"
     tracebacks of the task's other results besides the clean error. Now one traceback: the error."""
-    broken = tmp_path / "broken"
-    broken.mkdir()
-    for photo in folder.iterdir():
-        (broken / photo.name).write_bytes(photo.read_bytes())
-    last = sorted(broken.iterdir())[-1]
-    last.write_bytes(last.read_bytes()[:-5000])
+    broken, last = broken_copy(folder, tmp_path / "broken")
     env = {k: v for k, v in os.environ.items() if k != "RAY_IGNORE_UNHANDLED_ERRORS"}
     run = subprocess.run(
         [sys.executable, "-c", FAILING_RUN.format(folder=str(broken), db=str(tmp_path / "out.db"))],

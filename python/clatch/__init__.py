@@ -41,6 +41,7 @@ from ._exceptions import (
     ImageReadError,
     InvalidInputError,
     MissingDependencyError,
+    OutOfMemoryError,
 )
 from ._interop import points, to_cv2_keypoints, to_cv2_matches
 from . import colmap
@@ -64,6 +65,7 @@ __all__ = [
     "Matcher",
     "MissingDependencyError",
     "OpencvLatch",
+    "OutOfMemoryError",
     "__version__",
     "imread",
     "points",

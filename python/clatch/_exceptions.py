@@ -21,6 +21,7 @@ __all__ = [
     "DatabaseError",
     "ClusterError",
     "MissingDependencyError",
+    "OutOfMemoryError",
 ]
 
 
@@ -101,3 +102,10 @@ class MissingDependencyError(ClatchError, ImportError):
     (``kind == "MissingDependency"``)."""
 
     kind = "MissingDependency"
+
+
+class OutOfMemoryError(ClatchError, MemoryError):
+    """The memory an input needs (a copy of an image, a descriptor set) cannot be allocated on this
+    machine (``kind == "OutOfMemory"``): raised instead of the process aborting."""
+
+    kind = "OutOfMemory"

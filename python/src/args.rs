@@ -52,6 +52,7 @@ typed_args! {
     k: i64 = "k", "an int";
     n: i64 = "n", "an int";
     path: std::path::PathBuf = "path", "a str or os.PathLike";
+    images_path: std::path::PathBuf = "images", "a str or os.PathLike (a folder)";
     max_pixels: u64 = "max_pixels", "an int >= 0";
     bytes: i64 = "bytes", "an int";
     rotation_invariance: bool = "rotation_invariance", "a bool";

@@ -24,7 +24,7 @@ use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::PyDict;
 
-use crate::errors::{Class, OrRaise, invalid_input, raise, type_name};
+use crate::errors::{Class, OrRaise, invalid_input, out_of_memory, raise, try_buffer, type_name};
 
 /// A structured dtype with `fields` (name, numpy type code, byte offset) and `itemsize` bytes.
 fn record_dtype<'py>(
@@ -311,13 +311,14 @@ impl<'py> ImageInput<'py> {
                 height,
             });
         }
-        let owned = py.detach(|| {
+        let mut owned = try_buffer(py, height * width, what)?;
+        py.detach(|| {
             if gray {
                 // Rows not contiguous (a transposed view, a column step, a broadcast): one
                 // row-major copy.
-                gray_copy(view)
+                gray_copy(view, &mut owned)
             } else {
-                to_luma(view, channels)
+                to_luma(view, channels, &mut owned)
             }
         });
         Ok(Self::owned(owned, width, height))
@@ -358,29 +359,29 @@ impl<'py> ImageInput<'py> {
     /// The gray pixels, row-major (a copy when read in place), made with the GIL released.
     pub fn to_vec(&self, py: Python<'_>) -> PyResult<Vec<u8>> {
         let view = self.view().or_raise(py)?;
-        Ok(py.detach(|| {
-            let mut out = Vec::with_capacity(view.width() * view.height());
-            for y in 0..view.height() {
-                out.extend_from_slice(view.get_row(y).unwrap_or_default());
+        let (width, height) = (view.width(), view.height());
+        let mut out = try_buffer(py, width * height, "image")?;
+        py.detach(|| {
+            for (y, line) in out.chunks_exact_mut(width).enumerate() {
+                line.copy_from_slice(view.get_row(y).unwrap_or_default());
             }
-            out
-        }))
+        });
+        Ok(out)
     }
 }
 
 /// The gray image of an H x W x C (C = 3 or 4) colour image whose colours lie in `channels` order,
-/// with OpenCV's integer weights (`clatch::decode::luma`), any strides.
-fn to_luma(view: ArrayViewD<'_, u8>, channels: Channels) -> Vec<u8> {
+/// with OpenCV's integer weights (`clatch::decode::luma`), any strides, into `out` (H x W).
+fn to_luma(view: ArrayViewD<'_, u8>, channels: Channels, out: &mut [u8]) {
     let [r, g, b] = channels.offsets();
     if let Some(packed) = view.as_slice() {
         let c = view.shape()[2];
-        return packed
-            .chunks_exact(c)
-            .map(|p| clatch::decode::luma(p[r], p[g], p[b]))
-            .collect();
+        for (o, p) in out.iter_mut().zip(packed.chunks_exact(c)) {
+            *o = clatch::decode::luma(p[r], p[g], p[b]);
+        }
+        return;
     }
     let (height, width) = (view.shape()[0], view.shape()[1]);
-    let mut out = vec![0; height * width];
     for_tiles(height, width, |rows, columns| {
         let tile = view.slice(s![rows.clone(), columns.clone(), ..]);
         for (y, row) in rows.zip(tile.outer_iter()) {
@@ -390,23 +391,18 @@ fn to_luma(view: ArrayViewD<'_, u8>, channels: Channels) -> Vec<u8> {
             }
         }
     });
-    out
 }
 
-/// A 2-D `uint8` array's pixels, row-major, whatever its strides.
-fn gray_copy(view: ArrayViewD<'_, u8>) -> Vec<u8> {
+/// A 2-D `uint8` array's pixels into `out`, row-major, whatever its strides.
+fn gray_copy(view: ArrayViewD<'_, u8>, out: &mut [u8]) {
     let (height, width) = (view.shape()[0], view.shape()[1]);
-    let mut out = vec![0; height * width];
     for_tiles(height, width, |rows, columns| {
         let tile = view.slice(s![rows.clone(), columns.clone()]);
         for (y, row) in rows.zip(tile.outer_iter()) {
-            out[y * width..][columns.clone()]
-                .iter_mut()
-                .zip(row)
-                .for_each(|(o, &v)| *o = v);
+            let line = &mut out[y * width..][columns.clone()];
+            line.iter_mut().zip(row).for_each(|(o, &v)| *o = v);
         }
     });
-    out
 }
 
 /// Calls `f(rows, columns)` for the 64 x 64 tiles of a `height` x `width` image, row by row: a
@@ -459,6 +455,23 @@ pub fn descriptors_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Descriptor
         )
     })?;
     let width = DescriptorWidth::from_bytes(view.ncols()).or_raise(py)?;
+    let rows = view.nrows();
+    // Matches index descriptors with 32 bits (`Match`), and a Rust allocation failure would abort
+    // the interpreter: both checked before any copy.
+    if u32::try_from(rows).is_err() {
+        return Err(invalid_input(
+            py,
+            "TooManyDescriptors",
+            format!(
+                "{what} has {rows} descriptors; matches index at most {} (u32)",
+                u32::MAX
+            ),
+        ));
+    }
+    // The library's conversion holds each row as a 64-byte descriptor, then the packed words; a
+    // strided array is copied first.
+    let needed = rows.saturating_mul(64 + 8 * width.words() + width.bytes());
+    try_reserve_probe(py, needed, what)?;
     // With the GIL released: the conversion reads every byte (a large set takes milliseconds).
     let set = py.detach(|| match view.as_slice() {
         // C order (what numpy and the extractor give): the rows as they lie.
@@ -506,4 +519,13 @@ pub fn keypoints_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<KeyPoint
 pub fn matches_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<Match>> {
     let records: Vec<MatchRecord> = records_in(obj, what, "clatch.MATCH_DTYPE")?;
     Ok(records.into_iter().map(|m| m.0).collect())
+}
+
+/// Whether `bytes` could be allocated now (reserved, never touched, then freed), or an
+/// `OutOfMemoryError` naming `what`.
+fn try_reserve_probe(py: Python<'_>, bytes: usize, what: &str) -> PyResult<()> {
+    let mut probe: Vec<u8> = Vec::new();
+    probe
+        .try_reserve_exact(bytes)
+        .map_err(|_| out_of_memory(py, bytes, what))
 }

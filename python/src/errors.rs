@@ -32,6 +32,8 @@ pub enum Class {
     Database,
     /// An argument of the wrong Python type (also a `TypeError`).
     ArgumentType,
+    /// A host allocation the input needs cannot be made (also a `MemoryError`).
+    OutOfMemory,
 }
 
 impl Class {
@@ -45,20 +47,12 @@ impl Class {
             Class::ImageRead => "ImageReadError",
             Class::Database => "DatabaseError",
             Class::ArgumentType => "ArgumentTypeError",
+            Class::OutOfMemory => "OutOfMemoryError",
         }
     }
 
     fn cell(self) -> &'static PyOnceLock<Py<PyType>> {
-        static CELLS: [PyOnceLock<Py<PyType>>; 8] = [
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-        ];
+        static CELLS: [PyOnceLock<Py<PyType>>; 9] = [const { PyOnceLock::new() }; 9];
         &CELLS[self as usize]
     }
 }
@@ -149,6 +143,27 @@ pub fn from_clatch(py: Python<'_>, e: clatch::Error) -> PyErr {
         _ => e.to_string(),
     };
     raise(py, class_of(&e), e.kind().name(), message)
+}
+
+/// A zeroed buffer of `len` bytes for `what`, or an `OutOfMemoryError` (kind `OutOfMemory`) where
+/// the allocation fails: a Rust allocation failure would abort the whole interpreter.
+pub fn try_buffer(py: Python<'_>, len: usize, what: &str) -> PyResult<Vec<u8>> {
+    let mut buffer = Vec::new();
+    if buffer.try_reserve_exact(len).is_err() {
+        return Err(out_of_memory(py, len, what));
+    }
+    buffer.resize(len, 0);
+    Ok(buffer)
+}
+
+/// An `OutOfMemoryError`: `bytes` for `what` cannot be allocated.
+pub fn out_of_memory(py: Python<'_>, bytes: usize, what: &str) -> PyErr {
+    raise(
+        py,
+        Class::OutOfMemory,
+        "OutOfMemory",
+        format!("{what} needs {bytes} bytes of memory, which cannot be allocated here"),
+    )
 }
 
 /// The name of `obj`'s Python type, for messages.

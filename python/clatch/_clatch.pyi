@@ -75,8 +75,9 @@ class Extractor:
     settings start from the library's defaults (8-level pyramid of factor 1.2, 5000 keypoints shared
     among the levels, 40-pixel windows, sub-pixel positions); ``single_scale=True`` starts from the
     full-resolution speed preset (64-pixel windows, whole pixels). Keywords left at ``None`` keep the
-    preset's value. The methods release the GIL while they compute; a gray image whose rows are
-    contiguous is read in place meanwhile, so do not write to it from another thread during the call.
+    preset's value. The methods release the GIL while they compute (and copy); a gray image whose
+    rows are contiguous is read in place meanwhile, so do not write to it from another thread during
+    the call. Colour is RGB unless ``channels="bgr"``. Pickles (rebuilt from backend and config).
     """
 
     def __new__(
@@ -154,7 +155,8 @@ class OpencvLatch:
 @final
 class Matcher:
     """Brute-force Hamming matcher (ratio test, cross-check, distance limit; ties to the lowest
-    index). The methods release the GIL while they compute."""
+    index). The methods release the GIL while they compute. A pair that cannot match (no query, too
+    small a gallery) gives no matches in ``match`` as in ``match_pairs``. Pickles."""
 
     def __new__(
         cls,

@@ -40,9 +40,11 @@ use crate::errors::{OrRaise, compute, invalid_input, wrong_type};
 /// - ``weights`` (64 ints, 8x8 row-major): the patch weights (default LATCH's 7x7 patch).
 ///
 /// Invalid settings raise ``InvalidInputError``; an unusable backend ``BackendUnavailableError``.
-/// An Extractor can be shared by threads: its methods release the GIL while they compute. A gray
-/// image whose rows are contiguous is read in place meanwhile: do not write to it from another thread
-/// during the call.
+/// An Extractor can be shared by threads: its methods release the GIL while they compute (and
+/// while they copy an image that cannot be read in place). A gray image whose rows are contiguous is
+/// read in place meanwhile: do not write to it from another thread during the call. Colour images are
+/// RGB unless a call says ``channels="bgr"`` (``cv2.imread``). An Extractor pickles: it is rebuilt
+/// from ``backend`` and ``config``.
 #[pyclass(module = "clatch", frozen)]
 pub struct Extractor {
     pub(crate) inner: clatch::Extractor,

@@ -23,7 +23,9 @@ use crate::extractor::shortest;
 /// and the distance limit (``d1 <= max_distance``; ``None``: none). Ties always go to the lowest
 /// index. Matches come back as a structured array of ``MATCH_DTYPE`` (query, train, distance, all
 /// ``uint32``) in query order. ``backend`` as for ``Extractor``. The methods release the GIL while
-/// they compute.
+/// they compute. A pair that cannot match (no query, or fewer gallery descriptors than the rules look
+/// at) gives no matches in ``match`` as in ``match_pairs``. A Matcher pickles (the same settings and
+/// backend).
 #[pyclass(module = "clatch", frozen)]
 pub struct Matcher {
     pub(crate) inner: clatch::Matcher,

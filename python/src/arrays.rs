@@ -24,7 +24,7 @@ use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::PyDict;
 
-use crate::errors::{Class, OrRaise, invalid_input, out_of_memory, raise, try_buffer, type_name};
+use crate::errors::{Class, OrRaise, invalid_input, raise, try_buffer, type_name};
 
 /// A structured dtype with `fields` (name, numpy type code, byte offset) and `itemsize` bytes.
 fn record_dtype<'py>(
@@ -313,6 +313,7 @@ impl<'py> ImageInput<'py> {
         }
         let mut owned = try_buffer(py, height * width, what)?;
         py.detach(|| {
+            owned.resize(height * width, 0);
             if gray {
                 // Rows not contiguous (a transposed view, a column step, a broadcast): one
                 // row-major copy.
@@ -362,6 +363,7 @@ impl<'py> ImageInput<'py> {
         let (width, height) = (view.width(), view.height());
         let mut out = try_buffer(py, width * height, "image")?;
         py.detach(|| {
+            out.resize(width * height, 0);
             for (y, line) in out.chunks_exact_mut(width).enumerate() {
                 line.copy_from_slice(view.get_row(y).unwrap_or_default());
             }
@@ -469,9 +471,10 @@ pub fn descriptors_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Descriptor
         ));
     }
     // The library's conversion holds each row as a 64-byte descriptor, then the packed words; a
-    // strided array is copied first.
+    // strided array is copied first. Reserved (never touched) and freed again: whether the memory is
+    // there, asked of the allocator that would otherwise abort.
     let needed = rows.saturating_mul(64 + 8 * width.words() + width.bytes());
-    try_reserve_probe(py, needed, what)?;
+    drop(try_buffer(py, needed, what)?);
     // With the GIL released: the conversion reads every byte (a large set takes milliseconds).
     let set = py.detach(|| match view.as_slice() {
         // C order (what numpy and the extractor give): the rows as they lie.
@@ -519,13 +522,4 @@ pub fn keypoints_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<KeyPoint
 pub fn matches_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<Match>> {
     let records: Vec<MatchRecord> = records_in(obj, what, "clatch.MATCH_DTYPE")?;
     Ok(records.into_iter().map(|m| m.0).collect())
-}
-
-/// Whether `bytes` could be allocated now (reserved, never touched, then freed), or an
-/// `OutOfMemoryError` naming `what`.
-fn try_reserve_probe(py: Python<'_>, bytes: usize, what: &str) -> PyResult<()> {
-    let mut probe: Vec<u8> = Vec::new();
-    probe
-        .try_reserve_exact(bytes)
-        .map_err(|_| out_of_memory(py, bytes, what))
 }

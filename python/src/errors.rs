@@ -145,14 +145,14 @@ pub fn from_clatch(py: Python<'_>, e: clatch::Error) -> PyErr {
     raise(py, class_of(&e), e.kind().name(), message)
 }
 
-/// A zeroed buffer of `len` bytes for `what`, or an `OutOfMemoryError` (kind `OutOfMemory`) where
-/// the allocation fails: a Rust allocation failure would abort the whole interpreter.
+/// An empty buffer with room for `len` bytes for `what` (to be filled with the GIL released), or an
+/// `OutOfMemoryError` (kind `OutOfMemory`) where the allocation fails: a Rust allocation failure
+/// would abort the whole interpreter.
 pub fn try_buffer(py: Python<'_>, len: usize, what: &str) -> PyResult<Vec<u8>> {
     let mut buffer = Vec::new();
-    if buffer.try_reserve_exact(len).is_err() {
-        return Err(out_of_memory(py, len, what));
-    }
-    buffer.resize(len, 0);
+    buffer
+        .try_reserve_exact(len)
+        .map_err(|_| out_of_memory(py, len, what))?;
     Ok(buffer)
 }
 

@@ -476,8 +476,11 @@ def match_folder(
             if progress is not None:
                 progress("match", cursor, len(pair_list))
         rerun += pool.rerun
+        report = writer.finish()
+        if report is None:  # a plan's writer always reports
+            raise ClatchError("the plan's writer gave no report (a bug in clatch)", kind="Internal")
         return _result(
-            writer.finish(),
+            report,
             blocks=len(blocks),
             blocks_rerun=rerun,
             actors_lost=pool.lost,

@@ -98,6 +98,21 @@ def test_the_stub_passes_stubtest(tmp_path):
     assert run.returncode == 0, run.stdout + run.stderr
 
 
+def test_the_package_passes_mypy_strict(tmp_path):
+    # The package's Python files against the stub, as a user's type checker sees them.
+    pytest.importorskip("mypy.api")
+    config = tmp_path / "mypy.ini"
+    config.write_text("[mypy]\n")
+    run = subprocess.run(
+        [sys.executable, "-m", "mypy", "--strict", "--config-file", str(config), str(Path(clatch.__file__).parent)],
+        cwd=tmp_path,
+        env={**os.environ, "MYPY_CACHE_DIR": str(tmp_path / "cache")},
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
+
+
 def test_dtypes_mirror_the_library_types():
     assert clatch.KEYPOINT_DTYPE.names == ("x", "y", "size", "angle", "response", "octave")
     assert [clatch.KEYPOINT_DTYPE[n] for n in clatch.KEYPOINT_DTYPE.names] == [np.dtype(np.float32)] * 5 + [np.dtype(np.int32)]

@@ -22,7 +22,8 @@
 # with JOBS (every test function of every binary as its own job: a binary's trials side by side, so
 # the whole set takes about as long as its slowest trial).
 #
-# Logs: $OUT/TOOL/NAME.txt or, with TRIALS=1, $OUT/TOOL/NAME.TRIAL.txt (each run's whole output), $OUT/summary.txt (one line a run, printed last).
+# Logs: $OUT/TOOL/NAME.txt or, with TRIALS=1, $OUT/TOOL/NAME.TRIAL.txt (each run's whole output),
+# $OUT/progress.txt (each run's summary line as it ends), $OUT/summary.txt (one line a run, printed last).
 # A run passes when the binary exits 0 and the tool reports no error (racecheck: no hazard). The one
 # error memcheck reports in cuda_faults is expected: that suite asks for 4 TiB on purpose and checks
 # that the out-of-memory answer leaves the device usable; out-of-memory answers of the driver are
@@ -91,6 +92,8 @@ one() {
     printf '%-8s %-9s %s (CLATCH_TEST_SCALE=%s) rc=%s %ss: %s | %s%s\n' "$verdict" "$tool" "$label" \
         "$scale" "$rc" "$secs" "${result:-no test result}" "${summary:-no sanitizer summary}" "$note" \
         > "$OUT/$tool/runs/$label"
+    # One line appended as each run ends, so a session cut short still shows what finished.
+    cat "$OUT/$tool/runs/$label" >> "$OUT/progress.txt"
 }
 
 # trials NAME: the names of the binary's test functions (an ignored one stays ignored when run).
@@ -114,6 +117,7 @@ sequence() {
     "$san" --version | grep -i version | tail -1
     echo "commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown), $(date -u +%Y-%m-%dT%H:%MZ)${BINARIES:+ (test binaries built elsewhere: $BINARIES; the commit is that of the checkout, not of the binaries)}"
 } > "$OUT/summary.txt"
+: > "$OUT/progress.txt"
 for tool in $TOOLS; do
     rm -rf "$OUT/$tool"
     mkdir -p "$OUT/$tool/runs"

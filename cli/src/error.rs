@@ -128,6 +128,18 @@ pub enum CliError {
     #[error("bad homography file {path}: {reason}", path = .path.display())]
     Homography { path: PathBuf, reason: String },
 
+    /// Some images of a batch failed (each listed on stderr); the others' files were written.
+    #[error(
+        "{failed} of {total} images failed (listed above, the first {first}); the others' files were \
+         written; --fail-fast stops at the first and writes none",
+        first = .first.display()
+    )]
+    ImagesFailed {
+        failed: usize,
+        total: usize,
+        first: PathBuf,
+    },
+
     /// Options that cannot be given together.
     #[error("{options}: {reason}")]
     OptionConflict { options: String, reason: String },

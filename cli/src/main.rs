@@ -144,6 +144,10 @@ pub struct ExtractArgs {
     /// (with several images: the output folder).
     #[arg(short, long, value_name = "PREFIX")]
     pub output: PathBuf,
+    /// With several images: stop at the first image that fails and write no image's files (the
+    /// default goes on, writes every good image's three files, lists the failures and exits 1).
+    #[arg(long)]
+    pub fail_fast: bool,
     #[command(flatten)]
     pub input: InputArgs,
     #[command(flatten)]

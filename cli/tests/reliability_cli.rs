@@ -1,0 +1,119 @@
+//! The command-line findings of the reliability review (issue 28): batches that go on past a bad
+//! image, outputs checked before the work, locks, COLMAP failures that keep the work done, plausible
+//! camera matrices, corrupt images and decoder allocations, messages that name what the user set.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{assert_refused, clatch, photo, str, workdir};
+
+/// Every file name in `dir`, sorted.
+fn listing(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// Four photos `p0.png` .. `p3.png` in `dir`.
+fn four_photos(dir: &Path) -> Vec<PathBuf> {
+    (0..4u32)
+        .map(|i| {
+            let path = dir.join(format!("p{i}.png"));
+            photo(160, 160, 20 * i).save(&path).unwrap();
+            path
+        })
+        .collect()
+}
+
+/// A PNG whose header is fine and whose pixel data stops half-way.
+fn truncated_png(path: &Path) {
+    let mut bytes = Vec::new();
+    photo(160, 160, 5)
+        .write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
+        .unwrap();
+    bytes.truncate(bytes.len() / 2);
+    std::fs::write(path, bytes).unwrap();
+}
+
+fn extract(images: &[&Path], out: &Path, extra: &[&str]) -> std::process::Output {
+    let mut args = vec!["extract"];
+    args.extend(images.iter().map(|p| str(p)));
+    args.extend(["-o", str(out), "--backend", "cpu"]);
+    args.extend_from_slice(extra);
+    clatch(&args)
+}
+
+/// C2 and H4: a small image in a batch no longer stops it: every good image's three files are
+/// written, the failures are listed, the exit status is 1, and the message names no 64x64 "window".
+#[test]
+fn a_batch_goes_on_past_bad_images_and_lists_them() {
+    let dir = workdir("reliability", "keep-going");
+    let photos = four_photos(&dir);
+    let small = dir.join("small.png");
+    photo(50, 50, 0).save(&small).unwrap();
+    let broken = dir.join("broken.png");
+    truncated_png(&broken);
+    let out_dir = dir.join("out");
+    let inputs = [photos[0].as_path(), &broken, &photos[1], &small, &photos[2]];
+    let out = extract(&inputs, &out_dir, &[]);
+    assert_refused(&out, "2 of 5 images failed");
+    let e = common::stderr(&out);
+    assert!(e.contains("small.png") && e.contains("broken.png"), "{e}");
+    assert!(e.contains("at least 64x64 pixels"), "{e}");
+    assert!(!e.contains("descriptor window"), "{e}");
+    let mut want: Vec<String> = ["p0", "p1", "p2"]
+        .iter()
+        .flat_map(|s| {
+            [".keypoints.csv", ".keypoints.json", ".descriptors.npy"].map(|x| format!("{s}{x}"))
+        })
+        .collect();
+    want.sort();
+    assert_eq!(
+        listing(&out_dir),
+        want,
+        "the good images' files, nothing else"
+    );
+}
+
+/// H4: with --fail-fast a bad header is found before any work and nothing is written; a rerun that
+/// fails part-way leaves every earlier result as it was (no mix of old and new files).
+#[test]
+fn fail_fast_writes_nothing_or_everything() {
+    let dir = workdir("reliability", "fail-fast");
+    let photos = four_photos(&dir);
+    let out_dir = dir.join("out");
+    let small = dir.join("small.png");
+    photo(50, 50, 0).save(&small).unwrap();
+    let inputs = [photos[0].as_path(), &photos[1], &photos[2], &small];
+    let out = extract(&inputs, &out_dir, &["--fail-fast"]);
+    assert_refused(&out, "small.png");
+    assert!(
+        !out_dir.exists() || listing(&out_dir).is_empty(),
+        "nothing written"
+    );
+
+    let all: Vec<&Path> = photos.iter().map(PathBuf::as_path).collect();
+    let first = extract(&all, &out_dir, &[]);
+    assert!(first.status.success(), "{}", common::stderr(&first));
+    let before: Vec<Vec<u8>> = listing(&out_dir)
+        .iter()
+        .map(|n| std::fs::read(out_dir.join(n)).unwrap())
+        .collect();
+    // Other settings, and the 4th image's data broken after a good header.
+    truncated_png(&photos[3]);
+    let out = extract(&all, &out_dir, &["--fail-fast", "--threshold", "40"]);
+    assert_refused(&out, "p3.png");
+    let after: Vec<Vec<u8>> = listing(&out_dir)
+        .iter()
+        .map(|n| std::fs::read(out_dir.join(n)).unwrap())
+        .collect();
+    assert_eq!(after, before, "the earlier results, all of them, unchanged");
+    assert_eq!(listing(&out_dir).len(), 12, "no temporary file left");
+}

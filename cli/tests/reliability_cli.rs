@@ -117,3 +117,55 @@ fn fail_fast_writes_nothing_or_everything() {
     assert_eq!(after, before, "the earlier results, all of them, unchanged");
     assert_eq!(listing(&out_dir).len(), 12, "no temporary file left");
 }
+
+/// H9: an output folder that is missing, or a file, is found before any work (before the corrupt
+/// image is decoded) and named as the fault; `--workspace` naming a file says so.
+#[test]
+fn output_folders_are_checked_before_the_work() {
+    let dir = workdir("reliability", "out-folder");
+    let broken = dir.join("broken.png");
+    truncated_png(&broken);
+    let good = four_photos(&dir);
+    let missing = dir.join("missing");
+    let out = extract(&[&broken], &missing.join("x"), &[]);
+    assert_refused(&out, "does not exist");
+    assert!(common::stderr(&out).contains(str(&missing)));
+
+    let out = clatch(&[
+        "match",
+        str(&broken),
+        str(&good[0]),
+        "-o",
+        str(&missing.join("m.png")),
+        "--backend",
+        "cpu",
+    ]);
+    assert_refused(&out, "does not exist");
+
+    let file = dir.join("A.png");
+    std::fs::write(&file, "the user's").unwrap();
+    let out = extract(&[&broken], &file.join("x"), &[]);
+    assert_refused(&out, "not a folder");
+
+    let images = dir.join("images");
+    std::fs::create_dir(&images).unwrap();
+    for p in &good {
+        std::fs::copy(p, images.join(p.file_name().unwrap())).unwrap();
+    }
+    let out = clatch(&[
+        "colmap",
+        "--images",
+        str(&images),
+        "--database",
+        str(&dir.join("out.db")),
+        "--workspace",
+        str(&file),
+        "--no-colmap",
+        "--backend",
+        "cpu",
+    ]);
+    assert_refused(&out, "it is a file, not a folder");
+    assert!(!common::stderr(&out).contains("File exists"));
+    assert_eq!(std::fs::read(&file).unwrap(), b"the user's");
+    assert!(!dir.join("out.db").exists());
+}

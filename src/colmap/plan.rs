@@ -11,7 +11,7 @@ use crate::colmap::job::{FolderCamera, FolderJob, Overwrite};
 use crate::colmap::pairs::resolve_pairs;
 use crate::extract::Extractor;
 use crate::matcher::Matcher;
-use crate::output::{check_distinct, check_writable};
+use crate::output::{check_distinct, check_writable, check_writable_in_new_folder};
 
 /// A [`FolderJob`] with everything checked before any work: the extractor and matching settings, the
 /// backend (its set-up started), every photo's name and header ([`ImageFolder`]), the camera against
@@ -94,7 +94,7 @@ impl FolderPlan {
 /// matrix file, and no existing database unless the job may replace it.
 fn check_outputs(job: &FolderJob, folder: &ImageFolder) -> Result<(), ColmapError> {
     check_writable(&job.database)?;
-    check_writable(&job.match_list)?;
+    check_writable_in_new_folder(&job.match_list)?;
     let mut inputs: Vec<(&'static str, &Path)> = folder
         .paths
         .iter()

@@ -29,7 +29,9 @@ use std::path::PathBuf;
 
 use thiserror::Error;
 
-pub use checks::{check_distinct, check_writable, ends_with_separator, file_kind};
+pub use checks::{
+    check_distinct, check_writable, check_writable_in_new_folder, ends_with_separator, file_kind,
+};
 pub use staged::{Staged, TempDir, write_file};
 
 /// Why an output was refused or could not be written. Every variant names the file.

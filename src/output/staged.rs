@@ -125,7 +125,7 @@ impl Drop for TempDir {
 }
 
 /// A new file `.NAME.clatch-PID-N.tmp` in `path`'s folder (created, so no other run takes it).
-fn create_temp_beside(path: &Path) -> Result<PathBuf, OutputError> {
+pub(super) fn create_temp_beside(path: &Path) -> Result<PathBuf, OutputError> {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
     let folder = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,

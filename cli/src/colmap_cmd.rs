@@ -46,6 +46,8 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     // Every check before any work; the backend's set-up (on the GPU: the device's context and
     // kernels) runs on a thread of its own meanwhile and while the first photos are decoded.
     let plan = job.plan().map_err(|e| camera_k_error(args, e))?;
+    // The database stays locked until COLMAP's model is installed.
+    let _lock = plan.lock();
     let workspace = check_workspace(args, &job)?;
     // A workspace made here is removed again if nothing could be written to it.
     let workspace_existed = workspace.path.exists();
@@ -146,6 +148,8 @@ fn write_and_run(
     let watch = Stopwatch::start();
     let written = run_with_progress_bar(plan)?;
     let run = watch.stop();
+    // The workspace stays locked while COLMAP works in it.
+    let _locks = written.locks();
 
     let Some(colmap) = &workspace.colmap else {
         let report = written.commit()?;

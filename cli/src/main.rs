@@ -226,7 +226,8 @@ pub struct ColmapArgs {
     /// principal point at the centre, one camera per image size and focal, refined by the mapper.
     #[arg(long, value_name = "FILE")]
     pub camera_k: Option<PathBuf>,
-    /// Folder for the match list, COLMAP's logs and its model (default: DATABASE's name + `-colmap`).
+    /// Folder for the match list, COLMAP's logs and its model (default beside DATABASE: `out.db` gives
+    /// `out-colmap`, any other name keeps its extension, `out.sqlite` gives `out.sqlite-colmap`).
     #[arg(long, value_name = "DIR")]
     pub workspace: Option<PathBuf>,
     /// How the keypoint positions written to COLMAP are refined below a pixel (descriptors and

@@ -169,3 +169,111 @@ fn output_folders_are_checked_before_the_work() {
     assert_eq!(std::fs::read(&file).unwrap(), b"the user's");
     assert!(!dir.join("out.db").exists());
 }
+
+/// A folder of four photos for `clatch colmap`.
+fn colmap_photos(dir: &Path) -> PathBuf {
+    let images = dir.join("images");
+    std::fs::create_dir_all(&images).unwrap();
+    for i in 0..4u32 {
+        photo(160, 160, 20 * i)
+            .save(images.join(format!("v{i}.png")))
+            .unwrap();
+    }
+    images
+}
+
+fn colmap(images: &Path, db: &Path, extra: &[&str]) -> std::process::Output {
+    let mut args = vec![
+        "colmap",
+        "--images",
+        str(images),
+        "--database",
+        str(db),
+        "--backend",
+        "cpu",
+    ];
+    args.extend_from_slice(extra);
+    clatch(&args)
+}
+
+/// An executable shell script `name` in `dir`.
+#[cfg(unix)]
+fn script(dir: &Path, name: &str, body: &str) -> PathBuf {
+    use std::os::unix::fs::PermissionsExt;
+    let path = dir.join(name);
+    std::fs::write(&path, format!("#!/bin/sh\n{body}\n")).unwrap();
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+    path
+}
+
+/// H10: `x.db` and `x.sqlite` get workspaces of their own; a database without extension, whose
+/// default workspace is `x.db`'s, is refused instead of replacing its match list.
+#[test]
+fn databases_of_one_stem_never_share_a_match_list() {
+    let dir = workdir("reliability", "stems");
+    let images = colmap_photos(&dir);
+    let out = colmap(&images, &dir.join("x.db"), &["--no-colmap"]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    let list = dir.join("x-colmap/matches.txt");
+    let first = std::fs::read(&list).unwrap();
+    let out = colmap(
+        &images,
+        &dir.join("x.sqlite"),
+        &["--no-colmap", "--threshold", "40"],
+    );
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    assert!(dir.join("x.sqlite-colmap/matches.txt").exists());
+    assert_eq!(
+        std::fs::read(&list).unwrap(),
+        first,
+        "x.db's match list kept"
+    );
+    let out = colmap(
+        &images,
+        &dir.join("x"),
+        &["--no-colmap", "--threshold", "40"],
+    );
+    assert_refused(&out, "holds the match list of the database x.db");
+    assert_eq!(std::fs::read(&list).unwrap(), first);
+    assert!(!dir.join("x").exists());
+}
+
+/// H10: a second run on a database that a running one is writing is refused, naming the holder;
+/// the first completes.
+#[cfg(unix)]
+#[test]
+fn a_second_concurrent_run_on_one_database_is_refused() {
+    let dir = workdir("reliability", "concurrent");
+    let images = colmap_photos(&dir);
+    let slow = script(
+        &dir,
+        "slow-colmap",
+        "[ \"$1\" = matches_importer ] && sleep 4\nexit 0",
+    );
+    let db = dir.join("out.db");
+    let mut first = std::process::Command::new(env!("CARGO_BIN_EXE_clatch"))
+        .args(["colmap", "--images", str(&images), "--database", str(&db)])
+        .args(["--backend", "cpu", "--colmap", str(&slow)])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let lock = dir.join(".out.db.clatch-lock");
+    let began = std::time::Instant::now();
+    while !dir.join("out-colmap/.matches.txt.clatch-lock").exists() {
+        assert!(began.elapsed().as_secs() < 30, "the first run never locked");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    assert!(lock.exists());
+    let out = colmap(&images, &db, &["--no-colmap", "--force"]);
+    assert_refused(&out, "being written by another clatch run");
+    assert!(
+        common::stderr(&out).contains(&format!("process {}", first.id())),
+        "{}",
+        common::stderr(&out)
+    );
+    let status = first.wait().unwrap();
+    assert!(status.success());
+    assert!(db.exists());
+    assert!(!lock.exists(), "the lock file goes with the run");
+}

@@ -3,7 +3,7 @@
 //! earlier database is replaced only by a complete one.
 
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -13,7 +13,23 @@ use crate::colmap::folder::Photo;
 use crate::colmap::report::{FolderReport, FolderTimes};
 use crate::colmap::writer::{FolderCounts, FolderWriter};
 use crate::matching::Match;
-use crate::output::{OutputError, Staged};
+use crate::output::{OutputError, OutputLock, Staged};
+
+/// The file in a match list's folder naming the database the list belongs to.
+pub const OWNER_NAME: &str = ".clatch-database";
+
+fn owner_path(match_list: &Path) -> PathBuf {
+    match match_list.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.join(OWNER_NAME),
+        _ => PathBuf::from(OWNER_NAME),
+    }
+}
+
+/// The database file name the match list's folder belongs to, if an earlier run wrote one there.
+pub(crate) fn workspace_owner(match_list: &Path) -> Option<String> {
+    let text = std::fs::read_to_string(owner_path(match_list)).ok()?;
+    Some(text.trim_end_matches('\n').to_owned()).filter(|s| !s.is_empty())
+}
 
 /// The one writer of a folder run ([`FolderWriter`]) over temporary files: the stage every run ends
 /// in, whether it extracted and matched in this process ([`super::FolderPlan::run`]) or gathered the
@@ -23,6 +39,8 @@ pub struct FolderOutput {
     // Declared before `staged`: the database is closed before its temporary file is removed.
     writer: FolderWriter<BufWriter<File>>,
     staged: Staged,
+    /// The locks on the database and on the match list (its file beside it, removed before `made`).
+    locks: Vec<OutputLock>,
     /// The temporary database and match list, then their final paths.
     temp: (PathBuf, PathBuf),
     outputs: (PathBuf, PathBuf),
@@ -82,20 +100,30 @@ impl FolderOutput {
             Some(folder) => MadeFolders::create(folder)?,
             None => MadeFolders::default(),
         };
+        let locks = vec![OutputLock::acquire(match_list)?];
         let mut staged = Staged::new();
         let temp_database = staged.reserve(database)?;
         // `Database::create` makes the file itself (and never opens an existing one).
         std::fs::remove_file(&temp_database).map_err(OutputError::write(&temp_database))?;
         let (temp_list, list) = staged.open(match_list)?;
+        let owner = database.file_name().unwrap_or_default().to_string_lossy();
+        staged.write(&owner_path(match_list), |w| writeln!(w, "{owner}"))?;
         let writer = FolderWriter::create(&temp_database, BufWriter::new(list), camera)?;
         Ok(Self {
             writer,
             staged,
+            locks,
             temp: (temp_database, temp_list),
             outputs: (database.to_path_buf(), match_list.to_path_buf()),
             writing: began.elapsed(),
             made,
         })
+    }
+
+    /// The same output holding `lock` too (the plan's lock on the database) until it is committed.
+    pub(crate) fn holding(mut self, lock: OutputLock) -> Self {
+        self.locks.push(lock);
+        self
     }
 
     /// Adds the next photo: [`FolderWriter::add_photo`].
@@ -143,6 +171,7 @@ impl FolderOutput {
         file.sync_all().map_err(ColmapError::MatchListIo)?;
         Ok(WrittenFolder {
             staged: self.staged,
+            locks: self.locks,
             report: FolderReport {
                 database: self.temp.0,
                 match_list: self.temp.1,
@@ -165,6 +194,8 @@ impl FolderOutput {
 #[derive(Debug)]
 pub struct WrittenFolder {
     staged: Staged,
+    /// Released once the files are in place (or removed).
+    locks: Vec<OutputLock>,
     /// The report, its paths the temporary files'.
     report: FolderReport,
     /// The final database and match list.
@@ -174,6 +205,12 @@ pub struct WrittenFolder {
 }
 
 impl WrittenFolder {
+    /// The locks on the database and the match list, held until this value and every clone are
+    /// dropped (a caller that runs a program on the files keeps them past [`WrittenFolder::commit`]).
+    pub fn locks(&self) -> Vec<OutputLock> {
+        self.locks.clone()
+    }
+
     /// The complete database, under its temporary name.
     pub fn database(&self) -> &Path {
         &self.report.database
@@ -199,6 +236,7 @@ impl WrittenFolder {
     pub fn commit(self) -> Result<FolderReport, ColmapError> {
         let began = Instant::now();
         self.staged.commit()?;
+        drop(self.locks);
         self.made.keep();
         let mut report = self.report;
         (report.database, report.match_list) = self.outputs;

@@ -48,7 +48,7 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     let plan = job.plan().map_err(|e| camera_k_error(args, e))?;
     // The database stays locked until COLMAP's model is installed.
     let _lock = plan.lock();
-    let workspace = check_workspace(args, &job)?;
+    let workspace = check_workspace(args, &job, plan.folder().paths.len())?;
     // A workspace made here is removed again if nothing could be written to it.
     let workspace_existed = workspace.path.exists();
     let result = write_and_run(args, plan, &workspace);
@@ -106,7 +106,11 @@ fn camera_k_error(args: &ColmapArgs, e: ColmapError) -> CliError {
 
 /// Checks what the library's run does not write, before any work: the photos are not where clatch
 /// writes, the workspace's `sparse/` holds only what clatch may replace, the `colmap` program.
-fn check_workspace(args: &ColmapArgs, job: &FolderJob) -> Result<Workspace, CliError> {
+fn check_workspace(
+    args: &ColmapArgs,
+    job: &FolderJob,
+    job_photos: usize,
+) -> Result<Workspace, CliError> {
     let path = workspace_path(args);
     let sparse = path.join("sparse");
     check_images_outside(&job.images, &path, &sparse)?;
@@ -124,6 +128,16 @@ fn check_workspace(args: &ColmapArgs, job: &FolderJob) -> Result<Workspace, CliE
         }
         found
     };
+    if let Some(colmap) = &colmap {
+        check_mapper_options(&args.mapper_options, &colmap.options("mapper"))?;
+        let photos = job_photos;
+        if photos < 2 {
+            return Err(CliError::TooFewPhotos {
+                images: args.images.clone(),
+                photos,
+            });
+        }
+    }
     // Without COLMAP nothing is written there; a run that installs models may replace only its own.
     let sparse = match colmap {
         Some(_) => ModelFolder::inspect(&sparse, args.force)?,
@@ -175,12 +189,20 @@ fn write_and_run(
         (written.database(), written.match_list(), built.path()),
     );
     let watch = Stopwatch::start();
-    colmap.run("matches_importer", import_args)?;
-    times.verify = watch.stop();
-    let (verified, inliers) = verified_pairs(written.database())?;
-    let watch = Stopwatch::start();
-    colmap.run("mapper", mapper_args)?;
-    times.map = watch.stop();
+    let steps = (|| {
+        colmap.run("matches_importer", import_args)?;
+        times.verify = watch.stop();
+        let (verified, inliers) = verified_pairs(written.database())?;
+        let watch = Stopwatch::start();
+        colmap.run("mapper", mapper_args)?;
+        times.map = watch.stop();
+        Ok::<_, CliError>((verified, inliers))
+    })();
+    let (verified, inliers) = match steps {
+        Ok(figures) => figures,
+        // The extraction and matching are not thrown away: both files go into place.
+        Err(error) => return Err(keep_after_colmap_failed(args, written, workspace, error)),
+    };
 
     let report = written.commit()?;
     let installed = workspace.sparse.install(&built)?;
@@ -201,6 +223,84 @@ fn write_and_run(
     times.analyze = watch.stop();
     print_colmap_report(&report, verified, inliers, &models, &times);
     Ok(())
+}
+
+/// A COLMAP step failed: the database and match list, complete, are renamed into place all the same
+/// (the error says so, with the commands that run COLMAP on them again).
+fn keep_after_colmap_failed(
+    args: &ColmapArgs,
+    written: WrittenFolder,
+    workspace: &Workspace,
+    error: CliError,
+) -> CliError {
+    let report = match written.commit() {
+        Ok(report) => report,
+        Err(e) => return CliError::Colmap(e),
+    };
+    let final_paths = (
+        report.database.as_path(),
+        report.match_list.as_path(),
+        workspace.sparse.path(),
+    );
+    let commands = colmap_steps(args, final_paths)
+        .iter()
+        .map(|(step, step_args)| format!("  colmap {step} {}", shell_words(step_args)))
+        .collect::<Vec<_>>()
+        .join("\n");
+    CliError::ColmapFailedKept {
+        error: Box::new(error),
+        database: report.database,
+        match_list: report.match_list,
+        commands,
+    }
+}
+
+/// Refuses, before any work, a --mapper-option that is not KEY=VALUE or whose key `colmap mapper -h`
+/// does not list (`known`; empty: the program lists none, nothing is refused).
+fn check_mapper_options(options: &[String], known: &[String]) -> Result<(), CliError> {
+    for option in options {
+        let refuse = |reason: String| CliError::MapperOption {
+            option: option.clone(),
+            reason,
+        };
+        let Some((key, value)) = option.split_once('=') else {
+            return Err(refuse("it is not KEY=VALUE".into()));
+        };
+        if key.is_empty() || value.is_empty() || key.starts_with('-') {
+            return Err(refuse(
+                "it is not KEY=VALUE (a key without dashes, a value)".into(),
+            ));
+        }
+        if !known.is_empty() && !known.iter().any(|k| k == key) {
+            let close = known
+                .iter()
+                .min_by_key(|k| edit_distance(k, key))
+                .filter(|k| edit_distance(k, key) <= 3);
+            let hint = close.map_or(String::new(), |k| format!("; did you mean {k}?"));
+            return Err(refuse(format!(
+                "`colmap mapper -h` lists no option {key}{hint}"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Levenshtein distance, for the hint of a mistyped option.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diagonal = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let above = row[j + 1];
+            row[j + 1] = (above + 1)
+                .min(row[j] + 1)
+                .min(diagonal + usize::from(ca != cb));
+            diagonal = above;
+        }
+    }
+    row[b.len()]
 }
 
 /// [`FolderPlan::run`] with a progress bar per stage on stderr.

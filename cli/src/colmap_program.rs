@@ -34,6 +34,21 @@ impl ColmapProgram {
         }
     }
 
+    /// The options `colmap STEP -h` lists (`Mapper.min_num_matches`, ...), without their dashes;
+    /// empty when the program lists none (it cannot tell, so nothing is refused for it).
+    pub fn options(&self, step: &str) -> Vec<String> {
+        let Ok(output) = Command::new(&self.program).args([step, "-h"]).output() else {
+            return Vec::new();
+        };
+        let mut text = String::from_utf8_lossy(&output.stdout).into_owned();
+        text.push_str(&String::from_utf8_lossy(&output.stderr));
+        text.lines()
+            .filter_map(|line| line.trim_start().strip_prefix("--"))
+            .filter_map(|rest| rest.split_whitespace().next())
+            .map(str::to_owned)
+            .collect()
+    }
+
     /// Runs `colmap STEP ARGS...`, keeps its output in `LOGS/colmap-STEP.log` and returns it; a
     /// non-zero exit is an error quoting the output's last lines.
     pub fn run(&self, step: &'static str, args: &[OsString]) -> Result<String, CliError> {

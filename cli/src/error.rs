@@ -116,6 +116,31 @@ pub enum CliError {
         tail: String,
     },
 
+    /// A COLMAP step failed after the database and match list were complete: both were kept.
+    #[error(
+        "{error}\nthe database {database} and the match list {match_list} are kept (every photo's \
+         features and the putative matches); COLMAP can run on them again without extracting:\n{commands}",
+        database = .database.display(), match_list = .match_list.display()
+    )]
+    ColmapFailedKept {
+        error: Box<CliError>,
+        database: PathBuf,
+        match_list: PathBuf,
+        commands: String,
+    },
+
+    /// A --mapper-option refused before any work.
+    #[error("--mapper-option {option}: {reason}")]
+    MapperOption { option: String, reason: String },
+
+    /// Fewer photos than COLMAP's mapper can build a model from.
+    #[error(
+        "{images} holds {photos} photo(s): COLMAP's mapper needs at least 2; use --no-colmap to write \
+         only the database",
+        images = .images.display()
+    )]
+    TooFewPhotos { images: PathBuf, photos: usize },
+
     /// `colmap model_analyzer` printed no figure where one was expected.
     #[error("cannot read `{field}` from colmap model_analyzer's output for {model}; it printed:\n{output}", model = .model.display())]
     ModelAnalyzer {

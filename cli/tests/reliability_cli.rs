@@ -277,3 +277,68 @@ fn a_second_concurrent_run_on_one_database_is_refused() {
     assert!(db.exists());
     assert!(!lock.exists(), "the lock file goes with the run");
 }
+
+/// A `colmap` stand-in whose `mapper -h` lists two options and whose mapper exits with `mapper_exit`.
+#[cfg(unix)]
+fn listing_colmap(dir: &Path, mapper_exit: u8) -> PathBuf {
+    script(
+        dir,
+        "listing-colmap",
+        &format!(
+            "if [ \"$2\" = -h ]; then printf '  --database_path arg\\n  --Mapper.min_num_matches arg (=15)\\n  \
+             --Mapper.init_min_num_inliers arg (=100)\\n'; exit 0; fi\n\
+             [ \"$1\" = mapper ] && {{ echo 'no good initial pair' >&2; exit {mapper_exit}; }}\nexit 0"
+        ),
+    )
+}
+
+/// H6: what COLMAP would refuse at the end is refused before any work (a mistyped mapper option, a
+/// single photo); when COLMAP fails, the database and match list are kept and the message says so.
+#[cfg(unix)]
+#[test]
+fn colmap_failures_are_found_first_or_keep_the_work() {
+    let dir = workdir("reliability", "colmap-fails");
+    let images = colmap_photos(&dir);
+    let colmap_ok = listing_colmap(&dir, 0);
+    let db = dir.join("out.db");
+    let with = |program: &Path, extra: &[&str]| {
+        let mut all = vec!["--colmap", str(program)];
+        all.extend_from_slice(extra);
+        colmap(&images, &db, &all)
+    };
+    let out = with(
+        &colmap_ok,
+        &["--mapper-option", "Mapper.init_min_num_inlier=50"],
+    );
+    assert_refused(&out, "did you mean Mapper.init_min_num_inliers?");
+    assert!(!db.exists());
+    assert_refused(
+        &with(&colmap_ok, &["--mapper-option", "Mapper.min_num_matches"]),
+        "not KEY=VALUE",
+    );
+
+    let one = dir.join("one");
+    std::fs::create_dir(&one).unwrap();
+    std::fs::copy(images.join("v0.png"), one.join("v0.png")).unwrap();
+    let out = colmap(&one, &db, &["--colmap", str(&colmap_ok)]);
+    assert_refused(&out, "needs at least 2");
+    assert!(!db.exists());
+
+    let failing = dir.join("failing");
+    std::fs::create_dir(&failing).unwrap();
+    let colmap_fails = listing_colmap(&failing, 3);
+    let out = with(&colmap_fails, &[]);
+    assert_refused(&out, "are kept");
+    assert!(common::stderr(&out).contains("no good initial pair"));
+    assert!(common::stderr(&out).contains("colmap mapper --database_path"));
+    let sql = rusqlite::Connection::open(&db).unwrap();
+    let n: i64 = sql
+        .query_row("SELECT COUNT(*) FROM images", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(n, 4);
+    assert!(dir.join("out-colmap/matches.txt").exists());
+    assert!(
+        !dir.join("out-colmap/sparse").exists(),
+        "no model installed"
+    );
+}

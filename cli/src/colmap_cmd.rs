@@ -118,7 +118,8 @@ fn check_workspace(
         None
     } else {
         let program = args.colmap.clone().unwrap_or_else(|| "colmap".into());
-        let found = ColmapProgram::find(&program, &path)?;
+        let timeout = std::time::Duration::from_secs(args.colmap_timeout);
+        let found = ColmapProgram::find(&program, &path, timeout)?;
         if found.is_none() && args.colmap.is_some() {
             return Err(CliError::ColmapStart {
                 program,

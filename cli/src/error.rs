@@ -141,6 +141,17 @@ pub enum CliError {
     )]
     TooFewPhotos { images: PathBuf, photos: usize },
 
+    /// A `colmap` step ran past --colmap-timeout and was killed.
+    #[error(
+        "colmap {step} still ran after {seconds} s (--colmap-timeout) and was stopped; its output so far: {log}",
+        log = .log.display()
+    )]
+    ColmapTimeout {
+        step: &'static str,
+        seconds: u64,
+        log: PathBuf,
+    },
+
     /// `colmap model_analyzer` printed no figure where one was expected.
     #[error("cannot read `{field}` from colmap model_analyzer's output for {model}; it printed:\n{output}", model = .model.display())]
     ModelAnalyzer {

@@ -12,6 +12,7 @@ mod error;
 mod extract;
 mod extract_many;
 mod input;
+mod interrupt;
 mod match_cmd;
 mod model_folder;
 mod npy;
@@ -249,6 +250,10 @@ pub struct ColmapArgs {
     /// The COLMAP 3.8 executable (default: `colmap` on PATH, skipped with a note if absent).
     #[arg(long, value_name = "PROGRAM", conflicts_with = "no_colmap")]
     pub colmap: Option<PathBuf>,
+    /// The longest each COLMAP step may run, in seconds, before it is killed and the run fails
+    /// (the database and match list are kept). Default 6 hours.
+    #[arg(long, value_name = "SECONDS", default_value_t = 21_600, value_parser = clap::value_parser!(u64).range(1..))]
+    pub colmap_timeout: u64,
     /// An option for `colmap mapper`, as KEY=VALUE (for example Mapper.init_min_num_inliers=50);
     /// repeatable.
     #[arg(long = "mapper-option", value_name = "KEY=VALUE")]
@@ -316,6 +321,7 @@ pub fn settings_on(
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    interrupt::install();
     if let Some(warning) = threads::cap_pool() {
         eprintln!("clatch: warning: {warning}");
     }

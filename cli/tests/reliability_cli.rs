@@ -342,3 +342,161 @@ fn colmap_failures_are_found_first_or_keep_the_work() {
         "no model installed"
     );
 }
+
+/// Every name under `dir` (recursively) that holds `.clatch-`: temporary files, folders and locks.
+fn clatch_leftovers(dir: &Path) -> Vec<String> {
+    let mut found = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            let name = path.file_name().unwrap().to_string_lossy().into_owned();
+            if name.contains(".clatch-") && name != ".clatch-database" {
+                found.push(path.display().to_string());
+            }
+            if path.is_dir() && !path.is_symlink() {
+                stack.push(path);
+            }
+        }
+    }
+    found
+}
+
+/// Starts `clatch colmap` with a `colmap` whose matches_importer sleeps (writing its pid to
+/// `DIR/colmap.pid` first), and waits until it runs.
+#[cfg(unix)]
+fn start_colmap_that_hangs(dir: &Path, images: &Path, db: &Path) -> std::process::Child {
+    let pid_file = dir.join("colmap.pid");
+    let hang = script(
+        dir,
+        "hanging-colmap",
+        &format!(
+            "[ \"$1\" = matches_importer ] && {{ echo $$ > '{}'; exec sleep 60; }}\nexit 0",
+            pid_file.display()
+        ),
+    );
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_clatch"))
+        .args(["colmap", "--images", str(images), "--database", str(db)])
+        .args(["--backend", "cpu", "--colmap", str(&hang)])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let began = std::time::Instant::now();
+    while std::fs::read_to_string(&pid_file).map_or(true, |s| s.trim().is_empty()) {
+        assert!(began.elapsed().as_secs() < 30, "COLMAP never started");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child
+}
+
+#[cfg(unix)]
+fn signal(pid: u32, name: &str) {
+    let ok = std::process::Command::new("kill")
+        .args([&format!("-{name}"), &pid.to_string()])
+        .status()
+        .unwrap()
+        .success();
+    assert!(ok, "kill -{name} {pid}");
+}
+
+/// H2: SIGTERM or SIGINT during COLMAP's steps stops COLMAP and removes every temporary file,
+/// folder and lock; nothing is put in place.
+#[cfg(target_os = "linux")]
+#[test]
+fn an_interrupted_colmap_run_leaves_nothing_behind() {
+    for sig in ["TERM", "INT"] {
+        let dir = workdir("reliability", &format!("signal-{sig}"));
+        let images = colmap_photos(&dir);
+        let db = dir.join("out.db");
+        let mut run = start_colmap_that_hangs(&dir, &images, &db);
+        let colmap_pid: u32 = std::fs::read_to_string(dir.join("colmap.pid"))
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap();
+        assert!(!clatch_leftovers(&dir).is_empty(), "it is mid-run");
+        signal(run.id(), sig);
+        let status = run.wait().unwrap();
+        assert_eq!(status.code(), Some(130), "{sig}");
+        assert_eq!(clatch_leftovers(&dir), Vec::<String>::new(), "{sig}");
+        assert!(!db.exists());
+        let began = std::time::Instant::now();
+        while Path::new(&format!("/proc/{colmap_pid}")).exists() {
+            // A zombie reaped by init can linger a moment.
+            let state =
+                std::fs::read_to_string(format!("/proc/{colmap_pid}/stat")).unwrap_or_default();
+            if state.contains(") Z") {
+                break;
+            }
+            assert!(began.elapsed().as_secs() < 10, "{sig}: COLMAP still runs");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+}
+
+/// H2: what a SIGKILLed run leaves (temporary database, match list, model folder, locks) is swept by
+/// the next run in the same folders, and only that.
+#[cfg(target_os = "linux")]
+#[test]
+fn the_next_run_sweeps_what_a_killed_run_left() {
+    let dir = workdir("reliability", "sigkill");
+    let images = colmap_photos(&dir);
+    let db = dir.join("out.db");
+    let mut run = start_colmap_that_hangs(&dir, &images, &db);
+    let colmap_pid = std::fs::read_to_string(dir.join("colmap.pid")).unwrap();
+    signal(run.id(), "KILL");
+    run.wait().unwrap();
+    signal(colmap_pid.trim().parse().unwrap(), "KILL");
+    let left = clatch_leftovers(&dir);
+    assert!(left.iter().any(|p| p.ends_with(".tmp")), "{left:?}");
+    // A file of the user's that merely looks like one stays.
+    let lookalike = dir.join("out-colmap/notes.clatch-1-1.tmp");
+    std::fs::write(&lookalike, "mine").unwrap();
+    let out = colmap(&images, &db, &["--no-colmap"]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    assert_eq!(
+        clatch_leftovers(&dir),
+        [lookalike.display().to_string()],
+        "only the user's file"
+    );
+}
+
+/// H7: a K that COLMAP would spin or abort on, or whose principal point lies outside the photos, is
+/// refused before any work; a COLMAP step that runs past --colmap-timeout is stopped with a typed
+/// error (the database and match list kept).
+#[cfg(unix)]
+#[test]
+fn implausible_cameras_are_refused_and_colmap_is_bounded_in_time() {
+    let dir = workdir("reliability", "k-and-timeout");
+    let images = colmap_photos(&dir);
+    let db = dir.join("out.db");
+    let k = dir.join("K.txt");
+    for (text, needle) in [
+        (
+            "1e-300 0 80 0 1e-300 80 0 0 1",
+            "implausible for a 160x160 image",
+        ),
+        ("1e308 0 80 0 1e308 80 0 0 1", "implausible"),
+        ("200 0 500 0 200 80 0 0 1", "outside the 160x160 image"),
+    ] {
+        std::fs::write(&k, text).unwrap();
+        let out = colmap(&images, &db, &["--no-colmap", "--camera-k", str(&k)]);
+        assert_refused(&out, needle);
+        assert!(!db.exists());
+    }
+    let slow = script(
+        &dir,
+        "slow-mapper",
+        "[ \"$2\" = -h ] && exit 0\n[ \"$1\" = mapper ] && exec sleep 60\nexit 0",
+    );
+    let began = std::time::Instant::now();
+    let out = colmap(
+        &images,
+        &db,
+        &["--colmap", str(&slow), "--colmap-timeout", "1"],
+    );
+    assert_refused(&out, "colmap mapper still ran after 1 s");
+    assert!(began.elapsed().as_secs() < 30);
+    assert!(db.exists(), "kept");
+}

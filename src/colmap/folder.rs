@@ -215,8 +215,9 @@ pub fn photo_camera(
     focal_35mm: Option<u16>,
 ) -> Result<PinholeCamera, ColmapError> {
     let guess = PinholeCamera::guess(width, height)?;
-    Ok(match focal_35mm {
-        Some(f) => {
+    // An EXIF focal length the camera check finds implausible (a broken tag) is no better than none.
+    Ok(focal_35mm
+        .and_then(|f| {
             let focal = exif::focal_pixels(f, width, height);
             PinholeCamera {
                 fx: focal,
@@ -224,10 +225,10 @@ pub fn photo_camera(
                 focal_is_known: true,
                 ..guess
             }
-            .validated()?
-        }
-        None => guess,
-    })
+            .validated()
+            .ok()
+        })
+        .unwrap_or(guess))
 }
 
 /// A decoded photo waiting for extraction.

@@ -56,7 +56,9 @@ mod run;
 pub mod schema;
 mod writer;
 
-pub use camera::{DEFAULT_FOCAL_FACTOR, PINHOLE_MODEL_ID, PinholeCamera};
+pub use camera::{
+    DEFAULT_FOCAL_FACTOR, MAX_FOCAL_RATIO, MIN_FOCAL_RATIO, PINHOLE_MODEL_ID, PinholeCamera,
+};
 pub use corner::{Refinement, refine_corners};
 pub use database::{Database, check_match_indices};
 pub use error::ColmapError;

@@ -118,6 +118,7 @@ fn check_folder_of(path: &Path, create_missing: bool) -> Result<(), OutputError>
         }
     })?;
     std::fs::remove_file(&probe).ok();
+    super::staged::forget_temporary(&probe);
     Ok(())
 }
 

@@ -4,7 +4,7 @@
 use std::fs::File;
 use std::io::{Read, Seek, Write};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use crate::output::OutputError;
 
@@ -55,6 +55,9 @@ impl OutputLock {
             if !same_file(&file, &path) {
                 continue;
             }
+            HELD.lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .push(path.clone());
             file.set_len(0).map_err(OutputError::write(&path))?;
             file.rewind().map_err(OutputError::write(&path))?;
             writeln!(file, "{}", std::process::id()).map_err(OutputError::write(&path))?;
@@ -81,6 +84,20 @@ impl Drop for Held {
         // Removed while still locked, so no other run can lock this file once it is gone.
         std::fs::remove_file(&self.path).ok();
         self.file.unlock().ok();
+        let mut held = HELD.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(i) = held.iter().position(|p| *p == self.path) {
+            held.swap_remove(i);
+        }
+    }
+}
+
+/// The lock files this process holds.
+static HELD: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Removes the lock files this process holds (the process ends next; the system releases the locks).
+pub(crate) fn remove_held_locks() {
+    for path in std::mem::take(&mut *HELD.lock().unwrap_or_else(|p| p.into_inner())) {
+        std::fs::remove_file(path).ok();
     }
 }
 

@@ -34,7 +34,10 @@ pub use checks::{
     check_distinct, check_writable, check_writable_in_new_folder, ends_with_separator, file_kind,
 };
 pub use lock::{OutputLock, lock_path};
-pub use staged::{Staged, TempDir, write_file};
+pub use staged::{
+    Staged, TempDir, Uninterrupted, remove_temporaries, sweep_stale_temporaries, temporary_pid,
+    write_file,
+};
 
 /// Why an output was refused or could not be written. Every variant names the file.
 // Field names are described by each variant's message.

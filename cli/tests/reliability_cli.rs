@@ -500,3 +500,40 @@ fn implausible_cameras_are_refused_and_colmap_is_bounded_in_time() {
     assert!(began.elapsed().as_secs() < 30);
     assert!(db.exists(), "kept");
 }
+
+/// H3 and H15: a JPEG cut and marked as ended again, a JPEG whose header was patched larger, a PGM
+/// sample above MAXVAL are refused as corrupt (as `djpeg` reports them), not decoded into flat
+/// fill; an empty file says so.
+#[test]
+fn corrupt_images_are_refused_and_an_empty_file_is_named_so() {
+    let dir = workdir("reliability", "corrupt");
+    let mut jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 90)
+        .encode_image(&photo(320, 240, 0))
+        .unwrap();
+    let mut cut = jpeg[..jpeg.len() / 4].to_vec();
+    cut.extend_from_slice(&[0xFF, 0xD9]);
+    let mut patched = jpeg.clone();
+    let sof = patched.windows(2).position(|w| w == [0xFF, 0xC0]).unwrap() + 5;
+    patched[sof..sof + 4].copy_from_slice(&[0x27, 0x10, 0x27, 0x10]);
+    let mut pgm = b"P5\n100 100\n200\n".to_vec();
+    pgm.resize(pgm.len() + 100 * 100, 100);
+    pgm[20] = 250;
+    for (name, bytes, needle) in [
+        ("cut.jpg", cut, "corrupt image"),
+        ("patched.jpg", patched, "corrupt image"),
+        ("hot.pgm", pgm, "above the file's MAXVAL 200"),
+        ("empty.png", Vec::new(), "the file is empty"),
+    ] {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let out = extract(&[&path], &dir.join("out"), &[]);
+        assert_refused(&out, needle);
+        assert!(common::stderr(&out).contains(name));
+        assert!(!dir.join("out.keypoints.csv").exists());
+    }
+    let whole = dir.join("whole.jpg");
+    std::fs::write(&whole, &jpeg).unwrap();
+    let out = extract(&[&whole], &dir.join("out"), &[]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+}

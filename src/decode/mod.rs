@@ -14,6 +14,7 @@
 //! ```
 
 mod jpeg_end;
+mod jpeg_scan;
 mod open;
 mod palette;
 

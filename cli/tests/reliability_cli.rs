@@ -537,3 +537,93 @@ fn corrupt_images_are_refused_and_an_empty_file_is_named_so() {
     let out = extract(&[&whole], &dir.join("out"), &[]);
     assert!(out.status.success(), "{}", common::stderr(&out));
 }
+
+/// 548x342 pixels of the photograph (its 512-pixel crop mirrored at the edges).
+fn big_photo() -> image::GrayImage {
+    let p = photo(512, 342, 0);
+    image::GrayImage::from_fn(548, 342, |x, y| {
+        *p.get_pixel(if x < 512 { x } else { 1023 - x }, y)
+    })
+}
+
+/// A 548x342 PNG whose iCCP chunk inflates to `icc_bytes` of zeros.
+fn icc_bomb(icc_bytes: usize) -> Vec<u8> {
+    use std::io::Write;
+    let mut png = Vec::new();
+    big_photo()
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+    let zeros = vec![0u8; 1 << 20];
+    for _ in 0..icc_bytes >> 20 {
+        z.write_all(&zeros).unwrap();
+    }
+    let mut data = b"bomb\0\0".to_vec();
+    data.extend(z.finish().unwrap());
+    let mut chunk = (data.len() as u32).to_be_bytes().to_vec();
+    chunk.extend_from_slice(b"iCCP");
+    chunk.extend_from_slice(&data);
+    let crc = crc32fast::hash(&chunk[4..]);
+    chunk.extend_from_slice(&crc.to_be_bytes());
+    // After the signature (8 bytes) and IHDR (25).
+    png.splice(33..33, chunk);
+    png
+}
+
+/// The largest VmHWM (peak resident memory, KiB) seen of `child` until it ends.
+#[cfg(target_os = "linux")]
+fn peak_kib(child: &mut std::process::Child) -> u64 {
+    let mut peak = 0;
+    while child.try_wait().unwrap().is_none() {
+        if let Ok(status) = std::fs::read_to_string(format!("/proc/{}/status", child.id())) {
+            let kib = status
+                .lines()
+                .find_map(|l| l.strip_prefix("VmHWM:"))
+                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+                .unwrap_or(0);
+            peak = peak.max(kib);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    peak
+}
+
+/// H11: an ICC profile that inflates to 512 MiB in a 548x342 PNG (a 1.5 MB image) is cut off by the
+/// decoder's allocation cap (its pixels plus 16 MiB of metadata, whatever --max-pixels allows): the
+/// profile is dropped (the PNG decoder ignores a profile it cannot read), the image read, and the
+/// run's peak resident memory stays far below the bomb.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_decompression_bomb_in_png_metadata_is_refused_in_bounded_memory() {
+    let dir = workdir("reliability", "icc-bomb");
+    let bomb = dir.join("bomb.png");
+    std::fs::write(&bomb, icc_bomb(512 << 20)).unwrap();
+    for extra in [&[][..], &["--max-pixels", "1000000000"]] {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_clatch"))
+            .args([
+                "extract",
+                str(&bomb),
+                "-o",
+                str(&dir.join("out")),
+                "--backend",
+                "cpu",
+            ])
+            .args(extra)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let peak = peak_kib(&mut child);
+        let out = child.wait_with_output().unwrap();
+        assert!(out.status.success(), "{}", common::stderr(&out));
+        assert!(
+            peak < 150 << 10,
+            "{extra:?}: peak resident memory {peak} KiB"
+        );
+    }
+    // The same image without the bomb is read.
+    let plain = dir.join("plain.png");
+    big_photo().save(&plain).unwrap();
+    let out = extract(&[&plain], &dir.join("out"), &[]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+}

@@ -135,8 +135,10 @@ pub struct ImageInfo {
 /// Reads `path`'s header: its size (checked against `limits`) and format, without decoding pixels.
 /// JPEG files are also followed to their end marker, so a truncated one is refused here.
 pub fn probe(path: &Path, limits: &DecodeLimits) -> Result<ImageInfo, DecodeError> {
-    let reader = reader(path)?;
+    let mut reader = reader(path)?;
     let format = format_of(&reader, path)?;
+    // A PNG's metadata (iCCP, zTXt) is inflated while its header is read: capped already.
+    reader.limits(image_limits(path, limits)?);
     let decoder = reader.into_decoder().map_err(image_error(path))?;
     let (width, height) = decoder.dimensions();
     check_size(path, width, height, limits)?;
@@ -339,9 +341,7 @@ fn decode<R: BufRead + Seek>(
     path: &Path,
     limits: &DecodeLimits,
 ) -> Result<(DynamicImage, Option<Vec<u8>>), DecodeError> {
-    let mut image_limits = image::Limits::default();
-    image_limits.max_alloc = Some(limits.max_alloc());
-    reader.limits(image_limits);
+    reader.limits(image_limits(path, limits)?);
     let mut decoder = reader.into_decoder().map_err(image_error(path))?;
     let (width, height) = decoder.dimensions();
     check_size(path, width, height, limits)?;
@@ -393,6 +393,27 @@ fn open_palette_png(
         });
     }
     Ok(Some((super::gray_from_rgb(&rgb), exif)))
+}
+
+/// Metadata a PNG may inflate beyond its pixels (ICC profile, compressed text): real ICC profiles
+/// are under 1 MiB; 16 MiB leaves room for any, never the hundreds of MiB of a decompression bomb.
+pub const MAX_METADATA_BYTES: u64 = 16 << 20;
+
+/// The `image` crate's limits for `path`: its allocations capped at [`DecodeLimits::max_alloc`], and
+/// for a PNG at what its own size needs (8 bytes a pixel, from its IHDR) plus
+/// [`MAX_METADATA_BYTES`], so that a small image cannot inflate a huge ICC profile or text chunk.
+fn image_limits(path: &Path, limits: &DecodeLimits) -> Result<image::Limits, DecodeError> {
+    let mut max_alloc = limits.max_alloc();
+    let mut start = [0u8; 33];
+    let mut file = File::open(path).map_err(io_error(path))?;
+    let read = read_up_to(&mut file, &mut start).map_err(io_error(path))?;
+    if let Some(header) = palette::Header::parse(&start[..read]) {
+        let pixels = u64::from(header.width) * u64::from(header.height);
+        max_alloc = max_alloc.min(pixels.saturating_mul(8).saturating_add(MAX_METADATA_BYTES));
+    }
+    let mut image_limits = image::Limits::default();
+    image_limits.max_alloc = Some(max_alloc);
+    Ok(image_limits)
 }
 
 /// Refuses a PNM file with a sample above its MAXVAL (the decoder scales samples by MAXVAL and

@@ -129,6 +129,12 @@ pub fn main(
                 Ok::<_, Failure>(Decoded { img, index })
             },
             |_, decoded, features| {
+                crate::input::warn_if_no_keypoints(
+                    &args.images[decoded.index],
+                    decoded.img.dimensions(),
+                    features.keypoints.len(),
+                    extractor.config(),
+                );
                 let [csv, json, npy] = &outputs[decoded.index];
                 let mut one = Staged::new();
                 let staged = if args.fail_fast {

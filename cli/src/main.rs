@@ -307,6 +307,12 @@ pub fn settings_on(
     subpixel: Option<Subpixel>,
     matching: Option<&MatchingArgs>,
 ) -> Result<Settings, CliError> {
+    detect
+        .check_sizes()
+        .map_err(|reason| CliError::OptionConflict {
+            options: "--keypoint-size and --pyramid".into(),
+            reason,
+        })?;
     let mut extractor = detect.config()?;
     if let Some(subpixel) = subpixel {
         extractor.detector.subpixel = subpixel;
@@ -348,6 +354,46 @@ mod tests {
     use clatch_cli::flags::MIN_PYRAMID_FACTOR;
     use clatch_cli::names::BackendFlag;
 
+    /// Issue 28, H13: sizes that do not fit name the options as given and what would fit.
+    #[test]
+    fn pyramid_and_keypoint_sizes_that_do_not_fit_name_the_options() {
+        let backend = clatch_cli::flags::BackendArgs {
+            backend: BackendFlag::named(clatch::Backend::Cpu),
+            device: 0,
+        };
+        let refused = |extra: &[&str]| {
+            let args = [&["clatch", "demo"][..], extra].concat();
+            let Command::Demo(demo) = Cli::try_parse_from(args).unwrap().command else {
+                panic!("parsed the wrong subcommand")
+            };
+            match settings(&demo.backend, &demo.detect, None, None) {
+                Err(e) => e.to_string(),
+                Ok(_) => panic!("{extra:?} should be refused"),
+            }
+        };
+        let e = refused(&["--pyramid", "8"]);
+        assert!(
+            e.contains("--pyramid 8:2 with the default keypoint size 40"),
+            "{e}"
+        );
+        assert!(e.contains("at most 5 levels with FACTOR 2"), "{e}");
+        assert!(!e.contains("pyramid.levels"), "{e}");
+        let e = refused(&["--keypoint-size", "300"]);
+        assert!(
+            e.contains("the default pyramid 8:1.2 with --keypoint-size 300"),
+            "{e}"
+        );
+        assert!(e.contains("--keypoint-size at most 285"), "{e}");
+        let Command::Demo(demo) =
+            Cli::try_parse_from(["clatch", "demo", "--pyramid", "6", "--keypoint-size", "32"])
+                .unwrap()
+                .command
+        else {
+            panic!("parsed the wrong subcommand")
+        };
+        settings(&demo.backend, &demo.detect, None, None).unwrap();
+    }
+
     #[test]
     fn cli_definition_is_consistent() {
         Cli::command().debug_assert();
@@ -364,7 +410,6 @@ mod tests {
             &["clatch", "demo", "--max-keypoints", "0"],
             &["clatch", "demo", "--backend", "tpu"],
             &["clatch", "demo", "--pyramid", "0"],
-            &["clatch", "demo", "--pyramid", "6"],
             &["clatch", "demo", "--pyramid", "3:1"],
             &["clatch", "demo", "--pyramid", "3:2.5"],
             &["clatch", "demo", "--pyramid", "3:x"],

@@ -627,3 +627,32 @@ fn a_decompression_bomb_in_png_metadata_is_refused_in_bounded_memory() {
     let out = extract(&[&plain], &dir.join("out"), &[]);
     assert!(out.status.success(), "{}", common::stderr(&out));
 }
+
+/// H13: --pyramid 8 and a --keypoint-size too large for the default pyramid name the options as
+/// given (not the library's `pyramid.levels`); --single-scale on an image too small for its 64-pixel
+/// windows warns why it found nothing.
+#[test]
+fn sizes_are_explained_in_the_options_the_user_set() {
+    let dir = workdir("reliability", "sizes");
+    let out = clatch(&["demo", "--pyramid", "8", "-o", str(&dir.join("d.png"))]);
+    assert_refused(&out, "--pyramid 8:2 with the default keypoint size 40");
+    assert!(!common::stderr(&out).contains("pyramid.levels"));
+    let out = clatch(&[
+        "demo",
+        "--keypoint-size",
+        "500",
+        "-o",
+        str(&dir.join("d.png")),
+    ]);
+    assert_refused(&out, "--keypoint-size at most 285");
+    let small = dir.join("small.png");
+    photo(90, 90, 100).save(&small).unwrap();
+    let out = extract(&[&small], &dir.join("s"), &["--single-scale"]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    let e = common::stderr(&out);
+    assert!(
+        e.contains("warning") && e.contains("no keypoints: it is 90x90"),
+        "{e}"
+    );
+    assert!(e.contains("48 pixels from every border"), "{e}");
+}

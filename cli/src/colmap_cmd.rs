@@ -46,6 +46,20 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     // Every check before any work; the backend's set-up (on the GPU: the device's context and
     // kernels) runs on a thread of its own meanwhile and while the first photos are decoded.
     let plan = job.plan().map_err(|e| camera_k_error(args, e))?;
+    let skipped = clatch::colmap::skipped_entries(&args.images);
+    if !skipped.is_empty() {
+        let list: Vec<String> = skipped
+            .iter()
+            .map(|(path, what)| format!("{} ({what})", path.display()))
+            .collect();
+        eprintln!(
+            "clatch: warning: skipped {} entr{} of {} named like images but not regular files: {}",
+            skipped.len(),
+            if skipped.len() == 1 { "y" } else { "ies" },
+            args.images.display(),
+            list.join(", ")
+        );
+    }
     // The database stays locked until COLMAP's model is installed.
     let _lock = plan.lock();
     let workspace = check_workspace(args, &job, plan.folder().paths.len())?;

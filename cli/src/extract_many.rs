@@ -79,6 +79,24 @@ pub fn main(
                 .zip(files.iter().map(PathBuf::as_path))
         })
         .collect();
+    // Two inputs of one name (a/x.png, b/x.png) would write one set of files: named, both of them.
+    for (i, a) in args.images.iter().enumerate() {
+        if let Some(b) = args.images[..i]
+            .iter()
+            .find(|b| outputs_in(dir, b).ok() == outputs_in(dir, a).ok())
+        {
+            return Err(CliError::OutputPath {
+                path: outputs[i][0].clone(),
+                reason: format!(
+                    "the images {} and {} would both write their files as {}.*; give them \
+                     different file names or extract them into different folders",
+                    b.display(),
+                    a.display(),
+                    a.file_stem().unwrap_or_default().to_string_lossy()
+                ),
+            });
+        }
+    }
     check_distinct(&inputs, &all_outputs)?;
     std::fs::create_dir_all(dir).map_err(CliError::write(dir))?;
     for (_, path) in &all_outputs {

@@ -656,3 +656,43 @@ fn sizes_are_explained_in_the_options_the_user_set() {
     );
     assert!(e.contains("48 pixels from every border"), "{e}");
 }
+
+/// H15: two inputs of one name in a multi-image extract are both named; entries of a colmap folder
+/// named like images but skipped (a broken link, a FIFO, a folder) are listed in a warning.
+#[test]
+fn skipped_and_clashing_inputs_are_named() {
+    let dir = workdir("reliability", "names");
+    for sub in ["a", "b"] {
+        std::fs::create_dir(dir.join(sub)).unwrap();
+        photo(100, 100, 0)
+            .save(dir.join(sub).join("x.png"))
+            .unwrap();
+    }
+    let (a, b) = (dir.join("a/x.png"), dir.join("b/x.png"));
+    let out = extract(&[&a, &b], &dir.join("out"), &[]);
+    assert_refused(&out, str(&a));
+    assert!(
+        common::stderr(&out).contains(str(&b)),
+        "{}",
+        common::stderr(&out)
+    );
+    assert!(!dir.join("out/x.keypoints.csv").exists());
+
+    let images = colmap_photos(&dir);
+    std::fs::create_dir(images.join("folder.jpg")).unwrap();
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink(dir.join("gone.jpg"), images.join("dangling.jpg")).unwrap();
+        common::mkfifo(&images.join("pipe.png"));
+    }
+    let out = colmap(&images, &dir.join("out.db"), &["--no-colmap"]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    let e = common::stderr(&out);
+    assert!(e.contains("warning: skipped"), "{e}");
+    assert!(e.contains("folder.jpg (a folder)"), "{e}");
+    #[cfg(unix)]
+    {
+        assert!(e.contains("dangling.jpg (a broken link)"), "{e}");
+        assert!(e.contains("pipe.png (a FIFO)"), "{e}");
+    }
+}

@@ -31,6 +31,22 @@ pub(crate) fn workspace_owner(match_list: &Path) -> Option<String> {
     Some(text.trim_end_matches('\n').to_owned()).filter(|s| !s.is_empty())
 }
 
+/// A write failure of the database or the match list as an error naming the file (its final path:
+/// the temporary one beside it is removed).
+fn naming_the_file(e: ColmapError, (database, match_list): &(PathBuf, PathBuf)) -> ColmapError {
+    match e {
+        ColmapError::Sqlite { .. } => ColmapError::Writing {
+            path: database.clone(),
+            source: Box::new(e),
+        },
+        ColmapError::MatchListIo(_) => ColmapError::Writing {
+            path: match_list.clone(),
+            source: Box::new(e),
+        },
+        other => other,
+    }
+}
+
 /// The one writer of a folder run ([`FolderWriter`]) over temporary files: the stage every run ends
 /// in, whether it extracted and matched in this process ([`super::FolderPlan::run`]) or gathered the
 /// photos and matches from workers. [`FolderOutput::finish`] completes both files, which
@@ -141,12 +157,16 @@ impl FolderOutput {
         self.timed(|w| w.add_matches(i, j, matches))
     }
 
-    /// `write` on the writer, its time added to the writing time.
-    fn timed<T>(&mut self, write: impl FnOnce(&mut FolderWriter<BufWriter<File>>) -> T) -> T {
+    /// `write` on the writer, its time added to the writing time; a failure to write (a full disk)
+    /// names the file.
+    fn timed<T>(
+        &mut self,
+        write: impl FnOnce(&mut FolderWriter<BufWriter<File>>) -> Result<T, ColmapError>,
+    ) -> Result<T, ColmapError> {
         let began = Instant::now();
         let result = write(&mut self.writer);
         self.writing += began.elapsed();
-        result
+        result.map_err(|e| naming_the_file(e, &self.outputs))
     }
 
     /// Photos, keypoints, pairs and matches written so far.
@@ -164,11 +184,14 @@ impl FolderOutput {
     pub fn finish(self) -> Result<WrittenFolder, ColmapError> {
         let began = Instant::now();
         let counts = self.writer.counts();
-        let list = self.writer.finish()?;
+        let outputs = &self.outputs;
+        let name = |e| naming_the_file(e, outputs);
+        let list = self.writer.finish().map_err(name)?;
         let file = list
             .into_inner()
-            .map_err(|e| ColmapError::MatchListIo(e.into_error()))?;
-        file.sync_all().map_err(ColmapError::MatchListIo)?;
+            .map_err(|e| name(ColmapError::MatchListIo(e.into_error())))?;
+        file.sync_all()
+            .map_err(|e| name(ColmapError::MatchListIo(e)))?;
         Ok(WrittenFolder {
             staged: self.staged,
             locks: self.locks,
@@ -242,5 +265,33 @@ impl WrittenFolder {
         (report.database, report.match_list) = self.outputs;
         report.times.writing += began.elapsed();
         Ok(report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failed_write_names_the_file() {
+        let outputs = (
+            PathBuf::from("runs/out.db"),
+            PathBuf::from("runs/ws/matches.txt"),
+        );
+        let full = || std::io::Error::other("No space left on device");
+        let e = naming_the_file(
+            ColmapError::Sqlite {
+                operation: "inserting keypoints",
+                source: rusqlite::Error::InvalidQuery,
+            },
+            &outputs,
+        );
+        assert!(
+            e.to_string().starts_with("cannot write runs/out.db: "),
+            "{e}"
+        );
+        let e = naming_the_file(ColmapError::MatchListIo(full()), &outputs);
+        assert!(e.to_string().contains("runs/ws/matches.txt"), "{e}");
+        assert!(e.to_string().contains("No space left"), "{e}");
     }
 }

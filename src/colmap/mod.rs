@@ -65,6 +65,7 @@ pub use error::ColmapError;
 pub use folder::{
     DEFAULT_GRID, DEFAULT_MAX_KEYPOINTS, IMAGE_EXTENSIONS, ImageFolder, Photo, check_detectable,
     extract_each_photo, extract_photo, extract_photos, image_name, list_images, photo_camera,
+    skipped_entries,
 };
 pub use folder_output::{FolderOutput, WrittenFolder};
 pub use job::{FolderCamera, FolderJob, MATCH_LIST_NAME, Overwrite, default_workspace};

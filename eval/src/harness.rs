@@ -246,3 +246,48 @@ fn run_writing(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A failed run removes only what it wrote, never a file of the user's (in the folder, or an
+    /// input outside it), nor a link, nor a folder that still holds anything.
+    #[test]
+    fn a_failed_run_removes_only_its_own_files() {
+        let root = std::env::temp_dir().join(format!("clatch-eval-cleanup-{}", std::process::id()));
+        std::fs::remove_dir_all(&root).ok();
+        let out = root.join("out");
+        let synthetic = out.join("synthetic");
+        std::fs::create_dir_all(&synthetic).unwrap();
+        let input = root.join("img1.ppm");
+        std::fs::write(&input, "the user's image").unwrap();
+        let (ours_a, ours_h) = (synthetic.join("a.png"), synthetic.join("H_a"));
+        std::fs::write(&ours_a, "ours").unwrap();
+        std::fs::write(&ours_h, "ours").unwrap();
+        let notes = out.join("notes.txt");
+        std::fs::write(&notes, "the user's notes").unwrap();
+        let link = out.join("pairs.csv");
+        #[cfg(unix)]
+        std::os::unix::fs::symlink(&input, &link).unwrap();
+        let pair = pairs::EvalPair {
+            name: "a".into(),
+            group: "g".into(),
+            param: None,
+            image_a: ours_a.clone(),
+            image_b: input.clone(),
+            homography: ours_h.clone(),
+        };
+        remove_failed_run(&out, &[pair], &[link.clone()]);
+        assert!(!ours_a.exists() && !ours_h.exists() && !synthetic.exists());
+        assert_eq!(std::fs::read_to_string(&input).unwrap(), "the user's image");
+        assert_eq!(std::fs::read_to_string(&notes).unwrap(), "the user's notes");
+        #[cfg(unix)]
+        assert!(
+            std::fs::symlink_metadata(&link).is_ok(),
+            "a link is not removed"
+        );
+        assert!(out.exists(), "a folder holding the user's notes stays");
+        std::fs::remove_dir_all(&root).ok();
+    }
+}

@@ -30,6 +30,17 @@ impl OutputLock {
         // A holder that ends removes the lock file: a file opened just before that is locked by
         // no one else, so the lock taken is checked to still be the file at `path`.
         for _ in 0..16 {
+            // Only clatch's own lock file is ever opened: never a link, a folder, or a file of the
+            // user's that happens to bear the name (it would be truncated, then removed).
+            if let Ok(meta) = std::fs::symlink_metadata(&path)
+                && (!meta.is_file() || !holds_a_pid(&path))
+            {
+                return Err(OutputError::OutputPath {
+                    path: path.clone(),
+                    reason: "it is not a clatch lock file (clatch keeps its lock there); move it"
+                        .into(),
+                });
+            }
             let mut file = File::options()
                 .read(true)
                 .write(true)
@@ -101,6 +112,13 @@ pub(crate) fn remove_held_locks() {
     }
 }
 
+/// Whether `path` is empty or holds a process id, as clatch's lock files do.
+fn holds_a_pid(path: &Path) -> bool {
+    let mut text = String::new();
+    let read = File::open(path).and_then(|mut f| f.take(64).read_to_string(&mut text));
+    read.is_ok() && text.trim().bytes().all(|b| b.is_ascii_digit())
+}
+
 /// `.NAME.clatch-lock` beside `target`.
 pub fn lock_path(target: &Path) -> PathBuf {
     let name = target.file_name().unwrap_or_default().to_string_lossy();
@@ -149,6 +167,39 @@ mod tests {
         drop(clone);
         assert!(!lock_path(&target).exists());
         drop(OutputLock::acquire(&target).unwrap());
+        std::fs::remove_dir_all(&d).ok();
+    }
+
+    /// A file of the user's, or a link, that bears the lock file's name is never written or removed.
+    #[test]
+    fn a_users_file_by_the_lock_files_name_is_left_alone() {
+        let d = test_dir("lock-hostile");
+        let target = d.join("out.db");
+        std::fs::write(lock_path(&target), "my notes").unwrap();
+        let e = OutputLock::acquire(&target).unwrap_err();
+        assert!(e.to_string().contains("not a clatch lock file"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(lock_path(&target)).unwrap(),
+            "my notes"
+        );
+        std::fs::remove_file(lock_path(&target)).unwrap();
+        #[cfg(unix)]
+        {
+            let precious = d.join("precious.txt");
+            std::fs::write(&precious, "12345").unwrap();
+            std::os::unix::fs::symlink(&precious, lock_path(&target)).unwrap();
+            assert!(OutputLock::acquire(&target).is_err());
+            assert_eq!(std::fs::read_to_string(&precious).unwrap(), "12345");
+            assert!(
+                std::fs::symlink_metadata(lock_path(&target)).is_ok(),
+                "the link stays"
+            );
+        }
+        // A stale lock file of a killed run (its pid inside) is taken over and removed after.
+        std::fs::remove_file(lock_path(&target)).ok();
+        std::fs::write(lock_path(&target), "4194305\n").unwrap();
+        drop(OutputLock::acquire(&target).unwrap());
+        assert!(!lock_path(&target).exists());
         std::fs::remove_dir_all(&d).ok();
     }
 }

@@ -142,7 +142,7 @@ pub fn main(
                     .and_then(|img| check_detectable(path, img.width(), img.height()).map(|()| img))
                     .map_err(|error| Failure {
                         image: Some(index),
-                        error,
+                        error: Box::new(error),
                     })?;
                 Ok::<_, Failure>(Decoded { img, index })
             },
@@ -182,9 +182,9 @@ pub fn main(
                 error,
             }) if !args.fail_fast => {
                 progress.done();
-                failed.push((index, error));
+                failed.push((index, *error));
             }
-            Err(Failure { error, .. }) => return Err(error),
+            Err(Failure { error, .. }) => return Err(*error),
         }
     }
     all_or_none.commit()?;
@@ -234,14 +234,14 @@ pub fn main(
 /// is listed as failed and the others go on, unless --fail-fast).
 struct Failure {
     image: Option<usize>,
-    error: CliError,
+    error: Box<CliError>,
 }
 
 impl From<clatch::Error> for Failure {
     fn from(e: clatch::Error) -> Self {
         Self {
             image: None,
-            error: e.into(),
+            error: Box::new(e.into()),
         }
     }
 }
@@ -250,7 +250,7 @@ impl From<clatch::output::OutputError> for Failure {
     fn from(e: clatch::output::OutputError) -> Self {
         Self {
             image: None,
-            error: e.into(),
+            error: Box::new(e.into()),
         }
     }
 }

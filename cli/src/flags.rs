@@ -145,9 +145,11 @@ fn parse_pyramid(s: &str) -> Result<Pyramid, String> {
     // The ranges only: whether the top level's keypoints fit depends on --keypoint-size too
     // ([`DetectArgs::check_sizes`]).
     pyramid.validate(1.0).map_err(|e| match e {
-        clatch::Error::InvalidConfig { field, reason, .. } if field == "pyramid.levels" => {
-            format!("LEVELS {levels} {reason}")
-        }
+        clatch::Error::InvalidConfig {
+            field: "pyramid.levels",
+            reason,
+            ..
+        } => format!("LEVELS {levels} {reason}"),
         clatch::Error::InvalidConfig { reason, .. } => format!("FACTOR {scale_factor} {reason}"),
         other => other.to_string(),
     })?;

@@ -357,10 +357,6 @@ mod tests {
     /// Issue 28, H13: sizes that do not fit name the options as given and what would fit.
     #[test]
     fn pyramid_and_keypoint_sizes_that_do_not_fit_name_the_options() {
-        let backend = clatch_cli::flags::BackendArgs {
-            backend: BackendFlag::named(clatch::Backend::Cpu),
-            device: 0,
-        };
         let refused = |extra: &[&str]| {
             let args = [&["clatch", "demo"][..], extra].concat();
             let Command::Demo(demo) = Cli::try_parse_from(args).unwrap().command else {

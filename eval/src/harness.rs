@@ -278,7 +278,7 @@ mod tests {
             image_b: input.clone(),
             homography: ours_h.clone(),
         };
-        remove_failed_run(&out, &[pair], &[link.clone()]);
+        remove_failed_run(&out, &[pair], std::slice::from_ref(&link));
         assert!(!ours_a.exists() && !ours_h.exists() && !synthetic.exists());
         assert_eq!(std::fs::read_to_string(&input).unwrap(), "the user's image");
         assert_eq!(std::fs::read_to_string(&notes).unwrap(), "the user's notes");

@@ -115,7 +115,7 @@ pub(crate) fn remove_held_locks() {
 /// Whether `path` is empty or holds a process id, as clatch's lock files do.
 fn holds_a_pid(path: &Path) -> bool {
     let mut text = String::new();
-    let read = File::open(path).and_then(|mut f| f.take(64).read_to_string(&mut text));
+    let read = File::open(path).and_then(|f| f.take(64).read_to_string(&mut text));
     read.is_ok() && text.trim().bytes().all(|b| b.is_ascii_digit())
 }
 

@@ -6,17 +6,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{assert_refused, clatch, photo, str, workdir};
-
-/// Every file name in `dir`, sorted.
-fn listing(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    names
-}
+use common::{assert_refused, clatch, listing, photo, str, workdir};
 
 /// Four photos `p0.png` .. `p3.png` in `dir`.
 fn four_photos(dir: &Path) -> Vec<PathBuf> {
@@ -183,17 +173,7 @@ fn colmap_photos(dir: &Path) -> PathBuf {
 }
 
 fn colmap(images: &Path, db: &Path, extra: &[&str]) -> std::process::Output {
-    let mut args = vec![
-        "colmap",
-        "--images",
-        str(images),
-        "--database",
-        str(db),
-        "--backend",
-        "cpu",
-    ];
-    args.extend_from_slice(extra);
-    clatch(&args)
+    common::colmap_cpu(images, db, extra)
 }
 
 /// An executable shell script `name` in `dir`.

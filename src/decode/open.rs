@@ -210,14 +210,7 @@ fn decode_jpeg_strictly(
     use zune_jpeg::zune_core::colorspace::ColorSpace;
     use zune_jpeg::zune_core::options::DecoderOptions;
 
-    let len = regular_file(path)?.len();
-    if len > limits.max_alloc() {
-        return Err(DecodeError::FileTooLarge {
-            path: path.to_path_buf(),
-            bytes: len,
-            max: limits.max_alloc(),
-        });
-    }
+    let len = check_file_len(path, limits)?;
     let bytes = std::fs::read(path).map_err(io_error(path))?;
     let corrupt = |e: zune_jpeg::errors::DecodeErrors| DecodeError::CorruptImage {
         path: path.to_path_buf(),
@@ -266,6 +259,19 @@ fn decode_jpeg_strictly(
 }
 
 /// The path's metadata, refusing anything but a regular file (symbolic links are followed).
+/// The file's length, refused when larger than the decoder may allocate (a file read whole first).
+fn check_file_len(path: &Path, limits: &DecodeLimits) -> Result<u64, DecodeError> {
+    let len = regular_file(path)?.len();
+    if len > limits.max_alloc() {
+        return Err(DecodeError::FileTooLarge {
+            path: path.to_path_buf(),
+            bytes: len,
+            max: limits.max_alloc(),
+        });
+    }
+    Ok(len)
+}
+
 fn regular_file(path: &Path) -> Result<std::fs::Metadata, DecodeError> {
     let meta = std::fs::metadata(path).map_err(io_error(path))?;
     if meta.is_file() {
@@ -368,14 +374,7 @@ fn open_palette_png(
     }
     check_size(path, header.width, header.height, limits)?;
     // A palette file is at most a byte per pixel once inflated; a larger one is refused unread.
-    let len = regular_file(path)?.len();
-    if len > limits.max_alloc() {
-        return Err(DecodeError::FileTooLarge {
-            path: path.to_path_buf(),
-            bytes: len,
-            max: limits.max_alloc(),
-        });
-    }
+    let len = check_file_len(path, limits)?;
     let mut bytes = Vec::with_capacity(len as usize);
     file.rewind().map_err(io_error(path))?;
     file.read_to_end(&mut bytes).map_err(io_error(path))?;

@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{assert_refused, clatch, photo, str, workdir};
+use common::{assert_refused, photo, str, workdir};
 
 fn write_photos(images: &Path, size: u32) {
     std::fs::create_dir_all(images).unwrap();

@@ -210,7 +210,7 @@ fn decode_jpeg_strictly(
     use zune_jpeg::zune_core::colorspace::ColorSpace;
     use zune_jpeg::zune_core::options::DecoderOptions;
 
-    let len = check_file_len(path, limits)?;
+    check_file_len(path, limits)?;
     let bytes = std::fs::read(path).map_err(io_error(path))?;
     let corrupt = |e: zune_jpeg::errors::DecodeErrors| DecodeError::CorruptImage {
         path: path.to_path_buf(),

@@ -111,6 +111,12 @@ fn check_folder_of(path: &Path, create_missing: bool) -> Result<(), OutputError>
             reason: "the folder does not exist; create it first".into(),
         });
     }
+    // Probed once per folder and process: a batch checks thousands of outputs in one folder.
+    static WRITABLE: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+    let mut writable = WRITABLE.lock().unwrap_or_else(|p| p.into_inner());
+    if writable.iter().any(|f| f == existing) {
+        return Ok(());
+    }
     let probe = super::staged::create_temp_beside(&existing.join("probe")).map_err(|_| {
         OutputError::OutputPath {
             path: existing.to_path_buf(),
@@ -119,6 +125,7 @@ fn check_folder_of(path: &Path, create_missing: bool) -> Result<(), OutputError>
     })?;
     std::fs::remove_file(&probe).ok();
     super::staged::forget_temporary(&probe);
+    writable.push(existing.to_path_buf());
     Ok(())
 }
 

@@ -676,3 +676,53 @@ fn skipped_and_clashing_inputs_are_named() {
         assert!(e.contains("pipe.png (a FIFO)"), "{e}");
     }
 }
+
+/// H2: SIGTERM in the middle of a multi-image `extract` leaves no temporary file: every image's
+/// files are either all in place or absent.
+#[cfg(target_os = "linux")]
+#[test]
+fn an_interrupted_extract_leaves_no_temporary_file() {
+    let dir = workdir("reliability", "extract-signal");
+    let first = dir.join("p0.png");
+    let p = photo(512, 512, 0);
+    image::GrayImage::from_fn(1024, 1024, |x, y| *p.get_pixel(x % 512, y % 512))
+        .save(&first)
+        .unwrap();
+    let images: Vec<PathBuf> = (0..60)
+        .map(|i| {
+            let path = dir.join(format!("p{i}.png"));
+            if i > 0 {
+                std::fs::copy(&first, &path).unwrap();
+            }
+            path
+        })
+        .collect();
+    let out = dir.join("out");
+    let mut run = std::process::Command::new(env!("CARGO_BIN_EXE_clatch"))
+        .arg("extract")
+        .args(&images)
+        .args(["-o", str(&out), "--backend", "cpu"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let began = std::time::Instant::now();
+    while !out.join("p0.descriptors.npy").exists() {
+        assert!(began.elapsed().as_secs() < 60, "nothing written");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    signal(run.id(), "TERM");
+    assert_eq!(run.wait().unwrap().code(), Some(130));
+    assert_eq!(clatch_leftovers(&dir), Vec::<String>::new());
+    let names = listing(&out);
+    for i in 0..60 {
+        let of_image = [".keypoints.csv", ".keypoints.json", ".descriptors.npy"]
+            .iter()
+            .filter(|s| names.contains(&format!("p{i}{s}")))
+            .count();
+        assert!(
+            of_image == 0 || of_image == 3,
+            "p{i}: {of_image} of 3 files"
+        );
+    }
+}

@@ -41,14 +41,25 @@ impl OutputLock {
                         .into(),
                 });
             }
-            let mut file = File::options()
-                .read(true)
-                .write(true)
-                .create(true)
-                .truncate(false)
-                .open(&path)
-                .map_err(OutputError::write(&path))?;
-            match file.try_lock() {
+            // Made and registered together, never once the process is ending (its handler removes
+            // the registered lock files).
+            let opened = super::staged::while_open(|_| {
+                let file = File::options()
+                    .read(true)
+                    .write(true)
+                    .create(true)
+                    .truncate(false)
+                    .open(&path)?;
+                let locked = file.try_lock();
+                if locked.is_ok() {
+                    HELD.lock()
+                        .unwrap_or_else(|p| p.into_inner())
+                        .push(path.clone());
+                }
+                Ok::<_, std::io::Error>((file, locked))
+            });
+            let (mut file, locked) = opened.map_err(OutputError::write(&path))?;
+            match locked {
                 Ok(()) => {}
                 Err(std::fs::TryLockError::WouldBlock) => {
                     let mut text = String::new();
@@ -64,11 +75,9 @@ impl OutputLock {
                 }
             }
             if !same_file(&file, &path) {
+                forget_held(&path);
                 continue;
             }
-            HELD.lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .push(path.clone());
             file.set_len(0).map_err(OutputError::write(&path))?;
             file.rewind().map_err(OutputError::write(&path))?;
             writeln!(file, "{}", std::process::id()).map_err(OutputError::write(&path))?;
@@ -95,10 +104,14 @@ impl Drop for Held {
         // Removed while still locked, so no other run can lock this file once it is gone.
         std::fs::remove_file(&self.path).ok();
         self.file.unlock().ok();
-        let mut held = HELD.lock().unwrap_or_else(|p| p.into_inner());
-        if let Some(i) = held.iter().position(|p| *p == self.path) {
-            held.swap_remove(i);
-        }
+        forget_held(&self.path);
+    }
+}
+
+fn forget_held(path: &Path) {
+    let mut held = HELD.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some(i) = held.iter().position(|p| p == path) {
+        held.swap_remove(i);
     }
 }
 

@@ -113,11 +113,22 @@ static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 /// Renames in progress that an interruption must let finish ([`Uninterrupted`]).
 static UNINTERRUPTED: AtomicUsize = AtomicUsize::new(0);
 
-fn remember_temporary(path: &Path) {
-    TEMPORARIES
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .push(path.to_path_buf());
+/// Set by [`remove_temporaries`]: the process is ending, and no thread may make another file.
+static CLOSING: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Runs `make` (which creates a file of this process's and registers it) unless the process is
+/// ending: then the thread waits for the exit instead, so that no file is made after
+/// [`remove_temporaries`] collected the list.
+pub(crate) fn while_open<T>(make: impl FnOnce(&mut Vec<PathBuf>) -> T) -> T {
+    let mut all = TEMPORARIES.lock().unwrap_or_else(|p| p.into_inner());
+    // A group of renames under way ([`Uninterrupted`]) finishes, with the files it needs.
+    if CLOSING.load(Ordering::SeqCst) && IN_SECTION.get() == 0 {
+        drop(all);
+        loop {
+            std::thread::park();
+        }
+    }
+    make(&mut all)
 }
 
 /// Forgets a temporary path (renamed into place, or removed).
@@ -129,15 +140,18 @@ pub(crate) fn forget_temporary(path: &Path) {
 }
 
 /// While one is alive, [`remove_temporaries`] waits: a group of renames (a [`Staged::commit`], the
-/// installation of COLMAP models) is never cut half-way by an interruption.
+/// installation of COLMAP models) is never cut half-way by an interruption. Not `Send`: a section
+/// belongs to the thread that opened it (which may still make the files it needs meanwhile).
 #[derive(Debug)]
-pub struct Uninterrupted(());
+pub struct Uninterrupted(std::marker::PhantomData<*const ()>);
 
 impl Uninterrupted {
     /// Holds [`remove_temporaries`] off until the value is dropped.
     pub fn new() -> Self {
-        UNINTERRUPTED.fetch_add(1, Ordering::SeqCst);
-        Self(())
+        // Counted under the gate: once the process is ending, no group of renames starts.
+        while_open(|_| UNINTERRUPTED.fetch_add(1, Ordering::SeqCst));
+        IN_SECTION.set(IN_SECTION.get() + 1);
+        Self(std::marker::PhantomData)
     }
 }
 
@@ -149,8 +163,14 @@ impl Default for Uninterrupted {
 
 impl Drop for Uninterrupted {
     fn drop(&mut self) {
+        IN_SECTION.set(IN_SECTION.get() - 1);
         UNINTERRUPTED.fetch_sub(1, Ordering::SeqCst);
     }
+}
+
+thread_local! {
+    /// [`Uninterrupted`] sections this thread is in.
+    static IN_SECTION: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
 }
 
 /// Removes every temporary file and folder this process has made and not yet renamed into place
@@ -159,6 +179,11 @@ impl Drop for Uninterrupted {
 /// Waits (up to 30 s) for renames in progress ([`Uninterrupted`]) to finish first. Only paths this
 /// process created are touched.
 pub fn remove_temporaries() {
+    {
+        let _all = TEMPORARIES.lock().unwrap_or_else(|p| p.into_inner());
+        CLOSING.store(true, Ordering::SeqCst);
+    }
+    // No group of renames starts any more; those under way finish.
     let began = std::time::Instant::now();
     while UNINTERRUPTED.load(Ordering::SeqCst) > 0 && began.elapsed().as_secs() < 30 {
         std::thread::sleep(std::time::Duration::from_millis(5));
@@ -296,11 +321,15 @@ pub(super) fn create_temp_beside(path: &Path) -> Result<PathBuf, OutputError> {
     loop {
         let n = COUNTER.fetch_add(1, Ordering::Relaxed);
         let temp = folder.join(format!(".{name}.clatch-{}-{n}.tmp", std::process::id()));
-        match File::options().write(true).create_new(true).open(&temp) {
-            Ok(_) => {
-                remember_temporary(&temp);
-                return Ok(temp);
+        let made = while_open(|all| {
+            let made = File::options().write(true).create_new(true).open(&temp);
+            if made.is_ok() {
+                all.push(temp.clone());
             }
+            made
+        });
+        match made {
+            Ok(_) => return Ok(temp),
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
             Err(source) => return Err(OutputError::write(path)(source)),
         }

@@ -31,8 +31,12 @@ pub enum Error {
         got: usize,
     },
 
-    /// The image cannot hold one descriptor window.
-    #[error("image {width}x{height} is smaller than the {min}x{min} descriptor window")]
+    /// The image is smaller than the least clatch detects on: the descriptor's 64x64 sample grid
+    /// (spread over the keypoint's window, 40 pixels by default) needs `min` pixels on each side.
+    #[error(
+        "image {width}x{height} is too small: clatch needs at least {min}x{min} pixels (its descriptor \
+         samples a {min}x{min} grid)"
+    )]
     ImageTooSmall {
         width: usize,
         height: usize,

@@ -46,7 +46,23 @@ pub fn main(args: &ColmapArgs) -> Result<(), CliError> {
     // Every check before any work; the backend's set-up (on the GPU: the device's context and
     // kernels) runs on a thread of its own meanwhile and while the first photos are decoded.
     let plan = job.plan().map_err(|e| camera_k_error(args, e))?;
-    let workspace = check_workspace(args, &job)?;
+    let skipped = clatch::colmap::skipped_entries(&args.images);
+    if !skipped.is_empty() {
+        let list: Vec<String> = skipped
+            .iter()
+            .map(|(path, what)| format!("{} ({what})", path.display()))
+            .collect();
+        eprintln!(
+            "clatch: warning: skipped {} entr{} of {} named like images but not regular files: {}",
+            skipped.len(),
+            if skipped.len() == 1 { "y" } else { "ies" },
+            args.images.display(),
+            list.join(", ")
+        );
+    }
+    // The database stays locked until COLMAP's model is installed.
+    let _lock = plan.lock();
+    let workspace = check_workspace(args, &job, plan.folder().paths.len())?;
     // A workspace made here is removed again if nothing could be written to it.
     let workspace_existed = workspace.path.exists();
     let result = write_and_run(args, plan, &workspace);
@@ -104,7 +120,11 @@ fn camera_k_error(args: &ColmapArgs, e: ColmapError) -> CliError {
 
 /// Checks what the library's run does not write, before any work: the photos are not where clatch
 /// writes, the workspace's `sparse/` holds only what clatch may replace, the `colmap` program.
-fn check_workspace(args: &ColmapArgs, job: &FolderJob) -> Result<Workspace, CliError> {
+fn check_workspace(
+    args: &ColmapArgs,
+    job: &FolderJob,
+    job_photos: usize,
+) -> Result<Workspace, CliError> {
     let path = workspace_path(args);
     let sparse = path.join("sparse");
     check_images_outside(&job.images, &path, &sparse)?;
@@ -112,7 +132,8 @@ fn check_workspace(args: &ColmapArgs, job: &FolderJob) -> Result<Workspace, CliE
         None
     } else {
         let program = args.colmap.clone().unwrap_or_else(|| "colmap".into());
-        let found = ColmapProgram::find(&program, &path)?;
+        let timeout = std::time::Duration::from_secs(args.colmap_timeout);
+        let found = ColmapProgram::find(&program, &path, timeout)?;
         if found.is_none() && args.colmap.is_some() {
             return Err(CliError::ColmapStart {
                 program,
@@ -122,6 +143,16 @@ fn check_workspace(args: &ColmapArgs, job: &FolderJob) -> Result<Workspace, CliE
         }
         found
     };
+    if let Some(colmap) = &colmap {
+        check_mapper_options(&args.mapper_options, &colmap.options("mapper"))?;
+        let photos = job_photos;
+        if photos < 2 {
+            return Err(CliError::TooFewPhotos {
+                images: args.images.clone(),
+                photos,
+            });
+        }
+    }
     // Without COLMAP nothing is written there; a run that installs models may replace only its own.
     let sparse = match colmap {
         Some(_) => ModelFolder::inspect(&sparse, args.force)?,
@@ -146,6 +177,8 @@ fn write_and_run(
     let watch = Stopwatch::start();
     let written = run_with_progress_bar(plan)?;
     let run = watch.stop();
+    // The workspace stays locked while COLMAP works in it.
+    let _locks = written.locks();
 
     let Some(colmap) = &workspace.colmap else {
         let report = written.commit()?;
@@ -171,12 +204,20 @@ fn write_and_run(
         (written.database(), written.match_list(), built.path()),
     );
     let watch = Stopwatch::start();
-    colmap.run("matches_importer", import_args)?;
-    times.verify = watch.stop();
-    let (verified, inliers) = verified_pairs(written.database())?;
-    let watch = Stopwatch::start();
-    colmap.run("mapper", mapper_args)?;
-    times.map = watch.stop();
+    let steps = (|| {
+        colmap.run("matches_importer", import_args)?;
+        times.verify = watch.stop();
+        let (verified, inliers) = verified_pairs(written.database())?;
+        let watch = Stopwatch::start();
+        colmap.run("mapper", mapper_args)?;
+        times.map = watch.stop();
+        Ok::<_, CliError>((verified, inliers))
+    })();
+    let (verified, inliers) = match steps {
+        Ok(figures) => figures,
+        // The extraction and matching are not thrown away: both files go into place.
+        Err(error) => return Err(keep_after_colmap_failed(args, written, workspace, error)),
+    };
 
     let report = written.commit()?;
     let installed = workspace.sparse.install(&built)?;
@@ -197,6 +238,84 @@ fn write_and_run(
     times.analyze = watch.stop();
     print_colmap_report(&report, verified, inliers, &models, &times);
     Ok(())
+}
+
+/// A COLMAP step failed: the database and match list, complete, are renamed into place all the same
+/// (the error says so, with the commands that run COLMAP on them again).
+fn keep_after_colmap_failed(
+    args: &ColmapArgs,
+    written: WrittenFolder,
+    workspace: &Workspace,
+    error: CliError,
+) -> CliError {
+    let report = match written.commit() {
+        Ok(report) => report,
+        Err(e) => return CliError::Colmap(e),
+    };
+    let final_paths = (
+        report.database.as_path(),
+        report.match_list.as_path(),
+        workspace.sparse.path(),
+    );
+    let commands = colmap_steps(args, final_paths)
+        .iter()
+        .map(|(step, step_args)| format!("  colmap {step} {}", shell_words(step_args)))
+        .collect::<Vec<_>>()
+        .join("\n");
+    CliError::ColmapFailedKept {
+        error: Box::new(error),
+        database: report.database,
+        match_list: report.match_list,
+        commands,
+    }
+}
+
+/// Refuses, before any work, a --mapper-option that is not KEY=VALUE or whose key `colmap mapper -h`
+/// does not list (`known`; empty: the program lists none, nothing is refused).
+fn check_mapper_options(options: &[String], known: &[String]) -> Result<(), CliError> {
+    for option in options {
+        let refuse = |reason: String| CliError::MapperOption {
+            option: option.clone(),
+            reason,
+        };
+        let Some((key, value)) = option.split_once('=') else {
+            return Err(refuse("it is not KEY=VALUE".into()));
+        };
+        if key.is_empty() || value.is_empty() || key.starts_with('-') {
+            return Err(refuse(
+                "it is not KEY=VALUE (a key without dashes, a value)".into(),
+            ));
+        }
+        if !known.is_empty() && !known.iter().any(|k| k == key) {
+            let close = known
+                .iter()
+                .min_by_key(|k| edit_distance(k, key))
+                .filter(|k| edit_distance(k, key) <= 3);
+            let hint = close.map_or(String::new(), |k| format!("; did you mean {k}?"));
+            return Err(refuse(format!(
+                "`colmap mapper -h` lists no option {key}{hint}"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Levenshtein distance, for the hint of a mistyped option.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diagonal = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let above = row[j + 1];
+            row[j + 1] = (above + 1)
+                .min(row[j] + 1)
+                .min(diagonal + usize::from(ca != cb));
+            diagonal = above;
+        }
+    }
+    row[b.len()]
 }
 
 /// [`FolderPlan::run`] with a progress bar per stage on stderr.

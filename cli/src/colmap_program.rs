@@ -2,9 +2,10 @@
 //! the figures of the model it builds.
 
 use std::ffi::OsString;
-use std::io::Write;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
 
 use crate::error::CliError;
 
@@ -15,15 +16,20 @@ const TAIL_LINES: usize = 20;
 pub struct ColmapProgram {
     program: PathBuf,
     logs: PathBuf,
+    /// The longest a step may run before it is killed.
+    timeout: Duration,
 }
 
 impl ColmapProgram {
     /// `program` if it runs, `None` if there is no such program.
-    pub fn find(program: &Path, logs: &Path) -> Result<Option<Self>, CliError> {
-        match Command::new(program).arg("help").output() {
+    pub fn find(program: &Path, logs: &Path, timeout: Duration) -> Result<Option<Self>, CliError> {
+        let mut command = Command::new(program);
+        command.arg("help");
+        match run_bounded(command, HELP_TIMEOUT) {
             Ok(_) => Ok(Some(Self {
                 program: program.to_path_buf(),
                 logs: logs.to_path_buf(),
+                timeout,
             })),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
             Err(source) => Err(CliError::ColmapStart {
@@ -34,33 +40,115 @@ impl ColmapProgram {
         }
     }
 
+    /// The options `colmap STEP -h` lists (`Mapper.min_num_matches`, ...), without their dashes;
+    /// empty when the program lists none (it cannot tell, so nothing is refused for it).
+    pub fn options(&self, step: &str) -> Vec<String> {
+        let mut command = Command::new(&self.program);
+        command.args([step, "-h"]);
+        let Ok((_, text)) = run_bounded(command, HELP_TIMEOUT) else {
+            return Vec::new();
+        };
+        text.lines()
+            .filter_map(|line| line.trim_start().strip_prefix("--"))
+            .filter_map(|rest| rest.split_whitespace().next())
+            .map(str::to_owned)
+            .collect()
+    }
+
     /// Runs `colmap STEP ARGS...`, keeps its output in `LOGS/colmap-STEP.log` and returns it; a
-    /// non-zero exit is an error quoting the output's last lines.
+    /// non-zero exit is an error quoting the output's last lines; a step still running after the
+    /// program's time limit is killed ([`CliError::ColmapTimeout`]).
     pub fn run(&self, step: &'static str, args: &[OsString]) -> Result<String, CliError> {
-        let output = Command::new(&self.program)
-            .arg(step)
-            .args(args)
-            .output()
-            .map_err(|source| CliError::ColmapStart {
+        let mut command = Command::new(&self.program);
+        command.arg(step).args(args);
+        let (status, text) =
+            run_bounded(command, self.timeout).map_err(|source| CliError::ColmapStart {
                 program: self.program.clone(),
                 step,
                 source,
             })?;
-        // COLMAP logs through glog to stderr and prints summaries to stdout: keep both.
-        let mut text = String::from_utf8_lossy(&output.stdout).into_owned();
-        text.push_str(&String::from_utf8_lossy(&output.stderr));
         let log = self.logs.join(format!("colmap-{step}.log"));
         clatch::output::write_file(&log, |w| w.write_all(text.as_bytes()))?;
-        if !output.status.success() {
+        let Some(status) = status else {
+            return Err(CliError::ColmapTimeout {
+                step,
+                seconds: self.timeout.as_secs(),
+                log,
+            });
+        };
+        if !status.success() {
             return Err(CliError::ColmapFailed {
                 step,
-                status: output.status.to_string(),
+                status: status.to_string(),
                 log,
                 tail: tail(&text, TAIL_LINES),
             });
         }
         Ok(text)
     }
+}
+
+/// How long `colmap help` and `colmap STEP -h` may take.
+const HELP_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// Runs `command` with its stdout and stderr captured (stdout first in the text: COLMAP logs through
+/// glog to stderr and prints summaries to stdout), killed after `timeout` (status `None`), and
+/// registered for the interruption handler, which kills it if the run is interrupted.
+fn run_bounded(
+    mut command: Command,
+    timeout: Duration,
+) -> std::io::Result<(Option<ExitStatus>, String)> {
+    let mut child = command
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()?;
+    // Read on threads of their own, so that a chatty step never blocks on a full pipe.
+    let read = |pipe: Option<Box<dyn Read + Send>>| {
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            if let Some(mut pipe) = pipe {
+                pipe.read_to_end(&mut bytes).ok();
+            }
+            bytes
+        })
+    };
+    let stdout = read(
+        child
+            .stdout
+            .take()
+            .map(|p| Box::new(p) as Box<dyn Read + Send>),
+    );
+    let stderr = read(
+        child
+            .stderr
+            .take()
+            .map(|p| Box::new(p) as Box<dyn Read + Send>),
+    );
+    let child = crate::interrupt::Child::register(child);
+    let began = Instant::now();
+    let status = loop {
+        let mut process = child.process();
+        if let Some(status) = process.try_wait()? {
+            break Some(status);
+        }
+        if began.elapsed() >= timeout {
+            process.kill().ok();
+            process.wait().ok();
+            break None;
+        }
+        drop(process);
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    drop(child);
+    let mut text = String::new();
+    // A grandchild that keeps the pipes open (a shell's background job) is not waited for.
+    for reader in [stdout, stderr] {
+        if status.is_some() || reader.is_finished() {
+            text.push_str(&String::from_utf8_lossy(&reader.join().unwrap_or_default()));
+        }
+    }
+    Ok((status, text))
 }
 
 /// The last `n` lines of `text`.

@@ -351,9 +351,16 @@ mod tests {
 
     #[test]
     fn picture_paths() {
-        for ok in ["a.png", "dir/b.JPG", "c.jpeg", "d.ppm"] {
+        for ok in ["a.png", "./b.JPG", "c.jpeg", "d.ppm"] {
             assert!(check_picture_path(Path::new(ok)).is_ok(), "{ok}");
         }
+        // A folder that does not exist is found before any work (issue 28, H9).
+        let e = check_picture_path(Path::new("no-such-dir/b.png")).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("no-such-dir: the folder does not exist"),
+            "{e}"
+        );
         for bad in ["a.bmp", "noext", "x.txt", "x.pam", "x.pbm"] {
             let e = check_picture_path(Path::new(bad)).unwrap_err();
             assert!(e.to_string().contains(bad), "{e}");

@@ -116,6 +116,42 @@ pub enum CliError {
         tail: String,
     },
 
+    /// A COLMAP step failed after the database and match list were complete: both were kept.
+    #[error(
+        "{error}\nthe database {database} and the match list {match_list} are kept (every photo's \
+         features and the putative matches); COLMAP can run on them again without extracting:\n{commands}",
+        database = .database.display(), match_list = .match_list.display()
+    )]
+    ColmapFailedKept {
+        error: Box<CliError>,
+        database: PathBuf,
+        match_list: PathBuf,
+        commands: String,
+    },
+
+    /// A --mapper-option refused before any work.
+    #[error("--mapper-option {option}: {reason}")]
+    MapperOption { option: String, reason: String },
+
+    /// Fewer photos than COLMAP's mapper can build a model from.
+    #[error(
+        "{images} holds {photos} photo(s): COLMAP's mapper needs at least 2; use --no-colmap to write \
+         only the database",
+        images = .images.display()
+    )]
+    TooFewPhotos { images: PathBuf, photos: usize },
+
+    /// A `colmap` step ran past --colmap-timeout and was killed.
+    #[error(
+        "colmap {step} still ran after {seconds} s (--colmap-timeout) and was stopped; its output so far: {log}",
+        log = .log.display()
+    )]
+    ColmapTimeout {
+        step: &'static str,
+        seconds: u64,
+        log: PathBuf,
+    },
+
     /// `colmap model_analyzer` printed no figure where one was expected.
     #[error("cannot read `{field}` from colmap model_analyzer's output for {model}; it printed:\n{output}", model = .model.display())]
     ModelAnalyzer {
@@ -127,6 +163,18 @@ pub enum CliError {
     /// A homography file that is not nine finite numbers forming an invertible matrix.
     #[error("bad homography file {path}: {reason}", path = .path.display())]
     Homography { path: PathBuf, reason: String },
+
+    /// Some images of a batch failed (each listed on stderr); the others' files were written.
+    #[error(
+        "{failed} of {total} images failed (listed above, the first {first}); the others' files were \
+         written; --fail-fast stops at the first and writes none",
+        first = .first.display()
+    )]
+    ImagesFailed {
+        failed: usize,
+        total: usize,
+        first: PathBuf,
+    },
 
     /// Options that cannot be given together.
     #[error("{options}: {reason}")]

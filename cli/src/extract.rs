@@ -121,6 +121,12 @@ pub fn main(args: &ExtractArgs) -> Result<(), CliError> {
         Some(latch) => pipeline::extract_opencv(&extractor, latch, &img, image, &progress)?,
     };
     let features = &extracted.features;
+    crate::input::warn_if_no_keypoints(
+        image,
+        img.dimensions(),
+        features.keypoints.len(),
+        extractor.config(),
+    );
 
     progress.stage("writing files");
     // All three are written in full before any replaces an older file.

@@ -142,9 +142,17 @@ fn parse_pyramid(s: &str) -> Result<Pyramid, String> {
         ));
     }
     let pyramid = Pyramid::new(levels, scale_factor);
-    pyramid
-        .validate(clatch::KeyPoint::DEFAULT_SIZE)
-        .map_err(|e| e.to_string())?;
+    // The ranges only: whether the top level's keypoints fit depends on --keypoint-size too
+    // ([`DetectArgs::check_sizes`]).
+    pyramid.validate(1.0).map_err(|e| match e {
+        clatch::Error::InvalidConfig {
+            field: "pyramid.levels",
+            reason,
+            ..
+        } => format!("LEVELS {levels} {reason}"),
+        clatch::Error::InvalidConfig { reason, .. } => format!("FACTOR {scale_factor} {reason}"),
+        other => other.to_string(),
+    })?;
     Ok(pyramid)
 }
 
@@ -214,6 +222,63 @@ impl DetectArgs {
             return self.config();
         }
         self.config_from(ExtractorConfig::single_scale())
+    }
+
+    /// Whether the keypoints of every pyramid level fit the descriptor (at most 1024 pixels: the
+    /// top level's are --keypoint-size x FACTOR^(LEVELS - 1) of the full image's); otherwise a
+    /// message naming the options as given and what would fit.
+    pub fn check_sizes(&self) -> Result<(), String> {
+        let Ok(config) = self.config_unchecked() else {
+            return Ok(()); // the library's own error follows
+        };
+        let Some(pyramid) = config.pyramid else {
+            return Ok(());
+        };
+        let size = config.detector.keypoint_size;
+        if pyramid.validate(size).is_ok() {
+            return Ok(());
+        }
+        let factor = pyramid.scale_factor;
+        let top = f64::from(size) * f64::from(factor).powi(pyramid.levels as i32 - 1);
+        let levels_fit = (1..pyramid.levels)
+            .rev()
+            .find(|&l| Pyramid::new(l, factor).validate(size).is_ok());
+        let size_fits = (1..=1024u32)
+            .rev()
+            .find(|&k| pyramid.validate(k as f32).is_ok());
+        let pyramid_given = match self.pyramid {
+            Some(_) => format!("--pyramid {}:{factor}", pyramid.levels),
+            None => format!("the default pyramid {}:{factor}", pyramid.levels),
+        };
+        let size_given = match self.keypoint_size {
+            Some(k) => format!("--keypoint-size {k}"),
+            None => format!("the default keypoint size {size}"),
+        };
+        let mut fixes = Vec::new();
+        if let Some(l) = levels_fit {
+            fixes.push(format!("at most {l} levels with FACTOR {factor}"));
+        }
+        if let Some(k) = size_fits {
+            fixes.push(format!("--keypoint-size at most {k} with these levels"));
+        }
+        Err(format!(
+            "{pyramid_given} with {size_given}: keypoints on the top level would be {top:.0} \
+             pixels wide, more than the 1024 a descriptor window may span; use {}",
+            if fixes.is_empty() {
+                "a smaller --keypoint-size".to_owned()
+            } else {
+                fixes.join(", or ")
+            }
+        ))
+    }
+
+    /// [`DetectArgs::config`] without [`DetectArgs::check_sizes`]'s message.
+    fn config_unchecked(&self) -> clatch::Result<ExtractorConfig> {
+        self.config_from(if self.single_scale {
+            ExtractorConfig::single_scale()
+        } else {
+            ExtractorConfig::default()
+        })
     }
 
     fn config_from(&self, base: ExtractorConfig) -> clatch::Result<ExtractorConfig> {

@@ -24,6 +24,37 @@ pub fn check_detectable(path: &Path, width: u32, height: u32) -> Result<(), CliE
     Ok(clatch::colmap::check_detectable(path, width, height)?)
 }
 
+/// Warns on stderr when `path` gave no keypoint, saying why: the image is too small for keypoints
+/// whose windows must fit inside it (the margin of `config`'s keypoint size), or no corner passes
+/// the threshold.
+pub fn warn_if_no_keypoints(
+    path: &Path,
+    (width, height): (u32, u32),
+    keypoints: usize,
+    config: &clatch::ExtractorConfig,
+) {
+    if keypoints > 0 {
+        return;
+    }
+    let detector = &config.detector;
+    let margin = detector.margin();
+    let min = 2 * margin + 1;
+    let path = path.display();
+    if (width.min(height) as usize) < min {
+        eprintln!(
+            "clatch: warning: {path}: no keypoints: it is {width}x{height}, and keypoints are detected \
+             at least {margin} pixels from every border (their {}-pixel windows must fit, rotated), \
+             so a side needs {min} pixels; use a smaller --keypoint-size (--single-scale uses 64)",
+            detector.keypoint_size
+        );
+    } else {
+        eprintln!(
+            "clatch: warning: {path}: no keypoints: no corner passes --threshold {}",
+            detector.threshold
+        );
+    }
+}
+
 /// The library's error for an image that cannot hold one 64x64 descriptor window (or that is larger
 /// than supported).
 pub fn check_size(img: &GrayImage) -> Result<(), clatch::Error> {

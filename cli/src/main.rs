@@ -12,6 +12,7 @@ mod error;
 mod extract;
 mod extract_many;
 mod input;
+mod interrupt;
 mod match_cmd;
 mod model_folder;
 mod npy;
@@ -144,6 +145,10 @@ pub struct ExtractArgs {
     /// (with several images: the output folder).
     #[arg(short, long, value_name = "PREFIX")]
     pub output: PathBuf,
+    /// With several images: stop at the first image that fails and write no image's files (the
+    /// default goes on, writes every good image's three files, lists the failures and exits 1).
+    #[arg(long)]
+    pub fail_fast: bool,
     #[command(flatten)]
     pub input: InputArgs,
     #[command(flatten)]
@@ -222,7 +227,8 @@ pub struct ColmapArgs {
     /// principal point at the centre, one camera per image size and focal, refined by the mapper.
     #[arg(long, value_name = "FILE")]
     pub camera_k: Option<PathBuf>,
-    /// Folder for the match list, COLMAP's logs and its model (default: DATABASE's name + `-colmap`).
+    /// Folder for the match list, COLMAP's logs and its model (default beside DATABASE: `out.db` gives
+    /// `out-colmap`, any other name keeps its extension, `out.sqlite` gives `out.sqlite-colmap`).
     #[arg(long, value_name = "DIR")]
     pub workspace: Option<PathBuf>,
     /// How the keypoint positions written to COLMAP are refined below a pixel (descriptors and
@@ -244,6 +250,10 @@ pub struct ColmapArgs {
     /// The COLMAP 3.8 executable (default: `colmap` on PATH, skipped with a note if absent).
     #[arg(long, value_name = "PROGRAM", conflicts_with = "no_colmap")]
     pub colmap: Option<PathBuf>,
+    /// The longest each COLMAP step may run, in seconds, before it is killed and the run fails
+    /// (the database and match list are kept). Default 6 hours.
+    #[arg(long, value_name = "SECONDS", default_value_t = 21_600, value_parser = clap::value_parser!(u64).range(1..))]
+    pub colmap_timeout: u64,
     /// An option for `colmap mapper`, as KEY=VALUE (for example Mapper.init_min_num_inliers=50);
     /// repeatable.
     #[arg(long = "mapper-option", value_name = "KEY=VALUE")]
@@ -297,6 +307,12 @@ pub fn settings_on(
     subpixel: Option<Subpixel>,
     matching: Option<&MatchingArgs>,
 ) -> Result<Settings, CliError> {
+    detect
+        .check_sizes()
+        .map_err(|reason| CliError::OptionConflict {
+            options: "--keypoint-size and --pyramid".into(),
+            reason,
+        })?;
     let mut extractor = detect.config()?;
     if let Some(subpixel) = subpixel {
         extractor.detector.subpixel = subpixel;
@@ -311,6 +327,7 @@ pub fn settings_on(
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    interrupt::install();
     if let Some(warning) = threads::cap_pool() {
         eprintln!("clatch: warning: {warning}");
     }
@@ -337,6 +354,42 @@ mod tests {
     use clatch_cli::flags::MIN_PYRAMID_FACTOR;
     use clatch_cli::names::BackendFlag;
 
+    /// Issue 28, H13: sizes that do not fit name the options as given and what would fit.
+    #[test]
+    fn pyramid_and_keypoint_sizes_that_do_not_fit_name_the_options() {
+        let refused = |extra: &[&str]| {
+            let args = [&["clatch", "demo"][..], extra].concat();
+            let Command::Demo(demo) = Cli::try_parse_from(args).unwrap().command else {
+                panic!("parsed the wrong subcommand")
+            };
+            match settings(&demo.backend, &demo.detect, None, None) {
+                Err(e) => e.to_string(),
+                Ok(_) => panic!("{extra:?} should be refused"),
+            }
+        };
+        let e = refused(&["--pyramid", "8"]);
+        assert!(
+            e.contains("--pyramid 8:2 with the default keypoint size 40"),
+            "{e}"
+        );
+        assert!(e.contains("at most 5 levels with FACTOR 2"), "{e}");
+        assert!(!e.contains("pyramid.levels"), "{e}");
+        let e = refused(&["--keypoint-size", "300"]);
+        assert!(
+            e.contains("the default pyramid 8:1.2 with --keypoint-size 300"),
+            "{e}"
+        );
+        assert!(e.contains("--keypoint-size at most 285"), "{e}");
+        let Command::Demo(demo) =
+            Cli::try_parse_from(["clatch", "demo", "--pyramid", "6", "--keypoint-size", "32"])
+                .unwrap()
+                .command
+        else {
+            panic!("parsed the wrong subcommand")
+        };
+        settings(&demo.backend, &demo.detect, None, None).unwrap();
+    }
+
     #[test]
     fn cli_definition_is_consistent() {
         Cli::command().debug_assert();
@@ -353,7 +406,6 @@ mod tests {
             &["clatch", "demo", "--max-keypoints", "0"],
             &["clatch", "demo", "--backend", "tpu"],
             &["clatch", "demo", "--pyramid", "0"],
-            &["clatch", "demo", "--pyramid", "6"],
             &["clatch", "demo", "--pyramid", "3:1"],
             &["clatch", "demo", "--pyramid", "3:2.5"],
             &["clatch", "demo", "--pyramid", "3:x"],

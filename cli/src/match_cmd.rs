@@ -64,6 +64,12 @@ pub fn main(args: &MatchArgs) -> Result<(), CliError> {
         &progress,
     )?;
     let (kps_a, kps_b) = (&run.a.features.keypoints, &run.b.features.keypoints);
+    for (path, img, n) in [
+        (&args.image_a, &img_a, kps_a.len()),
+        (&args.image_b, &img_b, kps_b.len()),
+    ] {
+        crate::input::warn_if_no_keypoints(path, img.dimensions(), n, &settings.extractor);
+    }
     let evaluation = homography
         .as_ref()
         .map(|h| report::evaluate(&run.matches, kps_a, kps_b, h, args.check.inlier_px));

@@ -91,6 +91,8 @@ impl ModelFolder {
         new.sort_by_key(|name| (name.len(), name.clone()));
         std::fs::create_dir_all(&self.path).map_err(CliError::write(&self.path))?;
 
+        // An interruption waits until the models are in place (or back where they were).
+        let _whole = clatch::output::Uninterrupted::new();
         // The earlier models go aside (removed with `aside` when dropped, once all is in place).
         let aside = TempDir::beside(&self.path)?;
         let mut moved_aside = Vec::new();

@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{assert_refused, clatch, photo, str, workdir};
+use common::{assert_refused, photo, str, workdir};
 
 fn write_photos(images: &Path, size: u32) {
     std::fs::create_dir_all(images).unwrap();
@@ -24,18 +24,7 @@ fn colmap(images: &Path, db: &Path, extra: &[&str]) -> std::process::Output {
 
 /// `clatch colmap --images IMAGES --database DB --backend cpu` with `how` and `extra` after.
 fn colmap_with(images: &Path, db: &Path, how: &[&str], extra: &[&str]) -> std::process::Output {
-    let mut args = vec![
-        "colmap",
-        "--images",
-        str(images),
-        "--database",
-        str(db),
-        "--backend",
-        "cpu",
-    ];
-    args.extend_from_slice(how);
-    args.extend_from_slice(extra);
-    clatch(&args)
+    common::colmap_cpu(images, db, &[how, extra].concat())
 }
 
 #[test]

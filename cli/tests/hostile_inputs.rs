@@ -129,7 +129,7 @@ fn images_too_small_for_any_keypoint_are_refused() {
     let small = dir.join("small.png");
     photo(63, 200, 0).save(&small).unwrap();
     let out = clatch(&["extract", str(&small), "-o", str(&prefix)]);
-    assert_refused(&out, "smaller than the 64x64 descriptor window");
+    assert_refused(&out, "clatch needs at least 64x64 pixels");
     let ok = dir.join("ok.png");
     photo(64, 64, 0).save(&ok).unwrap();
     assert!(

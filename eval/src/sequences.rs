@@ -182,11 +182,28 @@ pub fn sequence_pairs(dir: &Path, layout: Layout) -> Result<Vec<EvalPair>, EvalE
 /// The pairs of `data` if it is a sequence folder, else of each sequence folder inside it (sorted by
 /// name); the second list names the subfolders skipped because they hold no first image.
 pub fn sequences_under(data: &Path) -> Result<(Vec<EvalPair>, Vec<PathBuf>), EvalError> {
-    if !data.is_dir() {
-        return Err(EvalError::Input {
-            path: data.to_path_buf(),
-            reason: "data folder not found".into(),
-        });
+    match std::fs::metadata(data) {
+        Ok(meta) if meta.is_dir() => {}
+        Ok(meta) => {
+            return Err(EvalError::Input {
+                path: data.to_path_buf(),
+                reason: format!(
+                    "--data names {}, not a folder: give a homography sequence folder or a \
+                     folder of them",
+                    if meta.is_file() {
+                        "a file"
+                    } else {
+                        clatch::decode::file_kind(&meta)
+                    }
+                ),
+            });
+        }
+        Err(_) => {
+            return Err(EvalError::Input {
+                path: data.to_path_buf(),
+                reason: "data folder not found".into(),
+            });
+        }
     }
     if let Some(layout) = detect_layout(data) {
         return Ok((sequence_pairs(data, layout)?, Vec::new()));

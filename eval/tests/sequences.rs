@@ -194,3 +194,125 @@ fn pyramid_runs_with_the_default_methods_and_refuses_the_opencv_column_when_aske
     assert!(!dir.join("out2").exists());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Issue 28, H5: a run that fails on a pair's image leaves the last run's `pairs.csv` (and every
+/// other file) as it was, and an output folder it created is removed again.
+#[test]
+fn a_failed_run_keeps_the_last_runs_files_and_leaves_no_folder() {
+    let root = workdir("failed-run");
+    let seq = root.join("oxford_wall");
+    write_sequence(&seq, |k| format!("img{k}.ppm"), |k| format!("H1to{k}p"));
+    let out = root.join("out");
+    let args = |out: &Path| {
+        vec![
+            "--no-synthetic".to_owned(),
+            "--backend".into(),
+            "cpu".into(),
+            "--method".into(),
+            "clatch".into(),
+            "--data".into(),
+            str(&seq).into(),
+            "--out".into(),
+            str(out).into(),
+        ]
+    };
+    let first = clatch_eval(&args(&out).iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        first.status.success(),
+        "{}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    let before: Vec<(String, Vec<u8>)> = ["pairs.csv", "results.json", "clatch.summary.csv"]
+        .iter()
+        .map(|n| (n.to_string(), std::fs::read(out.join(n)).unwrap()))
+        .collect();
+    // A second sequence (other pairs, so another manifest) whose image 3 is cut short: its header
+    // reads, its pixels do not.
+    let seq2 = root.join("oxford_floor");
+    write_sequence(&seq2, |k| format!("img{k}.ppm"), |k| format!("H1to{k}p"));
+    let img3 = seq2.join("img3.ppm");
+    let bytes = std::fs::read(&img3).unwrap();
+    std::fs::write(&img3, &bytes[..bytes.len() / 2]).unwrap();
+    let with_second = |out: &Path| {
+        let mut a = args(out);
+        a.extend(["--data".to_owned(), str(&seq2).to_owned()]);
+        a
+    };
+    let failed = clatch_eval(
+        &with_second(&out)
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    assert_refused(&failed, "img3.ppm");
+    for (name, old) in &before {
+        assert_eq!(&std::fs::read(out.join(name)).unwrap(), old, "{name} kept");
+    }
+    let fresh = root.join("fresh");
+    let failed = clatch_eval(
+        &with_second(&fresh)
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    assert_refused(&failed, "img3.ppm");
+    assert!(!fresh.exists(), "no output folder left behind");
+    std::fs::remove_dir_all(&root).ok();
+}
+
+/// Issue 28, H15 and C4: `--data FILE` says it is a file; the settings line tells the defaults from
+/// --single-scale, and says whose keypoints the OpenCV-compatible column describes.
+#[test]
+fn data_naming_a_file_and_the_settings_line_say_what_they_are() {
+    let root = workdir("settings-line");
+    let file = root.join("notes.txt");
+    std::fs::write(&file, "not a folder").unwrap();
+    let out = clatch_eval(&[
+        "--no-synthetic",
+        "--data",
+        str(&file),
+        "--out",
+        str(&root.join("o")),
+    ]);
+    assert_refused(&out, "not a folder");
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("not found"));
+
+    let seq = root.join("oxford_wall");
+    write_sequence(&seq, |k| format!("img{k}.ppm"), |k| format!("H1to{k}p"));
+    let line = |extra: &[&str]| {
+        let o = root.join("o");
+        let mut args = vec!["--no-synthetic", "--backend", "cpu", "--data", str(&seq)];
+        args.extend(["--out", str(&o)]);
+        args.extend_from_slice(extra);
+        let run = clatch_eval(&args);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
+        stdout
+            .lines()
+            .find(|l| l.trim_start().starts_with("clatch "))
+            .unwrap()
+            .to_owned()
+    };
+    let default = line(&[]);
+    let single = line(&["--single-scale"]);
+    assert_ne!(default, single);
+    assert!(
+        default.contains("pyramid 8 levels x 1.2, keypoint size 40 px"),
+        "{default}"
+    );
+    assert!(default.contains("its own keypoints"), "{default}");
+    assert!(!default.contains("the same keypoints"), "{default}");
+    assert!(
+        single.contains("single scale, keypoint size 64 px"),
+        "{single}"
+    );
+    assert!(
+        single.contains("the same keypoints as the clatch column"),
+        "{single}"
+    );
+    std::fs::remove_dir_all(&root).ok();
+}

@@ -23,6 +23,14 @@ pub struct PinholeCamera {
     pub focal_is_known: bool,
 }
 
+/// Smallest focal length accepted, as a multiple of the larger image side: a pinhole view 176° wide
+/// ([`PinholeCamera::validated`]).
+pub const MIN_FOCAL_RATIO: f64 = 0.01;
+
+/// Largest focal length accepted, as a multiple of the larger image side: a view 0.6° wide (a
+/// 3600 mm lens on a full-frame sensor).
+pub const MAX_FOCAL_RATIO: f64 = 100.0;
+
 /// COLMAP's model id of [`PinholeCamera`].
 pub const PINHOLE_MODEL_ID: i64 = 1;
 
@@ -88,7 +96,9 @@ impl PinholeCamera {
         .validated()
     }
 
-    /// Checks sizes and intrinsics.
+    /// Checks sizes and intrinsics: a positive size; finite values; focal lengths between
+    /// [`MIN_FOCAL_RATIO`] and [`MAX_FOCAL_RATIO`] times the larger side; the principal point inside
+    /// the image (`0 ≤ cx ≤ width`, `0 ≤ cy ≤ height`).
     pub fn validated(self) -> Result<Self, ColmapError> {
         let bad = |reason: String| Err(ColmapError::InvalidCamera { reason });
         if self.width == 0 || self.height == 0 {
@@ -101,6 +111,26 @@ impl PinholeCamera {
             return bad(format!(
                 "focal lengths must be positive and every value finite: fx {} fy {} cx {} cy {}",
                 self.fx, self.fy, self.cx, self.cy
+            ));
+        }
+        // Plausibility against the image (COLMAP's mapper spins for minutes on fx = 1e-300, aborts on
+        // 1e308, and fails only at its end on a principal point outside the image).
+        let side = f64::from(self.width.max(self.height));
+        let (lo, hi) = (side * MIN_FOCAL_RATIO, side * MAX_FOCAL_RATIO);
+        for (name, f) in [("fx", self.fx), ("fy", self.fy)] {
+            if !(lo..=hi).contains(&f) {
+                return bad(format!(
+                    "{name} {f} is implausible for a {}x{} image: focal lengths must lie between \
+                     {MIN_FOCAL_RATIO} and {MAX_FOCAL_RATIO} times the larger side ({lo} to {hi} pixels)",
+                    self.width, self.height
+                ));
+            }
+        }
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        if !(0.0..=w).contains(&self.cx) || !(0.0..=h).contains(&self.cy) {
+            return bad(format!(
+                "the principal point ({}, {}) lies outside the {}x{} image (0..{w}, 0..{h})",
+                self.cx, self.cy, self.width, self.height
             ));
         }
         Ok(self)
@@ -139,6 +169,25 @@ mod tests {
                 "{bad} should be refused"
             );
         }
+    }
+
+    #[test]
+    fn implausible_intrinsics_are_refused_against_the_image_size() {
+        for (k, needle) in [
+            ("1e-300 0 320 0 1e-300 240 0 0 1", "fx 0.00000"),
+            ("1e308 0 320 0 1e308 240 0 0 1", "implausible"),
+            ("500 0 320 0 1e5 240 0 0 1", "fy 100000 is implausible"),
+            ("500 0 9000 0 500 240 0 0 1", "outside the 640x480 image"),
+            ("500 0 320 0 500 -1 0 0 1", "outside"),
+        ] {
+            let e = PinholeCamera::from_k_text(k, 640, 480).unwrap_err();
+            assert!(
+                e.to_string().contains(needle.split(' ').next().unwrap()),
+                "{k}: {e}"
+            );
+            assert!(matches!(e, ColmapError::InvalidCamera { .. }), "{k}: {e}");
+        }
+        PinholeCamera::from_k_text("6.4 0 0 0 64000 480 0 0 1", 640, 480).unwrap();
     }
 
     #[test]

@@ -171,6 +171,21 @@ pub enum ColmapError {
     #[error("pair {position}: no descriptors of photo {image} were given")]
     MissingDescriptors { position: usize, image: usize },
 
+    /// Writing the database or the match list failed (a full disk, a lost device): the file named.
+    #[error("cannot write {path}: {source}", path = .path.display())]
+    Writing {
+        path: PathBuf,
+        source: Box<ColmapError>,
+    },
+
+    /// The workspace (the match list's folder) holds the match list of another database.
+    #[error(
+        "{workspace} holds the match list of the database {other}; choose another workspace (or \
+         remove that one) so that neither run replaces the other's files",
+        workspace = .workspace.display()
+    )]
+    WorkspaceOfAnother { workspace: PathBuf, other: String },
+
     /// The progress callback asked the run to stop; nothing was written.
     #[error("stopped by the progress callback while {stage}")]
     Stopped { stage: crate::colmap::FolderStage },

@@ -62,6 +62,31 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>, ColmapError> {
     Ok(images)
 }
 
+/// The entries of `dir` named like images ([`IMAGE_EXTENSIONS`]) that [`list_images`] skips because
+/// they are not regular files, with what each is: a broken link, a FIFO, a folder, a device, a
+/// socket. For a warning: a photo the user expects may be a dangling link.
+pub fn skipped_entries(dir: &Path) -> Vec<(PathBuf, &'static str)> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut skipped: Vec<(PathBuf, &'static str)> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|path| {
+            path.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| IMAGE_EXTENSIONS.iter().any(|x| x.eq_ignore_ascii_case(e)))
+        })
+        .filter_map(|path| match std::fs::metadata(&path) {
+            Ok(meta) if meta.is_file() => None,
+            Ok(meta) => Some((path, crate::output::file_kind(&meta))),
+            Err(_) => Some((path, "a broken link")),
+        })
+        .collect();
+    skipped.sort();
+    skipped
+}
+
 /// An image's name as COLMAP stores it: its file name (the folder is COLMAP's `--image_path`). It
 /// must be UTF-8 (COLMAP stores names as text) and hold no whitespace (the match list separates names
 /// with a space).
@@ -215,8 +240,9 @@ pub fn photo_camera(
     focal_35mm: Option<u16>,
 ) -> Result<PinholeCamera, ColmapError> {
     let guess = PinholeCamera::guess(width, height)?;
-    Ok(match focal_35mm {
-        Some(f) => {
+    // An EXIF focal length the camera check finds implausible (a broken tag) is no better than none.
+    Ok(focal_35mm
+        .and_then(|f| {
             let focal = exif::focal_pixels(f, width, height);
             PinholeCamera {
                 fx: focal,
@@ -224,10 +250,10 @@ pub fn photo_camera(
                 focal_is_known: true,
                 ..guess
             }
-            .validated()?
-        }
-        None => guess,
-    })
+            .validated()
+            .ok()
+        })
+        .unwrap_or(guess))
 }
 
 /// A decoded photo waiting for extraction.

@@ -3,7 +3,7 @@
 //! earlier database is replaced only by a complete one.
 
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -13,7 +13,39 @@ use crate::colmap::folder::Photo;
 use crate::colmap::report::{FolderReport, FolderTimes};
 use crate::colmap::writer::{FolderCounts, FolderWriter};
 use crate::matching::Match;
-use crate::output::{OutputError, Staged};
+use crate::output::{OutputError, OutputLock, Staged};
+
+/// The file in a match list's folder naming the database the list belongs to.
+pub const OWNER_NAME: &str = ".clatch-database";
+
+fn owner_path(match_list: &Path) -> PathBuf {
+    match match_list.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.join(OWNER_NAME),
+        _ => PathBuf::from(OWNER_NAME),
+    }
+}
+
+/// The database file name the match list's folder belongs to, if an earlier run wrote one there.
+pub(crate) fn workspace_owner(match_list: &Path) -> Option<String> {
+    let text = std::fs::read_to_string(owner_path(match_list)).ok()?;
+    Some(text.trim_end_matches('\n').to_owned()).filter(|s| !s.is_empty())
+}
+
+/// A write failure of the database or the match list as an error naming the file (its final path:
+/// the temporary one beside it is removed).
+fn naming_the_file(e: ColmapError, (database, match_list): &(PathBuf, PathBuf)) -> ColmapError {
+    match e {
+        ColmapError::Sqlite { .. } => ColmapError::Writing {
+            path: database.clone(),
+            source: Box::new(e),
+        },
+        ColmapError::MatchListIo(_) => ColmapError::Writing {
+            path: match_list.clone(),
+            source: Box::new(e),
+        },
+        other => other,
+    }
+}
 
 /// The one writer of a folder run ([`FolderWriter`]) over temporary files: the stage every run ends
 /// in, whether it extracted and matched in this process ([`super::FolderPlan::run`]) or gathered the
@@ -23,6 +55,8 @@ pub struct FolderOutput {
     // Declared before `staged`: the database is closed before its temporary file is removed.
     writer: FolderWriter<BufWriter<File>>,
     staged: Staged,
+    /// The locks on the database and on the match list (its file beside it, removed before `made`).
+    locks: Vec<OutputLock>,
     /// The temporary database and match list, then their final paths.
     temp: (PathBuf, PathBuf),
     outputs: (PathBuf, PathBuf),
@@ -82,20 +116,30 @@ impl FolderOutput {
             Some(folder) => MadeFolders::create(folder)?,
             None => MadeFolders::default(),
         };
+        let locks = vec![OutputLock::acquire(match_list)?];
         let mut staged = Staged::new();
         let temp_database = staged.reserve(database)?;
         // `Database::create` makes the file itself (and never opens an existing one).
         std::fs::remove_file(&temp_database).map_err(OutputError::write(&temp_database))?;
         let (temp_list, list) = staged.open(match_list)?;
+        let owner = database.file_name().unwrap_or_default().to_string_lossy();
+        staged.write(&owner_path(match_list), |w| writeln!(w, "{owner}"))?;
         let writer = FolderWriter::create(&temp_database, BufWriter::new(list), camera)?;
         Ok(Self {
             writer,
             staged,
+            locks,
             temp: (temp_database, temp_list),
             outputs: (database.to_path_buf(), match_list.to_path_buf()),
             writing: began.elapsed(),
             made,
         })
+    }
+
+    /// The same output holding `lock` too (the plan's lock on the database) until it is committed.
+    pub(crate) fn holding(mut self, lock: OutputLock) -> Self {
+        self.locks.push(lock);
+        self
     }
 
     /// Adds the next photo: [`FolderWriter::add_photo`].
@@ -113,12 +157,16 @@ impl FolderOutput {
         self.timed(|w| w.add_matches(i, j, matches))
     }
 
-    /// `write` on the writer, its time added to the writing time.
-    fn timed<T>(&mut self, write: impl FnOnce(&mut FolderWriter<BufWriter<File>>) -> T) -> T {
+    /// `write` on the writer, its time added to the writing time; a failure to write (a full disk)
+    /// names the file.
+    fn timed<T>(
+        &mut self,
+        write: impl FnOnce(&mut FolderWriter<BufWriter<File>>) -> Result<T, ColmapError>,
+    ) -> Result<T, ColmapError> {
         let began = Instant::now();
         let result = write(&mut self.writer);
         self.writing += began.elapsed();
-        result
+        result.map_err(|e| naming_the_file(e, &self.outputs))
     }
 
     /// Photos, keypoints, pairs and matches written so far.
@@ -136,13 +184,17 @@ impl FolderOutput {
     pub fn finish(self) -> Result<WrittenFolder, ColmapError> {
         let began = Instant::now();
         let counts = self.writer.counts();
-        let list = self.writer.finish()?;
+        let outputs = &self.outputs;
+        let name = |e| naming_the_file(e, outputs);
+        let list = self.writer.finish().map_err(name)?;
         let file = list
             .into_inner()
-            .map_err(|e| ColmapError::MatchListIo(e.into_error()))?;
-        file.sync_all().map_err(ColmapError::MatchListIo)?;
+            .map_err(|e| name(ColmapError::MatchListIo(e.into_error())))?;
+        file.sync_all()
+            .map_err(|e| name(ColmapError::MatchListIo(e)))?;
         Ok(WrittenFolder {
             staged: self.staged,
+            locks: self.locks,
             report: FolderReport {
                 database: self.temp.0,
                 match_list: self.temp.1,
@@ -165,6 +217,8 @@ impl FolderOutput {
 #[derive(Debug)]
 pub struct WrittenFolder {
     staged: Staged,
+    /// Released once the files are in place (or removed).
+    locks: Vec<OutputLock>,
     /// The report, its paths the temporary files'.
     report: FolderReport,
     /// The final database and match list.
@@ -174,6 +228,12 @@ pub struct WrittenFolder {
 }
 
 impl WrittenFolder {
+    /// The locks on the database and the match list, held until this value and every clone are
+    /// dropped (a caller that runs a program on the files keeps them past [`WrittenFolder::commit`]).
+    pub fn locks(&self) -> Vec<OutputLock> {
+        self.locks.clone()
+    }
+
     /// The complete database, under its temporary name.
     pub fn database(&self) -> &Path {
         &self.report.database
@@ -199,10 +259,39 @@ impl WrittenFolder {
     pub fn commit(self) -> Result<FolderReport, ColmapError> {
         let began = Instant::now();
         self.staged.commit()?;
+        drop(self.locks);
         self.made.keep();
         let mut report = self.report;
         (report.database, report.match_list) = self.outputs;
         report.times.writing += began.elapsed();
         Ok(report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failed_write_names_the_file() {
+        let outputs = (
+            PathBuf::from("runs/out.db"),
+            PathBuf::from("runs/ws/matches.txt"),
+        );
+        let full = || std::io::Error::other("No space left on device");
+        let e = naming_the_file(
+            ColmapError::Sqlite {
+                operation: "inserting keypoints",
+                source: rusqlite::Error::InvalidQuery,
+            },
+            &outputs,
+        );
+        assert!(
+            e.to_string().starts_with("cannot write runs/out.db: "),
+            "{e}"
+        );
+        let e = naming_the_file(ColmapError::MatchListIo(full()), &outputs);
+        assert!(e.to_string().contains("runs/ws/matches.txt"), "{e}");
+        assert!(e.to_string().contains("No space left"), "{e}");
     }
 }

@@ -19,16 +19,30 @@ use crate::matching::MatchConfig;
 /// The match list's file name in a workspace folder.
 pub const MATCH_LIST_NAME: &str = "matches.txt";
 
-/// The workspace of a database when none is given: `out.db` → `out-colmap/` beside it.
+/// The workspace of a database when none is given: `out.db` → `out-colmap/` beside it; any other
+/// name keeps its extension, `out.sqlite` → `out.sqlite-colmap/`, so that `out.db` and
+/// `out.sqlite` never share a workspace. (A database named `out` would share `out.db`'s: the
+/// workspace records its database, and a run of the other is refused,
+/// [`ColmapError::WorkspaceOfAnother`].)
 ///
 /// ```
 /// use std::path::Path;
 /// let workspace = clatch::colmap::default_workspace(Path::new("runs/out.db"));
 /// assert_eq!(workspace, Path::new("runs/out-colmap"));
+/// let workspace = clatch::colmap::default_workspace(Path::new("runs/out.sqlite"));
+/// assert_eq!(workspace, Path::new("runs/out.sqlite-colmap"));
 /// ```
 pub fn default_workspace(database: &Path) -> PathBuf {
-    let stem = database.file_stem().unwrap_or_default().to_string_lossy();
-    database.with_file_name(format!("{stem}-colmap"))
+    let is_db = database
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("db"));
+    let name = if is_db {
+        database.file_stem()
+    } else {
+        database.file_name()
+    };
+    let name = name.unwrap_or_default().to_string_lossy();
+    database.with_file_name(format!("{name}-colmap"))
 }
 
 /// The cameras a folder run writes.

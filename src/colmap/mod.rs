@@ -60,13 +60,16 @@ pub mod schema;
 pub mod two_view;
 mod writer;
 
-pub use camera::{DEFAULT_FOCAL_FACTOR, PINHOLE_MODEL_ID, PinholeCamera};
+pub use camera::{
+    DEFAULT_FOCAL_FACTOR, MAX_FOCAL_RATIO, MIN_FOCAL_RATIO, PINHOLE_MODEL_ID, PinholeCamera,
+};
 pub use corner::{Refinement, refine_corners};
 pub use database::{Database, check_match_indices};
 pub use error::ColmapError;
 pub use folder::{
     DEFAULT_GRID, DEFAULT_MAX_KEYPOINTS, IMAGE_EXTENSIONS, ImageFolder, Photo, check_detectable,
     extract_each_photo, extract_photo, extract_photos, image_name, list_images, photo_camera,
+    skipped_entries,
 };
 pub use folder_output::{FolderOutput, WrittenFolder};
 pub use job::{FolderCamera, FolderJob, MATCH_LIST_NAME, Overwrite, default_workspace};

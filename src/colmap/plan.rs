@@ -11,7 +11,7 @@ use crate::colmap::job::{FolderCamera, FolderJob, Overwrite};
 use crate::colmap::pairs::resolve_pairs;
 use crate::extract::Extractor;
 use crate::matcher::Matcher;
-use crate::output::{check_distinct, check_writable};
+use crate::output::{OutputLock, check_distinct, check_writable, check_writable_in_new_folder};
 
 /// A [`FolderJob`] with everything checked before any work: the extractor and matching settings, the
 /// backend (its set-up started), every photo's name and header ([`ImageFolder`]), the camera against
@@ -27,6 +27,8 @@ pub struct FolderPlan {
     pub(crate) extractor: Extractor,
     /// The backend's set-up, running beside the checks and the first photos' decoding.
     pub(crate) start: BackendStart,
+    /// The database's lock, held from the checks until the run ends (with its last clone).
+    pub(crate) lock: OutputLock,
 }
 
 impl FolderPlan {
@@ -48,6 +50,9 @@ impl FolderPlan {
         };
         let pairs = resolve_pairs(job.pairs.as_deref(), &folder.names)?;
         check_outputs(job, &folder)?;
+        let lock = OutputLock::acquire(&job.database)?;
+        // Checked again under the lock: a run that ended meanwhile may have written it.
+        check_outputs(job, &folder)?;
         Ok(Self {
             job: job.clone(),
             folder,
@@ -55,6 +60,7 @@ impl FolderPlan {
             pairs,
             extractor,
             start,
+            lock,
         })
     }
 
@@ -78,6 +84,12 @@ impl FolderPlan {
         &self.pairs
     }
 
+    /// The lock on the database, held until this plan, its output and every clone of the lock are
+    /// dropped: a caller that works on the files after the run (runs COLMAP on them) keeps a clone.
+    pub fn lock(&self) -> OutputLock {
+        self.lock.clone()
+    }
+
     /// The writer of this run's database and match list, under temporary names beside them
     /// ([`FolderOutput::create`]): the last stage, for a run whose photos and matches come from
     /// elsewhere (workers of a cluster) in the folder's order.
@@ -87,6 +99,7 @@ impl FolderPlan {
             &self.job.match_list,
             self.camera.as_ref(),
         )
+        .map(|output| output.holding(self.lock.clone()))
     }
 }
 
@@ -94,7 +107,7 @@ impl FolderPlan {
 /// matrix file, and no existing database unless the job may replace it.
 fn check_outputs(job: &FolderJob, folder: &ImageFolder) -> Result<(), ColmapError> {
     check_writable(&job.database)?;
-    check_writable(&job.match_list)?;
+    check_writable_in_new_folder(&job.match_list)?;
     let mut inputs: Vec<(&'static str, &Path)> = folder
         .paths
         .iter()
@@ -110,6 +123,18 @@ fn check_outputs(job: &FolderJob, folder: &ImageFolder) -> Result<(), ColmapErro
         &inputs,
         &[("database", &job.database), ("match list", &job.match_list)],
     )?;
+    if let Some(other) = super::folder_output::workspace_owner(&job.match_list)
+        && Some(other.as_str()) != job.database.file_name().and_then(|n| n.to_str())
+    {
+        return Err(ColmapError::WorkspaceOfAnother {
+            workspace: job
+                .match_list
+                .parent()
+                .unwrap_or(Path::new("."))
+                .to_path_buf(),
+            other,
+        });
+    }
     if job.overwrite == Overwrite::Refuse && job.database.exists() {
         return Err(ColmapError::DatabaseExists {
             path: job.database.display().to_string(),

@@ -14,12 +14,15 @@
 //! ```
 
 mod jpeg_end;
+mod jpeg_scan;
 mod open;
 mod palette;
 
 /// What a path that is not a regular file is, in words (kept here, where it was first public).
 pub use crate::output::file_kind;
-pub use open::{DecodeError, DecodeLimits, ImageInfo, open_gray, open_gray_with_exif, probe};
+pub use open::{
+    DecodeError, DecodeLimits, ImageInfo, MAX_METADATA_BYTES, open_gray, open_gray_with_exif, probe,
+};
 
 use crate::error::{Error, Result};
 use crate::gray_view::GrayView;

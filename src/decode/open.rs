@@ -99,6 +99,16 @@ pub enum DecodeError {
     #[error("{path}: palette PNG with pixels whose colour index is past the end of its {entries}-colour palette", path = .path.display())]
     PaletteIndex { path: PathBuf, entries: usize },
 
+    /// The file is corrupt although its decoder could have filled the gaps: a JPEG whose entropy-coded
+    /// data stops early or holds a marker where none belongs (what `djpeg` reports as corrupt), a
+    /// PNM sample above the file's MAXVAL.
+    #[error("{path}: corrupt image: {reason}", path = .path.display())]
+    CorruptImage { path: PathBuf, reason: String },
+
+    /// The file is empty.
+    #[error("{path}: the file is empty, not an image", path = .path.display())]
+    EmptyFile { path: PathBuf },
+
     /// The decoder refused the file (unknown format, corrupt or truncated data, ...).
     #[error("cannot decode image {path}: {source}", path = .path.display())]
     Image {
@@ -125,8 +135,10 @@ pub struct ImageInfo {
 /// Reads `path`'s header: its size (checked against `limits`) and format, without decoding pixels.
 /// JPEG files are also followed to their end marker, so a truncated one is refused here.
 pub fn probe(path: &Path, limits: &DecodeLimits) -> Result<ImageInfo, DecodeError> {
-    let reader = reader(path)?;
+    let mut reader = reader(path)?;
     let format = format_of(&reader, path)?;
+    // A PNG's metadata (iCCP, zTXt) is inflated while its header is read: capped already.
+    reader.limits(image_limits(path, limits)?);
     let decoder = reader.into_decoder().map_err(image_error(path))?;
     let (width, height) = decoder.dimensions();
     check_size(path, width, height, limits)?;
@@ -168,7 +180,11 @@ pub fn open_gray_with_exif(
 ) -> Result<(GrayImage, Option<Vec<u8>>), DecodeError> {
     let reader = reader(path)?;
     match format_of(&reader, path)? {
-        ImageFormat::Jpeg => check_jpeg_end(path)?,
+        ImageFormat::Jpeg => {
+            check_jpeg_end(path)?;
+            let (img, exif) = decode_jpeg_strictly(path, limits)?;
+            return Ok((super::gray_from_dynamic(&img), exif));
+        }
         ImageFormat::Png => {
             if let Some(decoded) = open_palette_png(path, limits)? {
                 return Ok(decoded);
@@ -176,11 +192,86 @@ pub fn open_gray_with_exif(
         }
         _ => {}
     }
+    if reader.format() == Some(ImageFormat::Pnm) {
+        check_pnm_samples(path)?;
+    }
     let (img, exif) = decode(reader, path, limits)?;
     Ok((super::gray_from_dynamic(&img), exif))
 }
 
+/// Decodes a JPEG with the `image` crate's decoder (zune-jpeg) and its options, but in strict mode:
+/// entropy-coded data that ends early, or a marker inside it, is [`DecodeError::CorruptImage`]
+/// instead of gray fill. Valid files decode to the same pixels as `image` gives.
+fn decode_jpeg_strictly(
+    path: &Path,
+    limits: &DecodeLimits,
+) -> Result<(DynamicImage, Option<Vec<u8>>), DecodeError> {
+    use zune_jpeg::zune_core::bytestream::ZCursor;
+    use zune_jpeg::zune_core::colorspace::ColorSpace;
+    use zune_jpeg::zune_core::options::DecoderOptions;
+
+    check_file_len(path, limits)?;
+    let bytes = std::fs::read(path).map_err(io_error(path))?;
+    let corrupt = |e: zune_jpeg::errors::DecodeErrors| DecodeError::CorruptImage {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    };
+    let options = DecoderOptions::default()
+        .set_strict_mode(true)
+        .set_max_width(usize::MAX)
+        .set_max_height(usize::MAX);
+    let mut decoder = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(&bytes[..]), options);
+    decoder.decode_headers().map_err(corrupt)?;
+    let (width, height) = decoder.dimensions().unwrap_or_default();
+    let (width, height) = (width as u32, height as u32);
+    check_size(path, width, height, limits)?;
+    super::jpeg_scan::check_scans(&bytes).map_err(|reason| DecodeError::CorruptImage {
+        path: path.to_path_buf(),
+        reason,
+    })?;
+    // The `image` crate's colour choice: these four as they are, anything else (CMYK, YCCK) to RGB.
+    let out = match decoder.input_colorspace() {
+        Some(c @ (ColorSpace::RGB | ColorSpace::RGBA | ColorSpace::Luma | ColorSpace::LumaA)) => c,
+        _ => ColorSpace::RGB,
+    };
+    decoder.set_options(decoder.options().jpeg_set_out_colorspace(out));
+    let exif = decoder.exif().cloned();
+    let pixels = decoder.decode().map_err(corrupt)?;
+    let wrong = || DecodeError::CorruptImage {
+        path: path.to_path_buf(),
+        reason: "the decoded pixels do not fill the header's size".into(),
+    };
+    let img = match out {
+        ColorSpace::Luma => {
+            DynamicImage::ImageLuma8(GrayImage::from_raw(width, height, pixels).ok_or_else(wrong)?)
+        }
+        ColorSpace::LumaA => DynamicImage::ImageLumaA8(
+            image::GrayAlphaImage::from_raw(width, height, pixels).ok_or_else(wrong)?,
+        ),
+        ColorSpace::RGBA => DynamicImage::ImageRgba8(
+            image::RgbaImage::from_raw(width, height, pixels).ok_or_else(wrong)?,
+        ),
+        _ => DynamicImage::ImageRgb8(
+            image::RgbImage::from_raw(width, height, pixels).ok_or_else(wrong)?,
+        ),
+    };
+    Ok((img, exif))
+}
+
 /// The path's metadata, refusing anything but a regular file (symbolic links are followed).
+/// The file's length, refused when larger than the decoder may allocate (a file read whole first).
+fn check_file_len(path: &Path, limits: &DecodeLimits) -> Result<u64, DecodeError> {
+    let len = regular_file(path)?.len();
+    if len > limits.max_alloc() {
+        return Err(DecodeError::FileTooLarge {
+            path: path.to_path_buf(),
+            bytes: len,
+            max: limits.max_alloc(),
+        });
+    }
+    Ok(len)
+}
+
 fn regular_file(path: &Path) -> Result<std::fs::Metadata, DecodeError> {
     let meta = std::fs::metadata(path).map_err(io_error(path))?;
     if meta.is_file() {
@@ -193,7 +284,11 @@ fn regular_file(path: &Path) -> Result<std::fs::Metadata, DecodeError> {
 }
 
 fn reader(path: &Path) -> Result<ImageReader<BufReader<File>>, DecodeError> {
-    regular_file(path)?;
+    if regular_file(path)?.len() == 0 {
+        return Err(DecodeError::EmptyFile {
+            path: path.to_path_buf(),
+        });
+    }
     let file = File::open(path).map_err(io_error(path))?;
     ImageReader::new(BufReader::new(file))
         .with_guessed_format()
@@ -252,9 +347,7 @@ fn decode<R: BufRead + Seek>(
     path: &Path,
     limits: &DecodeLimits,
 ) -> Result<(DynamicImage, Option<Vec<u8>>), DecodeError> {
-    let mut image_limits = image::Limits::default();
-    image_limits.max_alloc = Some(limits.max_alloc());
-    reader.limits(image_limits);
+    reader.limits(image_limits(path, limits)?);
     let mut decoder = reader.into_decoder().map_err(image_error(path))?;
     let (width, height) = decoder.dimensions();
     check_size(path, width, height, limits)?;
@@ -281,14 +374,7 @@ fn open_palette_png(
     }
     check_size(path, header.width, header.height, limits)?;
     // A palette file is at most a byte per pixel once inflated; a larger one is refused unread.
-    let len = regular_file(path)?.len();
-    if len > limits.max_alloc() {
-        return Err(DecodeError::FileTooLarge {
-            path: path.to_path_buf(),
-            bytes: len,
-            max: limits.max_alloc(),
-        });
-    }
+    let len = check_file_len(path, limits)?;
     let mut bytes = Vec::with_capacity(len as usize);
     file.rewind().map_err(io_error(path))?;
     file.read_to_end(&mut bytes).map_err(io_error(path))?;
@@ -306,6 +392,64 @@ fn open_palette_png(
         });
     }
     Ok(Some((super::gray_from_rgb(&rgb), exif)))
+}
+
+/// Metadata a PNG may inflate beyond its pixels (ICC profile, compressed text): real ICC profiles
+/// are under 1 MiB; 16 MiB leaves room for any, never the hundreds of MiB of a decompression bomb.
+pub const MAX_METADATA_BYTES: u64 = 16 << 20;
+
+/// The `image` crate's limits for `path`: its allocations capped at [`DecodeLimits::max_alloc`], and
+/// for a PNG at what its own size needs (8 bytes a pixel, from its IHDR) plus
+/// [`MAX_METADATA_BYTES`], so that a small image cannot inflate a huge ICC profile or text chunk.
+fn image_limits(path: &Path, limits: &DecodeLimits) -> Result<image::Limits, DecodeError> {
+    let mut max_alloc = limits.max_alloc();
+    let mut start = [0u8; 33];
+    let mut file = File::open(path).map_err(io_error(path))?;
+    let read = read_up_to(&mut file, &mut start).map_err(io_error(path))?;
+    if let Some(header) = palette::Header::parse(&start[..read]) {
+        let pixels = u64::from(header.width) * u64::from(header.height);
+        max_alloc = max_alloc.min(pixels.saturating_mul(8).saturating_add(MAX_METADATA_BYTES));
+    }
+    let mut image_limits = image::Limits::default();
+    image_limits.max_alloc = Some(max_alloc);
+    Ok(image_limits)
+}
+
+/// Refuses a PNM file with a sample above its MAXVAL (the decoder scales samples by MAXVAL and
+/// would pass a larger one on as a brighter value). Bitmaps, whose samples are bits, have none.
+/// The samples are read as the file holds them, after its header: binary (one byte each up to
+/// MAXVAL 255, two big-endian bytes above) or decimal text.
+fn check_pnm_samples(path: &Path) -> Result<(), DecodeError> {
+    use image::codecs::pnm::{PnmDecoder, PnmSubtype, SampleEncoding};
+    let file = File::open(path).map_err(io_error(path))?;
+    let decoder = PnmDecoder::new(BufReader::new(file)).map_err(image_error(path))?;
+    let (mut rest, header) = decoder.into_inner();
+    let maxval = header.maximal_sample();
+    let encoding = match header.subtype() {
+        PnmSubtype::Bitmap(_) => return Ok(()),
+        PnmSubtype::Graymap(e) | PnmSubtype::Pixmap(e) => e,
+        PnmSubtype::ArbitraryMap => SampleEncoding::Binary,
+    };
+    let mut data = Vec::new();
+    rest.read_to_end(&mut data).map_err(io_error(path))?;
+    let largest = match encoding {
+        SampleEncoding::Binary if maxval > 255 => data
+            .chunks_exact(2)
+            .map(|c| u32::from(u16::from_be_bytes([c[0], c[1]])))
+            .max(),
+        SampleEncoding::Binary => data.iter().map(|&b| u32::from(b)).max(),
+        SampleEncoding::Ascii => String::from_utf8_lossy(&data)
+            .split_ascii_whitespace()
+            .filter_map(|t| t.parse::<u32>().ok())
+            .max(),
+    };
+    match largest {
+        Some(v) if v > maxval => Err(DecodeError::CorruptImage {
+            path: path.to_path_buf(),
+            reason: format!("a sample is {v}, above the file's MAXVAL {maxval}"),
+        }),
+        _ => Ok(()),
+    }
 }
 
 /// Reads until `buf` is full or the data ends; returns the bytes read.

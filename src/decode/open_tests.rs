@@ -270,3 +270,101 @@ fn sixteen_bit_data_is_scaled_full_range() {
     // x = 32: (32 * 65) * 255 / (63 * 65) = 129.52, rounded to 130.
     assert_eq!(gray.get_pixel(32, 3).0[0], 130);
 }
+
+fn rgb_jpeg_bytes(width: u32, height: u32) -> Vec<u8> {
+    let img = image::RgbImage::from_fn(width, height, |x, y| {
+        image::Rgb([
+            (x * 7 + y * 3) as u8,
+            ((x ^ y) * 5) as u8,
+            (x * y / 7) as u8,
+        ])
+    });
+    let mut out = Cursor::new(Vec::new());
+    DynamicImage::ImageRgb8(img)
+        .write_to(&mut out, ImageFormat::Jpeg)
+        .unwrap();
+    out.into_inner()
+}
+
+/// The offset of the first SOF0 marker's height field.
+fn sof_size_offset(jpeg: &[u8]) -> usize {
+    jpeg.windows(2).position(|w| w == [0xFF, 0xC0]).unwrap() + 5
+}
+
+#[test]
+fn strict_jpeg_decoding_gives_the_image_crates_pixels_for_valid_files() {
+    for bytes in [jpeg_bytes(&textured(97, 75)), rgb_jpeg_bytes(130, 66)] {
+        let path = temp("valid.jpg");
+        std::fs::write(&path, &bytes).unwrap();
+        let ours = open_gray(&path, &DecodeLimits::default()).unwrap();
+        let theirs = super::super::gray_from_dynamic(&image::load_from_memory(&bytes).unwrap());
+        assert_eq!(ours, theirs);
+    }
+}
+
+#[test]
+fn corrupt_jpegs_that_end_with_their_marker_are_refused() {
+    let whole = jpeg_bytes(&textured(320, 240));
+    // Cut in the entropy-coded data and marked as ended.
+    let mut cut = whole[..whole.len() * 2 / 5].to_vec();
+    cut.extend_from_slice(&[0xFF, 0xD9]);
+    // The header's size patched to 10000 x 10000 (the data holds 320 x 240).
+    let mut patched = whole.clone();
+    let at = sof_size_offset(&patched);
+    patched[at..at + 4].copy_from_slice(&[0x27, 0x10, 0x27, 0x10]);
+    for (name, bytes) in [("cut.jpg", cut), ("patched.jpg", patched)] {
+        let path = temp(name);
+        std::fs::write(&path, &bytes).unwrap();
+        let e = open_gray(&path, &DecodeLimits::default()).unwrap_err();
+        assert!(matches!(e, DecodeError::CorruptImage { .. }), "{name}: {e}");
+        assert!(e.to_string().contains(name), "{e}");
+    }
+}
+
+#[test]
+fn pnm_samples_above_maxval_and_empty_files_are_refused() {
+    let path = temp("hot.pgm");
+    let mut pgm = b"P5\n64 64\n100\n".to_vec();
+    pgm.resize(pgm.len() + 64 * 64, 50);
+    std::fs::write(&path, &pgm).unwrap();
+    // Scaled by MAXVAL: 50 of 100 is 128 of 255.
+    assert_eq!(
+        open_gray(&path, &DecodeLimits::default())
+            .unwrap()
+            .get_pixel(1, 1)
+            .0[0],
+        128
+    );
+    *pgm.last_mut().unwrap() = 200;
+    std::fs::write(&path, &pgm).unwrap();
+    let e = open_gray(&path, &DecodeLimits::default()).unwrap_err();
+    assert!(e.to_string().contains("above the file's MAXVAL 100"), "{e}");
+    // A bitmap's 0/1 samples are expanded by the decoder: accepted.
+    let mut pbm = b"P4\n64 64\n".to_vec();
+    pbm.resize(pbm.len() + 8 * 64, 0x0F);
+    std::fs::write(&path, &pbm).unwrap();
+    open_gray(&path, &DecodeLimits::default()).unwrap();
+    std::fs::write(&path, b"").unwrap();
+    let e = open_gray(&path, &DecodeLimits::default()).unwrap_err();
+    assert!(matches!(e, DecodeError::EmptyFile { .. }), "{e}");
+    assert!(e.to_string().contains("the file is empty"), "{e}");
+}
+
+/// A libjpeg file (OpenCV 5.0.0's `imwrite`: 4:2:0, a restart marker every 2 MCUs, 160 x 120).
+const RESTART_420: &[u8] = include_bytes!("testdata/restart_420.jpg");
+
+#[test]
+fn libjpeg_files_with_restart_markers_pass_whole_and_fail_cut() {
+    super::super::jpeg_scan::check_scans(RESTART_420).unwrap();
+    let path = temp("restart.jpg");
+    std::fs::write(&path, RESTART_420).unwrap();
+    let ours = open_gray(&path, &DecodeLimits::default()).unwrap();
+    let theirs = super::super::gray_from_dynamic(&image::load_from_memory(RESTART_420).unwrap());
+    assert_eq!(ours, theirs);
+    for keep in [RESTART_420.len() / 3, RESTART_420.len() * 3 / 4] {
+        let mut cut = RESTART_420[..keep].to_vec();
+        cut.extend_from_slice(&[0xFF, 0xD9]);
+        let e = super::super::jpeg_scan::check_scans(&cut).unwrap_err();
+        assert!(e.contains("of its 80 MCUs"), "{e}");
+    }
+}

@@ -44,8 +44,89 @@ pub fn check_writable(path: &Path) -> Result<(), OutputError> {
             "it is {}, not a regular file",
             file_kind(&meta)
         ))),
-        _ => Ok(()),
+        _ => check_folder_of(path, false),
     }
+}
+
+/// [`check_writable`] for an output whose folder the run creates: folders missing on its path are
+/// allowed, and the nearest one that exists must be a writable folder.
+pub fn check_writable_in_new_folder(path: &Path) -> Result<(), OutputError> {
+    if path.file_name().is_none() || ends_with_separator(path) {
+        return Err(OutputError::OutputPath {
+            path: path.to_path_buf(),
+            reason: "the path names a folder, not a file".into(),
+        });
+    }
+    match std::fs::metadata(path) {
+        Ok(meta) if !meta.is_file() => Err(OutputError::OutputPath {
+            path: path.to_path_buf(),
+            reason: format!("it is {}, not a regular file", file_kind(&meta)),
+        }),
+        _ => check_folder_of(path, true),
+    }
+}
+
+/// Refuses, before any work, an output whose folder cannot take it: the folder is missing (unless
+/// `create_missing`: then its nearest existing ancestor is checked), is a file, or is not writable
+/// (a file is created there and removed again: `.probe.clatch-PID-N.tmp`, the pattern of every
+/// temporary file clatch writes). The error names the folder at fault.
+fn check_folder_of(path: &Path, create_missing: bool) -> Result<(), OutputError> {
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let mut existing = folder;
+    let meta = loop {
+        let gone = match std::fs::metadata(existing) {
+            Ok(meta) => break meta,
+            // Not a directory: an ancestor is a file, found on the way up.
+            Err(e) => match e.kind() {
+                std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory => e,
+                _ => return Err(OutputError::write(existing)(e)),
+            },
+        };
+        existing = match existing.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            Some(_) if existing != Path::new(".") => Path::new("."),
+            _ => return Err(OutputError::write(existing)(gone)),
+        };
+    };
+    if !meta.is_dir() {
+        return Err(OutputError::OutputPath {
+            path: existing.to_path_buf(),
+            reason: format!(
+                "it is {}, not a folder, so {} cannot be written in it",
+                if meta.is_file() {
+                    "a file"
+                } else {
+                    file_kind(&meta)
+                },
+                path.display()
+            ),
+        });
+    }
+    if existing != folder && !create_missing {
+        return Err(OutputError::OutputPath {
+            path: folder.to_path_buf(),
+            reason: "the folder does not exist; create it first".into(),
+        });
+    }
+    // Probed once per folder and process: a batch checks thousands of outputs in one folder.
+    static WRITABLE: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+    let mut writable = WRITABLE.lock().unwrap_or_else(|p| p.into_inner());
+    if writable.iter().any(|f| f == existing) {
+        return Ok(());
+    }
+    let probe = super::staged::create_temp_beside(&existing.join("probe")).map_err(|_| {
+        OutputError::OutputPath {
+            path: existing.to_path_buf(),
+            reason: "the folder is not writable".into(),
+        }
+    })?;
+    std::fs::remove_file(&probe).ok();
+    super::staged::forget_temporary(&probe);
+    writable.push(existing.to_path_buf());
+    Ok(())
 }
 
 /// Whether the path is written with a trailing separator (`out/`).

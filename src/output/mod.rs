@@ -23,14 +23,21 @@
 //! ```
 
 mod checks;
+mod lock;
 mod staged;
 
 use std::path::PathBuf;
 
 use thiserror::Error;
 
-pub use checks::{check_distinct, check_writable, ends_with_separator, file_kind};
-pub use staged::{Staged, TempDir, write_file};
+pub use checks::{
+    check_distinct, check_writable, check_writable_in_new_folder, ends_with_separator, file_kind,
+};
+pub use lock::{OutputLock, lock_path};
+pub use staged::{
+    Staged, TempDir, Uninterrupted, remove_temporaries, sweep_stale_temporaries, temporary_pid,
+    write_file,
+};
 
 /// Why an output was refused or could not be written. Every variant names the file.
 // Field names are described by each variant's message.
@@ -48,6 +55,19 @@ pub enum OutputError {
     /// An output path that cannot be written as a file (a folder, a device, ...).
     #[error("cannot write {path}: {reason}", path = .path.display())]
     OutputPath { path: PathBuf, reason: String },
+
+    /// Another run (process `holder`, when known) is writing this output now.
+    #[error(
+        "{path} is being written by another clatch run{by}; wait for it to end or choose another path \
+         (lock file {lock})",
+        path = .path.display(), lock = .lock.display(),
+        by = .holder.map(|p| format!(" (process {p})")).unwrap_or_default()
+    )]
+    Locked {
+        path: PathBuf,
+        holder: Option<u32>,
+        lock: PathBuf,
+    },
 
     /// An output path that names an input or another output.
     #[error(

@@ -100,3 +100,28 @@ pub fn lying_png(width: u32, height: u32) -> Vec<u8> {
 pub fn mkfifo(path: &Path) {
     assert!(Command::new("mkfifo").arg(path).status().unwrap().success());
 }
+
+/// Every name in `dir`, sorted.
+pub fn listing(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// `clatch colmap --images IMAGES --database DB --backend cpu EXTRA...`.
+pub fn colmap_cpu(images: &Path, db: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "colmap",
+        "--images",
+        str(images),
+        "--database",
+        str(db),
+        "--backend",
+        "cpu",
+    ];
+    args.extend_from_slice(extra);
+    clatch(&args)
+}

@@ -202,7 +202,11 @@ pub fn from_colmap(py: Python<'_>, e: clatch::colmap::ColmapError) -> PyErr {
         E::Output(o) => return from_output(py, o),
         E::Image { ref source, .. } => class_of(source),
         E::ImageDir { .. } => Class::ImageRead,
-        E::Sqlite { .. } | E::DatabaseExists { .. } | E::MatchListIo(_) => Class::Database,
+        E::Sqlite { .. }
+        | E::DatabaseExists { .. }
+        | E::DatabaseMissing { .. }
+        | E::MatchListIo(_)
+        | E::Writing { .. } => Class::Database,
         _ => Class::InvalidInput,
     };
     let debug = format!("{e:?}");
@@ -214,12 +218,13 @@ pub fn from_colmap(py: Python<'_>, e: clatch::colmap::ColmapError) -> PyErr {
     raise(py, class, kind, e.to_string())
 }
 
-/// An output refused (a folder, an input's path: `InvalidInputError`) or not written
-/// (`DatabaseError`), its kind the variant's name (`OutputPath`, `OutputClash`, `Write`).
+/// An output refused (a folder, an input's path: `InvalidInputError`) or not written (a failed
+/// write, another run holding it: `DatabaseError`), its kind the variant's name (`OutputPath`,
+/// `OutputClash`, `Write`, `Locked`).
 fn from_output(py: Python<'_>, e: clatch::output::OutputError) -> PyErr {
     use clatch::output::OutputError as E;
     let class = match e {
-        E::Write { .. } => Class::Database,
+        E::Write { .. } | E::Locked { .. } => Class::Database,
         _ => Class::InvalidInput,
     };
     let debug = format!("{e:?}");

@@ -156,6 +156,22 @@ def test_an_existing_database_is_kept_unless_forced(backend, folder, tmp_path):
     assert result.images == 6
 
 
+def test_a_database_another_run_is_writing_is_a_database_error(backend, folder, tmp_path):
+    # Another run holds the database's lock (the operating system's advisory lock on the lock file,
+    # as clatch takes it): refused as a DatabaseError naming the holder, nothing written.
+    import fcntl
+
+    db = tmp_path / "out.db"
+    with open(tmp_path / ".out.db.clatch-lock", "w") as lock:
+        lock.write("4242\n")
+        lock.flush()
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(clatch.DatabaseError) as e:
+            clatch.colmap.match_folder(folder, db, backend=backend)
+    assert e.value.kind == "Locked" and "4242" in str(e.value)
+    assert not db.exists()
+
+
 def test_an_unreadable_photo_leaves_no_output(backend, folder, tmp_path):
     broken, last = broken_copy(folder, tmp_path / "broken")
     db = tmp_path / "out.db"

@@ -354,7 +354,7 @@ mod tests {
         for ok in ["a.png", "./b.JPG", "c.jpeg", "d.ppm"] {
             assert!(check_picture_path(Path::new(ok)).is_ok(), "{ok}");
         }
-        // A folder that does not exist is found before any work (issue 28, H9).
+        // A folder that does not exist is found before any work.
         let e = check_picture_path(Path::new("no-such-dir/b.png")).unwrap_err();
         assert!(
             e.to_string()

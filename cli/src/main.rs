@@ -354,7 +354,7 @@ mod tests {
     use clatch_cli::flags::MIN_PYRAMID_FACTOR;
     use clatch_cli::names::BackendFlag;
 
-    /// Issue 28, H13: sizes that do not fit name the options as given and what would fit.
+    /// Sizes that do not fit name the options as given and what would fit.
     #[test]
     fn pyramid_and_keypoint_sizes_that_do_not_fit_name_the_options() {
         let refused = |extra: &[&str]| {

@@ -187,7 +187,7 @@ fn extract_of_several_images_writes_each_as_its_own_call_would() {
         "cpu",
     ]);
     assert!(!out.status.success());
-    // Both inputs named (issue 28, H15).
+    // Both inputs named.
     assert!(
         common::stderr(&out).contains("would both write their files as A.*"),
         "{}",

@@ -1,4 +1,4 @@
-//! The command-line findings of the reliability review (issue 28): batches that go on past a bad
+//! The command-line findings of the reliability review: batches that go on past a bad
 //! image, outputs checked before the work, locks, COLMAP failures that keep the work done, plausible
 //! camera matrices, corrupt images and decoder allocations, messages that name what the user set.
 
@@ -40,7 +40,7 @@ fn extract(images: &[&Path], out: &Path, extra: &[&str]) -> std::process::Output
     clatch(&args)
 }
 
-/// C2 and H4: a small image in a batch no longer stops it: every good image's three files are
+/// A small image in a batch no longer stops it: every good image's three files are
 /// written, the failures are listed, the exit status is 1, and the message names no 64x64 "window".
 #[test]
 fn a_batch_goes_on_past_bad_images_and_lists_them() {
@@ -72,7 +72,7 @@ fn a_batch_goes_on_past_bad_images_and_lists_them() {
     );
 }
 
-/// H4: with --fail-fast a bad header is found before any work and nothing is written; a rerun that
+/// With --fail-fast a bad header is found before any work and nothing is written; a rerun that
 /// fails part-way leaves every earlier result as it was (no mix of old and new files).
 #[test]
 fn fail_fast_writes_nothing_or_everything() {
@@ -108,7 +108,7 @@ fn fail_fast_writes_nothing_or_everything() {
     assert_eq!(listing(&out_dir).len(), 12, "no temporary file left");
 }
 
-/// H9: an output folder that is missing, or a file, is found before any work (before the corrupt
+/// An output folder that is missing, or a file, is found before any work (before the corrupt
 /// image is decoded) and named as the fault; `--workspace` naming a file says so.
 #[test]
 fn output_folders_are_checked_before_the_work() {
@@ -186,7 +186,7 @@ fn script(dir: &Path, name: &str, body: &str) -> PathBuf {
     path
 }
 
-/// H10: `x.db` and `x.sqlite` get workspaces of their own; a database without extension, whose
+/// `x.db` and `x.sqlite` get workspaces of their own; a database without extension, whose
 /// default workspace is `x.db`'s, is refused instead of replacing its match list.
 #[test]
 fn databases_of_one_stem_never_share_a_match_list() {
@@ -218,7 +218,7 @@ fn databases_of_one_stem_never_share_a_match_list() {
     assert!(!dir.join("x").exists());
 }
 
-/// H10: a second run on a database that a running one is writing is refused, naming the holder;
+/// A second run on a database that a running one is writing is refused, naming the holder;
 /// the first completes.
 #[cfg(unix)]
 #[test]
@@ -272,7 +272,7 @@ fn listing_colmap(dir: &Path, mapper_exit: u8) -> PathBuf {
     )
 }
 
-/// H6: what COLMAP would refuse at the end is refused before any work (a mistyped mapper option, a
+/// What COLMAP would refuse at the end is refused before any work (a mistyped mapper option, a
 /// single photo); when COLMAP fails, the database and match list are kept and the message says so.
 #[cfg(unix)]
 #[test]
@@ -380,7 +380,7 @@ fn signal(pid: u32, name: &str) {
     assert!(ok, "kill -{name} {pid}");
 }
 
-/// H2: SIGTERM or SIGINT during COLMAP's steps stops COLMAP and removes every temporary file,
+/// SIGTERM or SIGINT during COLMAP's steps stops COLMAP and removes every temporary file,
 /// folder and lock; nothing is put in place.
 #[cfg(target_os = "linux")]
 #[test]
@@ -415,7 +415,7 @@ fn an_interrupted_colmap_run_leaves_nothing_behind() {
     }
 }
 
-/// H2: what a SIGKILLed run leaves (temporary database, match list, model folder, locks) is swept by
+/// What a SIGKILLed run leaves (temporary database, match list, model folder, locks) is swept by
 /// the next run in the same folders, and only that.
 #[cfg(target_os = "linux")]
 #[test]
@@ -442,7 +442,7 @@ fn the_next_run_sweeps_what_a_killed_run_left() {
     );
 }
 
-/// H7: a K that COLMAP would spin or abort on, or whose principal point lies outside the photos, is
+/// A K that COLMAP would spin or abort on, or whose principal point lies outside the photos, is
 /// refused before any work; a COLMAP step that runs past --colmap-timeout is stopped with a typed
 /// error (the database and match list kept).
 #[cfg(unix)]
@@ -481,7 +481,7 @@ fn implausible_cameras_are_refused_and_colmap_is_bounded_in_time() {
     assert!(db.exists(), "kept");
 }
 
-/// H3 and H15: a JPEG cut and marked as ended again, a JPEG whose header was patched larger, a PGM
+/// A JPEG cut and marked as ended again, a JPEG whose header was patched larger, a PGM
 /// sample above MAXVAL are refused as corrupt (as `djpeg` reports them), not decoded into flat
 /// fill; an empty file says so.
 #[test]
@@ -568,7 +568,7 @@ fn peak_kib(child: &mut std::process::Child) -> u64 {
     peak
 }
 
-/// H11: an ICC profile that inflates to 512 MiB in a 548x342 PNG (a 1.5 MB image) is cut off by the
+/// An ICC profile that inflates to 512 MiB in a 548x342 PNG (a 1.5 MB image) is cut off by the
 /// decoder's allocation cap (its pixels plus 16 MiB of metadata, whatever --max-pixels allows): the
 /// profile is dropped (the PNG decoder ignores a profile it cannot read), the image read, and the
 /// run's peak resident memory stays far below the bomb.
@@ -608,7 +608,7 @@ fn a_decompression_bomb_in_png_metadata_is_refused_in_bounded_memory() {
     assert!(out.status.success(), "{}", common::stderr(&out));
 }
 
-/// H13: --pyramid 8 and a --keypoint-size too large for the default pyramid name the options as
+/// --pyramid 8 and a --keypoint-size too large for the default pyramid name the options as
 /// given (not the library's `pyramid.levels`); --single-scale on an image too small for its 64-pixel
 /// windows warns why it found nothing.
 #[test]
@@ -637,7 +637,7 @@ fn sizes_are_explained_in_the_options_the_user_set() {
     assert!(e.contains("48 pixels from every border"), "{e}");
 }
 
-/// H15: two inputs of one name in a multi-image extract are both named; entries of a colmap folder
+/// Two inputs of one name in a multi-image extract are both named; entries of a colmap folder
 /// named like images but skipped (a broken link, a FIFO, a folder) are listed in a warning.
 #[test]
 fn skipped_and_clashing_inputs_are_named() {
@@ -677,7 +677,7 @@ fn skipped_and_clashing_inputs_are_named() {
     }
 }
 
-/// H2: SIGTERM in the middle of a multi-image `extract` leaves no temporary file: every image's
+/// SIGTERM in the middle of a multi-image `extract` leaves no temporary file: every image's
 /// files are either all in place or absent.
 #[cfg(target_os = "linux")]
 #[test]

@@ -195,7 +195,7 @@ fn pyramid_runs_with_the_default_methods_and_refuses_the_opencv_column_when_aske
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// Issue 28, H5: a run that fails on a pair's image leaves the last run's `pairs.csv` (and every
+/// A run that fails on a pair's image leaves the last run's `pairs.csv` (and every
 /// other file) as it was, and an output folder it created is removed again.
 #[test]
 fn a_failed_run_keeps_the_last_runs_files_and_leaves_no_folder() {
@@ -260,7 +260,7 @@ fn a_failed_run_keeps_the_last_runs_files_and_leaves_no_folder() {
     std::fs::remove_dir_all(&root).ok();
 }
 
-/// Issue 28, H15 and C4: `--data FILE` says it is a file; the settings line tells the defaults from
+/// `--data FILE` says it is a file; the settings line tells the defaults from
 /// --single-scale, and says whose keypoints the OpenCV-compatible column describes.
 #[test]
 fn data_naming_a_file_and_the_settings_line_say_what_they_are() {

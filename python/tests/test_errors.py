@@ -58,7 +58,7 @@ def test_bad_images(backend, image, kind):
 
 
 def test_sizes_are_numpy_shapes(backend):
-    """Finding P8: image sizes are said as numpy shapes, (H, W), never the library's W x H."""
+    """Image sizes are said as numpy shapes, (H, W), never the library's W x H."""
     extractor = clatch.Extractor(backend)
     e = raises(clatch.InvalidInputError, "ImageTooSmall", lambda: extractor.detect(np.zeros((63, 200), np.uint8)))
     assert "shape (63, 200)" in str(e) and "200x63" not in str(e)
@@ -216,7 +216,7 @@ def test_errors_leave_the_objects_usable(backend, photo):
 
 
 def test_all_pairs_refuses_a_list_too_large_to_hold():
-    """Finding P2: ``all_pairs(10**6)`` listed 5 * 10^11 pairs (24 GB, then the kernel's OOM kill).
+    """``all_pairs(10**6)`` listed 5 * 10^11 pairs (24 GB, then the kernel's OOM kill).
     Now every n whose list would pass ``MAX_PAIRS`` is refused before anything is allocated."""
     for n in (10**6, 10**12, 2**62, 16_385):
         e = raises(clatch.InvalidInputError, "TooManyPairs", lambda: clatch.Matcher.all_pairs(n))
@@ -230,7 +230,7 @@ def test_all_pairs_refuses_a_list_too_large_to_hold():
 
 @pytest.mark.parametrize("ratio", [0.8, None])
 def test_one_rule_for_a_pair_that_cannot_match(backend, ratio):
-    """Finding P6: an empty descriptor set (a blank frame) raised EmptyGallery in ``match`` but gave
+    """An empty descriptor set (a blank frame) raised EmptyGallery in ``match`` but gave
     no matches in ``match_pairs``. One rule now, the library's ``MatchConfig::can_match``: a pair
     with no query, or fewer gallery descriptors than the rules look at (none; one with the ratio
     test), gives no matches, in both calls."""
@@ -251,7 +251,7 @@ def test_one_rule_for_a_pair_that_cannot_match(backend, ratio):
 
 
 def test_knn_names_the_k_it_was_given(backend):
-    """Finding P8: ``knn(k=-1)`` said "k = 0 is invalid"."""
+    """``knn(k=-1)`` said "k = 0 is invalid"."""
     d = random_descriptors(np.random.default_rng(5), 10, 32)
     m = clatch.Matcher(backend)
     for k in (-1, -(2**40), 0, 11):
@@ -262,7 +262,7 @@ def test_knn_names_the_k_it_was_given(backend):
 
 
 def test_range_errors_say_the_range(backend):
-    """Finding P8: a setting out of range said only "(out of range)"; now the library's range."""
+    """A setting out of range said only "(out of range)"; now the library's range."""
     for keywords, words in [
         ({"threshold": 300}, "threshold = 300 (must be in 1..=254)"),
         ({"threshold": -1}, "threshold = -1 (must be in 1..=254)"),
@@ -280,7 +280,7 @@ def test_range_errors_say_the_range(backend):
 
 
 def test_every_error_class_has_a_kind_of_its_own():
-    """Finding P8: ``ClusterError.kind`` read "Unknown"."""
+    """``ClusterError.kind`` read "Unknown"."""
     classes = [getattr(clatch, n) for n in clatch.__all__ if n.endswith("Error")]
     assert len(classes) >= 10
     for cls in classes:
@@ -316,7 +316,7 @@ def test_every_error_class_has_a_kind_of_its_own():
     ],
 )
 def test_type_mistakes_are_clatch_errors_and_type_errors(backend, call):
-    """Finding P8: ``k=2.5`` or ``backend=None`` raised a plain TypeError, though every error is a
+    """``k=2.5`` or ``backend=None`` raised a plain TypeError, though every error is a
     ClatchError. Now an ArgumentTypeError, which is both, naming the argument."""
     m, e = clatch.Matcher(backend), clatch.Extractor(backend)
     d = random_descriptors(np.random.default_rng(6), 10, 32)

@@ -17,7 +17,7 @@ H, W = 3744, 5616
 
 
 def test_the_size_is_checked_from_the_shape_before_any_copy(backend):
-    """Finding P1: a broadcast array of 10^9 pixels was copied (15-18 s, 1 GB, the GIL held)
+    """A broadcast array of 10^9 pixels was copied (15-18 s, 1 GB, the GIL held)
     before ImageTooLarge; now the shape alone refuses it."""
     extractor = clatch.Extractor(backend)
     huge = [
@@ -63,7 +63,7 @@ def big_images():
     "gray transposed", "gray column step", "rgb", "rgb negative strides", "bgr fortran order", "rgba", "gray in place"
 ])
 def test_no_layout_holds_the_gil(big_images, layout):
-    """Finding P1: a transposed 21 MP image blocked every other Python thread for 160-200 ms while
+    """A transposed 21 MP image blocked every other Python thread for 160-200 ms while
     it was copied. Now every conversion runs with the GIL released: another thread, spinning,
     is never stalled for more than a few switch intervals (5 ms each) however long the call."""
     image = big_images[layout]
@@ -90,7 +90,7 @@ def test_every_layout_gives_the_same_gray(big_images):
 
 
 def test_bgr_from_opencv_gives_the_gray_images_keypoints(backend):
-    """Finding P9: ``cv2.imread`` gives BGR, which was read as RGB. ``channels="bgr"`` gives exactly
+    """``cv2.imread`` gives BGR, which was read as RGB. ``channels="bgr"`` gives exactly
     what the RGB image gives (and its gray image gives), and the gray image of cv2.cvtColor but for
     rounding (OpenCV 5 rounds its weights otherwise than 4.x, whose integer weights the library
     uses: at most 1 apart)."""

@@ -20,7 +20,7 @@ def features(max_keypoints: int = 500):
 
 
 def test_points_are_a_plain_array_of_positions():
-    """Finding P4: ``kp[["x", "y"]]`` is a structured view (cv2 refuses it) and
+    """``kp[["x", "y"]]`` is a structured view (cv2 refuses it) and
     ``.view(np.float32).reshape(-1, 2)`` reads size and angle as every second point."""
     _, keypoints, _ = features()
     for kp in (keypoints, keypoints[::-3], keypoints[:0]):
@@ -71,7 +71,7 @@ def readme_snippet(path):
 
 
 def test_the_readme_snippet_runs_with_find_homography(tmp_path, monkeypatch):
-    """Finding P4: the README's snippet, as written, on two views related by a known homography."""
+    """The README's snippet, as written, on two views related by a known homography."""
     cv2 = pytest.importorskip("cv2")
     gray = clatch.imread(ASTRONAUT)
     colour = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
@@ -91,7 +91,7 @@ def test_the_readme_snippet_runs_with_find_homography(tmp_path, monkeypatch):
 
 
 def test_opencv_latch_equals_cv2_bit_for_bit():
-    """Finding P10: OpenCV's LATCH (the library's ``OpencvLatch``) from Python, equal to
+    """OpenCV's LATCH (the library's ``OpencvLatch``) from Python, equal to
     ``cv2.xfeatures2d.LATCH_create(...).compute`` on the same keypoints (tests/opencv_latch.rs
     checks the library the same way over many more settings)."""
     cv2 = pytest.importorskip("cv2")

@@ -20,7 +20,7 @@ def extract_and_match(extractor, matcher, image):
 
 
 def test_round_trip_through_pickle(backend):
-    """Finding P12: ``Extractor`` and ``Matcher`` could not be pickled."""
+    """``Extractor`` and ``Matcher`` could not be pickled."""
     extractor = clatch.Extractor(backend, max_keypoints=700, grid=4, bits=256, pyramid=(3, 1.5), smoothing="binomial3")
     matcher = clatch.Matcher(backend, ratio=None, cross_check=False, max_distance=90)
     latch = clatch.OpencvLatch(16, False, 2, 0.0)

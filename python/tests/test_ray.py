@@ -208,7 +208,7 @@ def test_a_backend_the_actors_cannot_start_raises_its_own_error(cluster, folder,
     ],
 )
 def test_resources_the_cluster_lacks_are_refused_at_once(cluster, folder, tmp_path, options, actors, words):
-    """Finding P5: ``actor_options={"num_gpus": 1}`` on a cluster without GPUs never returned (Ray
+    """``actor_options={"num_gpus": 1}`` on a cluster without GPUs never returned (Ray
     waits for a GPU for ever). The cluster's resources are checked first."""
     start = time.perf_counter()
     with pytest.raises(clatch.ClusterError) as e:
@@ -219,7 +219,7 @@ def test_resources_the_cluster_lacks_are_refused_at_once(cluster, folder, tmp_pa
 
 
 def test_actors_that_cannot_start_in_time_are_a_cluster_error(cluster, folder, tmp_path):
-    """Finding P5, the wait bounded: the resources exist but another job holds them."""
+    """The wait bounded: the resources exist but another job holds them."""
 
     @ray.remote(num_cpus=2)
     class Hog:
@@ -255,7 +255,7 @@ time.sleep(3)
 
 
 def test_a_failing_task_prints_one_traceback(folder, tmp_path):
-    """Finding P12, second half: a photo that fails on an actor printed Ray's "Unhandled error"
+    """A photo that fails on an actor printed Ray's "Unhandled error"
     tracebacks of the task's other results besides the clean error. Now one traceback: the error."""
     broken, last = broken_copy(folder, tmp_path / "broken")
     env = {k: v for k, v in os.environ.items() if k != "RAY_IGNORE_UNHANDLED_ERRORS"}

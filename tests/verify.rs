@@ -484,11 +484,39 @@ fn bad_inputs_are_typed_errors() {
     let mut extra = pair.keypoints_a.clone();
     extra.push(KeyPoint::new(f32::NAN, 0.0));
     assert!(verify_pair(&extra, &pair.keypoints_b, &pair.matches, None, &config).is_ok());
+    // Extreme but finite positions are no error and no panic: at worst no model.
+    let huge: Vec<KeyPoint> = (0..40)
+        .map(|i| {
+            KeyPoint::new(
+                if i % 2 == 0 { f32::MAX } else { -f32::MAX },
+                i as f32 * 1e36,
+            )
+        })
+        .collect();
+    for cameras in [None, Some((&pair.camera_a, &pair.camera_b))] {
+        let g = verify_pair(&huge, &pair.keypoints_b, &pair.matches, cameras, &config).unwrap();
+        assert!(g.inliers.len() <= 40);
+    }
     // No matches at all: degenerate, not an error.
     assert_eq!(
         verify_pair(&[], &[], &[], None, &config).unwrap().config,
         GeometryConfig::Degenerate
     );
+}
+
+#[test]
+fn models_in_colmaps_pixel_convention_fit_the_shifted_positions() {
+    let pair = Pair::new(scene(31, Shape::Planar, 200, 0.0, 0.0));
+    let g = verify(pair.uncalibrated());
+    let colmap = g.in_colmap_pixels();
+    assert_eq!((colmap.config, &colmap.inliers), (g.config, &g.inliers));
+    let shifted = |p: &[f64; 2]| [p[0] + 0.5, p[1] + 0.5];
+    for (a, b) in pair.scene.a.iter().zip(&pair.scene.b) {
+        assert!(sampson(&colmap.f.unwrap(), shifted(a), shifted(b)) < 1e-9);
+        assert!(transfer(&colmap.h.unwrap(), shifted(a), shifted(b)) < 1e-9);
+    }
+    assert_ne!(colmap.h, g.h);
+    assert_ne!(colmap.f, g.f);
 }
 
 #[test]

@@ -1,6 +1,6 @@
 //! What verification finds for a pair: COLMAP's configuration and models, and the inlier matches.
 
-use super::linalg::Mat3;
+use super::linalg::{Mat3, mul3, transpose3};
 
 /// The kind of two-view geometry, with COLMAP 3.8's numbering (`TwoViewGeometry::ConfigurationType`,
 /// the `config` column of its `two_view_geometries` table): [`GeometryConfig::colmap_code`].
@@ -77,6 +77,28 @@ pub struct TwoViewGeometry {
 }
 
 impl TwoViewGeometry {
+    /// The same geometry in COLMAP's pixel convention (pixel centres at `+ 0.5`, as its database
+    /// stores keypoints): `F ← Sᵀ F S`, `H ← S⁻¹ H S` with `S` the shift by `−0.5` (clatch's
+    /// coordinates of a COLMAP position); `E` (camera coordinates) and the inliers are unchanged.
+    ///
+    /// ```
+    /// use clatch::verify::{GeometryConfig, InlierCounts, TwoViewGeometry};
+    ///
+    /// let shift = [[1.0, 0.0, 3.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    /// let g = TwoViewGeometry { config: GeometryConfig::PlanarOrPanoramic, f: None, e: None, h: Some(shift),
+    ///     inliers: vec![], inlier_counts: InlierCounts::default() };
+    /// assert_eq!(g.in_colmap_pixels().h, Some(shift)); // a translation commutes with the shift
+    /// ```
+    pub fn in_colmap_pixels(&self) -> TwoViewGeometry {
+        let shift = [[1.0, 0.0, -0.5], [0.0, 1.0, -0.5], [0.0, 0.0, 1.0]];
+        let unshift = [[1.0, 0.0, 0.5], [0.0, 1.0, 0.5], [0.0, 0.0, 1.0]];
+        TwoViewGeometry {
+            f: self.f.map(|f| mul3(&mul3(&transpose3(&shift), &f), &shift)),
+            h: self.h.map(|h| mul3(&mul3(&unshift, &h), &shift)),
+            ..self.clone()
+        }
+    }
+
     /// A degenerate pair: no model, no inliers.
     pub(crate) fn degenerate(inlier_counts: InlierCounts) -> Self {
         Self {

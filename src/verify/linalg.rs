@@ -132,7 +132,8 @@ impl Normalisation {
         }
         let rms = (squares / count).sqrt();
         let scale = std::f64::consts::SQRT_2 / rms;
-        (rms > 0.0 && scale.is_finite()).then_some(Self { centre, scale })
+        // An overflowing spread gives `s = 0`, NaN fails every comparison: no normalisation either way.
+        (rms > 0.0 && scale > 0.0 && scale.is_finite()).then_some(Self { centre, scale })
     }
 
     /// `s (p − c)`.

@@ -11,6 +11,7 @@ mod two_view;
 use std::hint::black_box;
 use std::time::Duration;
 
+use clatch::synthetic::SplitMix64;
 use clatch::verify::{Camera, Intrinsics, VerifyConfig, ViewPair, verify_pairs};
 use clatch::{KeyPoint, Match};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};

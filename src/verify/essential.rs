@@ -13,7 +13,7 @@
 //! Up to ten essential matrices, in ascending order of `z`.
 
 use super::fundamental::{epipolar_row, sampson_error_squared};
-use super::linalg::{Mat3, cross3, dot3, from_vec9, is_finite3, smallest_right_singular_vectors};
+use super::linalg::{Mat3, cross3, dot3, from_vec9, is_finite3, null_basis};
 use super::poly::{MAX_DEGREE, real_roots};
 use super::ransac::Estimator;
 
@@ -278,10 +278,11 @@ pub(crate) fn five_point(a: &[[f64; 2]], b: &[[f64; 2]], models: &mut Vec<Mat3>)
         .zip(b)
         .map(|(pa, pb)| epipolar_row(*pa, *pb))
         .collect();
-    // W is the smallest singular vector (as COLMAP orders them): with more than five exact points it
-    // alone is E, at x = y = z = 0.
-    let [w, z, y, x] = smallest_right_singular_vectors::<4>(&rows);
-    let basis = [x, y, z, w];
+    // W is the vector that matters most (the smallest singular vector, as COLMAP orders them): with
+    // more than five exact points it alone is E, at x = y = z = 0.
+    let Some(basis) = null_basis::<4>(&rows) else {
+        return;
+    };
     let Some(reduced) = eliminate(&constraints(&basis)) else {
         return;
     };

@@ -5,7 +5,7 @@
 
 use super::linalg::{
     Mat3, Normalisation, adjugate3, det3, enforce_rank2, from_vec9, is_finite3, mul3, mul3_vec,
-    mul3t_vec, smallest_right_singular_vectors, trace_of_product3, transpose3,
+    mul3t_vec, null_basis, trace_of_product3, transpose3,
 };
 use super::poly::{MAX_DEGREE, real_roots};
 use super::ransac::Estimator;
@@ -62,7 +62,9 @@ pub(crate) fn seven_point(a: &[[f64; 2]], b: &[[f64; 2]], models: &mut Vec<Mat3>
     let Some((rows, ta, tb)) = normalised_rows(a, b) else {
         return;
     };
-    let [v1, v2] = smallest_right_singular_vectors::<2>(&rows);
+    let Some([v1, v2]) = null_basis::<2>(&rows) else {
+        return;
+    };
     let (f1, f2) = (from_vec9(&v1), from_vec9(&v2));
     let d: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| f1[i][j] - f2[i][j]));
     // det(F2 + α D) = det F2 + α tr(adj(F2) D) + α² tr(F2 adj(D)) + α³ det D.
@@ -87,7 +89,7 @@ pub(crate) fn seven_point(a: &[[f64; 2]], b: &[[f64; 2]], models: &mut Vec<Mat3>
 /// null vector, its smallest singular value set to zero.
 pub(crate) fn eight_point(a: &[[f64; 2]], b: &[[f64; 2]]) -> Option<Mat3> {
     let (rows, ta, tb) = normalised_rows(a, b)?;
-    let [v] = smallest_right_singular_vectors::<1>(&rows);
+    let [v] = null_basis::<1>(&rows)?;
     let f = denormalise(&enforce_rank2(&from_vec9(&v)), &ta, &tb);
     is_finite3(&f).then_some(f)
 }

@@ -3,7 +3,7 @@
 //! optimisation), and its residual, the squared transfer error in the second image (COLMAP's
 //! `HomographyMatrixEstimator`).
 
-use super::linalg::{Mat3, Normalisation, RowReduction, from_vec9, is_finite3, mul3};
+use super::linalg::{Mat3, Normalisation, from_vec9, is_finite3, mul3, null_basis};
 use super::ransac::Estimator;
 
 /// Homography estimation for LO-RANSAC: the same DLT is the minimal and the local solver.
@@ -31,17 +31,14 @@ impl Estimator for HomographyEstimator {
 /// back: `H = Tb⁻¹ Ĥ Ta`. `None` for coincident points or a non-finite result.
 pub(crate) fn homography_dlt(a: &[[f64; 2]], b: &[[f64; 2]]) -> Option<Mat3> {
     let (ta, tb) = (Normalisation::of(a)?, Normalisation::of(b)?);
-    let mut reduction = RowReduction::new();
+    let mut rows = Vec::with_capacity(2 * a.len());
     for (pa, pb) in a.iter().zip(b) {
         let ([x1, y1], [x2, y2]) = (ta.apply(*pa), tb.apply(*pb));
-        reduction.add_row([-x1, -y1, -1.0, 0.0, 0.0, 0.0, x1 * x2, y1 * x2, x2]);
-        reduction.add_row([0.0, 0.0, 0.0, -x1, -y1, -1.0, x1 * y2, y1 * y2, y2]);
+        rows.push([-x1, -y1, -1.0, 0.0, 0.0, 0.0, x1 * x2, y1 * x2, x2]);
+        rows.push([0.0, 0.0, 0.0, -x1, -y1, -1.0, x1 * y2, y1 * y2, y2]);
     }
-    let (vectors, _) = reduction.right_singular_vectors();
-    let h = mul3(
-        &mul3(&tb.inverse_matrix(), &from_vec9(&vectors[0])),
-        &ta.matrix(),
-    );
+    let [v] = null_basis::<1>(&rows)?;
+    let h = mul3(&mul3(&tb.inverse_matrix(), &from_vec9(&v)), &ta.matrix());
     is_finite3(&h).then_some(h)
 }
 
@@ -50,7 +47,8 @@ pub(crate) fn transfer_error_squared(h: &Mat3, a: [f64; 2], b: [f64; 2]) -> f64 
     let u = h[0][0] * a[0] + h[0][1] * a[1] + h[0][2];
     let v = h[1][0] * a[0] + h[1][1] * a[1] + h[1][2];
     let w = h[2][0] * a[0] + h[2][1] * a[1] + h[2][2];
-    let dx = b[0] - u / w;
-    let dy = b[1] - v / w;
+    let inverse_w = 1.0 / w;
+    let dx = b[0] - u * inverse_w;
+    let dy = b[1] - v * inverse_w;
     dx * dx + dy * dy
 }

@@ -4,8 +4,9 @@
 //!
 //! - 3x3 products, determinants, adjugates;
 //! - Hartley normalisation of a point set (centroid to the origin, RMS distance √2);
-//! - the right singular vectors of a matrix of nine columns: Givens QR of the rows (any number of
-//!   rows, streamed) to a 9x9 triangle, then one-sided Jacobi with a fixed number of sweeps, whose
+//! - null spaces of systems of nine unknowns: Gauss–Jordan elimination for the minimal samples
+//!   (exactly `9 − K` rows); for more rows the right singular vectors: Givens QR of the rows
+//!   (streamed) to a 9x9 triangle, then one-sided Jacobi with a fixed number of sweeps, whose
 //!   rotations come from square roots (never an angle);
 //! - rank-2 enforcement of a fundamental matrix and the (σ, σ, 0) projection of an essential matrix,
 //!   by the same Jacobi on 3x3.
@@ -288,15 +289,81 @@ impl RowReduction {
     }
 }
 
-/// The `K` right singular vectors of `rows` with the smallest singular values (the null space of a
-/// minimal system, or its least-squares stand-in), smallest first.
-pub(crate) fn smallest_right_singular_vectors<const K: usize>(rows: &[[f64; 9]]) -> [[f64; 9]; K] {
+/// A basis of the (least-squares) null space of `rows`, the vector that matters most last: for
+/// exactly `9 − K` rows (a minimal sample) the exact [`null_space`]; for more, the `K` right singular
+/// vectors with the smallest singular values, the smallest last.
+pub(crate) fn null_basis<const K: usize>(rows: &[[f64; 9]]) -> Option<[[f64; 9]; K]> {
+    if rows.len() + K == 9 {
+        return null_space::<K>(rows);
+    }
     let mut reduction = RowReduction::new();
     for row in rows {
         reduction.add_row(*row);
     }
     let (vectors, _) = reduction.right_singular_vectors();
-    std::array::from_fn(|k| vectors[k])
+    Some(std::array::from_fn(|k| vectors[K - 1 - k]))
+}
+
+/// The null space of `9 − K` rows of nine columns by Gauss–Jordan elimination with full pivoting,
+/// for the minimal samples (a fraction of the cost of the Jacobi route of [`null_basis`]): each step
+/// takes the largest magnitude among the remaining rows and the columns not yet pivots (scanning rows,
+/// then columns, ascending; the first on ties), swaps its row up, divides it by the pivot and clears
+/// the pivot's column in every other row. The columns never chosen are free; the vector of free
+/// column `f` (ascending) has 1 at `f`, 0 at the other free columns and `−m[i][f]` at the `i`-th
+/// pivot's column. `None` for another row count or a zero (or non-finite) pivot: rank below `9 − K`.
+pub(crate) fn null_space<const K: usize>(rows: &[[f64; 9]]) -> Option<[[f64; 9]; K]> {
+    let rank = 9 - K;
+    if rows.len() != rank {
+        return None;
+    }
+    let mut m = rows.to_vec();
+    let mut pivot_of_row = [0usize; 9];
+    let mut is_pivot = [false; 9];
+    for row in 0..rank {
+        let (mut best_row, mut best_col, mut best) = (row, 0, -1.0);
+        for (r, values) in m.iter().enumerate().skip(row) {
+            for c in 0..9 {
+                if !is_pivot[c] && values[c].abs() > best {
+                    (best_row, best_col, best) = (r, c, values[c].abs());
+                }
+            }
+        }
+        if best == 0.0 || !best.is_finite() {
+            return None;
+        }
+        m.swap(row, best_row);
+        let pivot = m[row][best_col];
+        for k in 0..9 {
+            m[row][k] /= pivot;
+        }
+        for r in 0..rank {
+            if r == row {
+                continue;
+            }
+            let factor = m[r][best_col];
+            for k in 0..9 {
+                m[r][k] -= factor * m[row][k];
+            }
+        }
+        pivot_of_row[row] = best_col;
+        is_pivot[best_col] = true;
+    }
+    let mut free = [0usize; K];
+    let mut count = 0;
+    for (c, pivot) in is_pivot.iter().enumerate() {
+        if !pivot {
+            free[count] = c;
+            count += 1;
+        }
+    }
+    Some(std::array::from_fn(|j| {
+        let mut v = [0.0; 9];
+        v[free[j]] = 1.0;
+        for (i, &p) in pivot_of_row[..rank].iter().enumerate() {
+            v[p] = -m[i][free[j]];
+        }
+        v
+    }))
 }
 
 /// The SVD of a 3x3 matrix as `(W, V, order)`: `A V = W` with orthogonal columns `W_j = σ_j u_j`,
@@ -412,9 +479,39 @@ mod tests {
             }
             rows.push(row);
         }
-        let [v] = smallest_right_singular_vectors::<1>(&rows);
-        let cosine = v.iter().zip(&truth).map(|(a, b)| a * b).sum::<f64>() / norm;
+        let [v] = null_basis::<1>(&rows).unwrap();
+        let v_norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let cosine = v.iter().zip(&truth).map(|(a, b)| a * b).sum::<f64>() / (norm * v_norm);
         assert!((cosine.abs() - 1.0).abs() < 1e-12, "{cosine}");
+    }
+
+    #[test]
+    fn gauss_jordan_null_space_is_orthogonal_to_every_row() {
+        let rows: Vec<[f64; 9]> = (0..5)
+            .map(|k| {
+                std::array::from_fn(|i| {
+                    (((i + 2) * (k + 5)) % 11) as f64 * 0.5 - 2.0 + 0.01 * (i * k) as f64
+                })
+            })
+            .collect();
+        let basis = null_space::<4>(&rows).unwrap();
+        for v in &basis {
+            for row in &rows {
+                let dot: f64 = row.iter().zip(v).map(|(a, b)| a * b).sum();
+                assert!(dot.abs() < 1e-12, "{dot}");
+            }
+        }
+        // Independent: each has 1 where the others have 0.
+        let ones: Vec<usize> = basis
+            .iter()
+            .map(|v| v.iter().filter(|x| **x == 1.0).count())
+            .collect();
+        assert!(ones.iter().all(|&n| n >= 1), "{basis:?}");
+        assert!(null_space::<4>(&rows[..4]).is_none(), "wrong row count");
+        assert!(
+            null_space::<4>(&[[0.0; 9]; 5]).is_none(),
+            "rank 0: nine free columns"
+        );
     }
 
     #[test]

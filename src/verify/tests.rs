@@ -12,6 +12,7 @@ use super::{
     essential::EssentialEstimator, fundamental::FundamentalEstimator,
     homography::HomographyEstimator,
 };
+use crate::synthetic::SplitMix64;
 use scene::{Scene, Shape, distance_up_to_scale};
 
 /// The camera-normalised points of a scene.

@@ -1,24 +1,22 @@
-//! Synthetic two-view scenes with known cameras, for the verification tests (unit tests include this
-//! file by path, so it uses std only): random 3-D points seen by two pinhole cameras, their true F,
-//! E and H, optional pixel noise and outliers.
+//! Synthetic two-view scenes with known cameras, for the verification tests and bench: random 3-D
+//! points seen by two pinhole cameras, their true F, E and H, optional pixel noise and outliers. The
+//! crate's unit tests include this file by path, so it uses std and its parent's `SplitMix64` only.
 #![allow(dead_code)]
 
 pub type Mat3 = [[f64; 3]; 3];
 
-/// A reproducible generator (SplitMix64) with uniform and Gaussian draws.
-pub struct Rng(u64);
+/// A reproducible generator with uniform and Gaussian draws, over the includer's
+/// `SplitMix64` (`clatch::synthetic::SplitMix64`; this file is included by path from inside the
+/// crate too, so it names the generator through its parent module).
+pub struct Rng(super::SplitMix64);
 
 impl Rng {
     pub fn new(seed: u64) -> Self {
-        Self(seed)
+        Self(super::SplitMix64::new(seed))
     }
 
     pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
 
     /// Uniform in `[lo, hi)`.

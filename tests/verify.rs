@@ -74,6 +74,17 @@ impl Pair {
     }
 }
 
+/// Matches `i ↔ i` for `i < n`.
+fn identity_matches(n: u32) -> Vec<Match> {
+    (0..n)
+        .map(|i| Match {
+            query: i,
+            train: i,
+            distance: 0,
+        })
+        .collect()
+}
+
 fn verify(pair: ViewPair<'_>) -> TwoViewGeometry {
     pair.verify(&VerifyConfig::default()).unwrap()
 }
@@ -239,13 +250,7 @@ fn too_few_or_random_matches_are_degenerate() {
             .collect::<Vec<_>>()
     };
     let (a, b) = (random(), random());
-    let matches: Vec<Match> = (0..200)
-        .map(|i| Match {
-            query: i,
-            train: i,
-            distance: 0,
-        })
-        .collect();
+    let matches = identity_matches(200);
     let g = verify_pair(
         &a,
         &b,
@@ -280,13 +285,7 @@ fn a_translation_in_the_border_is_a_watermark() {
         .enumerate()
         .map(|(i, k)| KeyPoint::new(k.x + (i % 2) as f32, k.y))
         .collect();
-    let matches: Vec<Match> = (0..60)
-        .map(|i| Match {
-            query: i,
-            train: i,
-            distance: 0,
-        })
-        .collect();
+    let matches = identity_matches(60);
     let camera = Camera::new(1024, 768);
     let g = verify_pair(
         &a,

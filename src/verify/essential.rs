@@ -118,26 +118,29 @@ impl Products {
         }
     }
 
-    /// `p · q`, terms accumulated with `p`'s index outer, `q`'s inner.
     fn linear_linear(&self, p: &Linear, q: &Linear) -> Quadratic {
-        let mut out = [0.0; 10];
-        for i in 0..4 {
-            for j in 0..4 {
-                out[self.linear_linear[i][j]] += p[i] * q[j];
-            }
-        }
-        out
+        multiply_by_table(&self.linear_linear, p, q)
     }
 
     fn quadratic_linear(&self, p: &Quadratic, q: &Linear) -> Cubic {
-        let mut out = [0.0; 20];
-        for i in 0..10 {
-            for j in 0..4 {
-                out[self.quadratic_linear[i][j]] += p[i] * q[j];
-            }
-        }
-        out
+        multiply_by_table(&self.quadratic_linear, p, q)
     }
+}
+
+/// `p · q` with `table[i][j]` the place of the product of `p`'s term `i` and `q`'s term `j`; terms
+/// accumulated with `p`'s index outer, `q`'s inner.
+fn multiply_by_table<const P: usize, const Q: usize, const R: usize>(
+    table: &[[usize; Q]; P],
+    p: &[f64; P],
+    q: &[f64; Q],
+) -> [f64; R] {
+    let mut out = [0.0; R];
+    for i in 0..P {
+        for j in 0..Q {
+            out[table[i][j]] += p[i] * q[j];
+        }
+    }
+    out
 }
 
 /// The ten cubic constraints on `(x, y, z)` for the basis `X, Y, Z, W`: row 0 is `det E`, rows 1–9

@@ -366,15 +366,27 @@ pub(crate) fn null_space<const K: usize>(rows: &[[f64; 9]]) -> Option<[[f64; 9];
     }))
 }
 
-/// The SVD of a 3x3 matrix as `(W, V, order)`: `A V = W` with orthogonal columns `W_j = σ_j u_j`,
-/// `order` the column indices by singular value ascending.
-fn svd3(a: &Mat3) -> ([[f64; 3]; 3], [[f64; 3]; 3], [usize; 3], [f64; 3]) {
+/// The SVD of a 3x3 matrix: `A V = W` with orthogonal columns `W_j = σ_j u_j` (all stored as
+/// columns), `order` the column indices by singular value ascending, `norms` the `σ_j²`.
+struct Svd3 {
+    w: [[f64; 3]; 3],
+    v: [[f64; 3]; 3],
+    order: [usize; 3],
+    norms: [f64; 3],
+}
+
+fn svd3(a: &Mat3) -> Svd3 {
     let mut cols: [[f64; 3]; 3] = std::array::from_fn(|j| std::array::from_fn(|i| a[i][j]));
     let mut v: [[f64; 3]; 3] =
         std::array::from_fn(|j| std::array::from_fn(|i| if i == j { 1.0 } else { 0.0 }));
     jacobi_columns(&mut cols, &mut v);
     let norms = squared_norms(&cols);
-    (cols, v, ascending_order(&norms), norms)
+    Svd3 {
+        w: cols,
+        v,
+        order: ascending_order(&norms),
+        norms,
+    }
 }
 
 /// `Σ_j w_j v_jᵀ` over the columns `js`, in that order.
@@ -392,7 +404,7 @@ fn outer_sum(w: &[[f64; 3]; 3], v: &[[f64; 3]; 3], js: &[usize]) -> Mat3 {
 
 /// The nearest matrix of rank 2 (Frobenius): the smallest singular value set to zero.
 pub(crate) fn enforce_rank2(a: &Mat3) -> Mat3 {
-    let (w, v, order, _) = svd3(a);
+    let Svd3 { w, v, order, .. } = svd3(a);
     outer_sum(&w, &v, &[order[2], order[1]])
 }
 
@@ -402,7 +414,7 @@ pub(crate) fn enforce_rank2(a: &Mat3) -> Mat3 {
 /// The nearest essential matrix up to scale: singular values `(σ1, σ2, σ3)` become `(σ, σ, 0)` with
 /// `σ = (σ1 + σ2) / 2`. `None` when the two larger singular values are zero.
 pub(crate) fn project_to_essential(a: &Mat3) -> Option<Mat3> {
-    let (w, v, order, norms) = svd3(a);
+    let Svd3 { w, v, order, norms } = svd3(a);
     let (s1, s2) = (norms[order[2]].sqrt(), norms[order[1]].sqrt());
     if s1 == 0.0 || s2 == 0.0 {
         return None;
@@ -426,7 +438,7 @@ mod tests {
     }
 
     fn singular_values(a: &Mat3) -> [f64; 3] {
-        let (_, _, order, norms) = svd3(a);
+        let Svd3 { order, norms, .. } = svd3(a);
         order.map(|j| norms[j].sqrt())
     }
 

@@ -34,7 +34,7 @@ impl Poly {
     /// The sign at +∞ (`at_plus`) or −∞: the leading coefficient's, flipped at −∞ for odd degree.
     fn sign_at_infinity(&self, at_plus: bool) -> f64 {
         let lead = self.c[self.degree];
-        if at_plus || self.degree % 2 == 0 {
+        if at_plus || self.degree.is_multiple_of(2) {
             lead
         } else {
             -lead

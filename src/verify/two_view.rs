@@ -36,7 +36,8 @@ fn settings<E: Estimator>(
     }
 }
 
-/// LO-RANSAC of `E` with COLMAP's threshold and the inlier ratio from the configuration.
+/// LO-RANSAC with the estimator `E`, the pixel (or camera-unit) threshold `max_error` and the
+/// configured a-priori inlier ratio.
 fn run<E: Estimator>(
     a: &[[f64; 2]],
     b: &[[f64; 2]],

@@ -520,6 +520,105 @@ fn models_in_colmaps_pixel_convention_fit_the_shifted_positions() {
     assert_ne!(colmap.f, g.f);
 }
 
+/// A pair built with `+ − × ÷` only (no `sin`, `ln` of the platform): 600 random points in depth,
+/// a rotation by Cayley's formula, 35 % of the matches moved at random.
+fn arithmetic_only_pair() -> (Vec<KeyPoint>, Vec<KeyPoint>, Vec<Match>, Camera, Camera) {
+    let mut rng = clatch::synthetic::SplitMix64::new(2026);
+    let mut unit = || (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+    // R = (I + S)(I − S)⁻¹ for the skew matrix S of s = (0.05, −0.1, 0.08).
+    let (x, y, z) = (0.05, -0.1, 0.08);
+    let scale = 1.0 / (1.0 + x * x + y * y + z * z);
+    let r = [
+        [
+            1.0 + x * x - y * y - z * z,
+            2.0 * (x * y - z),
+            2.0 * (x * z + y),
+        ],
+        [
+            2.0 * (x * y + z),
+            1.0 - x * x + y * y - z * z,
+            2.0 * (y * z - x),
+        ],
+        [
+            2.0 * (x * z - y),
+            2.0 * (y * z + x),
+            1.0 - x * x - y * y + z * z,
+        ],
+    ]
+    .map(|row| row.map(|v| v * scale));
+    let t = [1.0, 0.2, -0.1];
+    let (f, cx, cy) = (950.0, 511.5, 383.5);
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    while a.len() < 600 {
+        let p = [unit() * 8.0 - 4.0, unit() * 6.0 - 3.0, 5.0 + unit() * 10.0];
+        let q: Vec<f64> = (0..3)
+            .map(|i| r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2] + t[i])
+            .collect();
+        let (ua, va) = (f * p[0] / p[2] + cx, f * p[1] / p[2] + cy);
+        let (ub, vb) = (f * q[0] / q[2] + cx, f * q[1] / q[2] + cy);
+        if [ua, ub].iter().all(|u| (0.0..1024.0).contains(u))
+            && [va, vb].iter().all(|v| (0.0..768.0).contains(v))
+        {
+            a.push(KeyPoint::new(ua as f32, va as f32));
+            b.push(KeyPoint::new(ub as f32, vb as f32));
+        }
+    }
+    for k in (0..600).filter(|k| k % 20 < 7) {
+        b[k] = KeyPoint::new((unit() * 1024.0) as f32, (unit() * 768.0) as f32);
+    }
+    let camera = Camera::new(1024, 768).with_intrinsics(Intrinsics::new(f, f, cx, cy));
+    (a, b, identity_matches(600), camera, camera)
+}
+
+/// FNV-1a over the bits of a geometry.
+fn fingerprint(g: &TwoViewGeometry) -> u64 {
+    let (config, matrices, inliers, counts) = bits(g);
+    let words = std::iter::once(config as u64)
+        .chain(matrices)
+        .chain(inliers.into_iter().map(u64::from))
+        .chain(counts.into_iter().map(|c| c as u64));
+    words.fold(0xcbf2_9ce4_8422_2325, |hash, word| {
+        (hash ^ word).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// The specification pinned: these bits change only with a deliberate change of the arithmetic in
+/// `docs/numerics.md`, section 7 (and then the CUDA twin changes with it). The pair uses only basic
+/// IEEE operations, so the expected values hold on every platform.
+#[test]
+fn golden_bits_of_a_fixed_pair() {
+    let (a, b, matches, camera_a, camera_b) = arithmetic_only_pair();
+    let config = VerifyConfig::default().with_seed(7);
+    let calibrated = ViewPair::new(&a, &b, &matches)
+        .with_cameras(&camera_a, &camera_b)
+        .with_key(3)
+        .verify(&config)
+        .unwrap();
+    let uncalibrated = ViewPair::new(&a, &b, &matches)
+        .with_key(3)
+        .verify(&config)
+        .unwrap();
+    assert_eq!(calibrated.config, GeometryConfig::Calibrated);
+    assert_eq!(uncalibrated.config, GeometryConfig::Uncalibrated);
+    let truth: Vec<u32> = (0..600).filter(|k| k % 20 >= 7).collect();
+    // Every true match, and the few moved ones that landed within 4 px of their epipolar line.
+    assert!(
+        truth
+            .iter()
+            .all(|k| calibrated.inliers.binary_search(k).is_ok())
+    );
+    assert!(
+        calibrated.inliers.len() < truth.len() + 12,
+        "{}",
+        calibrated.inliers.len()
+    );
+    assert_eq!(
+        (fingerprint(&calibrated), fingerprint(&uncalibrated)),
+        (0xd640_ccd5_9722_f773, 0x7fa2_887c_ff8a_94aa),
+        "the verification arithmetic changed: change docs/numerics.md section 7 and the CUDA twin with it"
+    );
+}
+
 #[test]
 fn configurations_carry_colmaps_numbers() {
     let codes = [

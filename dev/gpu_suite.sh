@@ -78,7 +78,7 @@ failed=0
     else
         echo "nvidia-smi not found"
     fi
-    echo "commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown), $(date -u +%Y-%m-%dT%H:%MZ)${BINARIES:+ (test binaries built elsewhere: $BINARIES; the commit is the checkout's, not theirs)}"
+    echo "commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown), $(date -u +%Y-%m-%dT%H:%MZ)${BINARIES:+ (test binaries built elsewhere: $BINARIES; the commit is that of the checkout, not of the binaries)}"
 } | tee -a "$OUT/summary.txt" >> "$OUT/suite.txt"
 
 # run LABEL NAME [ARGS...]: one test binary (environment from the caller), logged and summarised.

@@ -18,9 +18,12 @@
 # binary may run under one tool, default 3600), RACECHECK_SCALE (default sanitizer; `full` for the
 # normal workload), SEQUENTIAL=1 (the tools one after another instead of side by side, for a GPU with
 # little memory), JOBS=N (every tool-and-binary run as its own job, N at a time: all binaries side by
-# side, which is what lets the whole set finish within minutes on a large GPU and many cores).
+# side, which is what lets the whole set finish within minutes on a large GPU and many cores), TRIALS=1
+# with JOBS (every test function of every binary as its own job: a binary's trials side by side, so
+# the whole set takes about as long as its slowest trial).
 #
-# Logs: $OUT/TOOL/NAME.txt (each run's whole output), $OUT/summary.txt (one line a run, printed last).
+# Logs: $OUT/TOOL/NAME.txt or, with TRIALS=1, $OUT/TOOL/NAME.TRIAL.txt (each run's whole output),
+# $OUT/progress.txt (each run's summary line as it ends), $OUT/summary.txt (one line a run, printed last).
 # A run passes when the binary exits 0 and the tool reports no error (racecheck: no hazard). The one
 # error memcheck reports in cuda_faults is expected: that suite asks for 4 TiB on purpose and checks
 # that the out-of-memory answer leaves the device usable; out-of-memory answers of the driver are
@@ -53,15 +56,19 @@ for name in "${names[@]}"; do
         || { echo "no such test binary: $name" >&2; exit 1; }
 done
 
-# one TOOL NAME: the binary under the tool; appends its summary line to $OUT/TOOL/summary.txt.
+# one TOOL NAME [TRIAL]: the binary (or one trial of it) under the tool; writes its summary line to
+# $OUT/TOOL/runs/, gathered into $OUT/TOOL/summary.txt at the end.
 one() {
-    local tool=$1 name=$2
+    local tool=$1 name=$2 trial=${3:-}
     local path; path=$(awk -v n="$name" '$1 == n { print $2 }' "$list")
     local scale=${SCALE:-full}
     [ "$tool" = racecheck ] && scale=${RACECHECK_SCALE:-sanitizer}
-    local log="$OUT/$tool/$name.txt"
+    local label=$name args=()
+    if [ -n "$trial" ]; then label="$name.$trial"; args=(--exact "$trial"); fi
+    local log="$OUT/$tool/$label.txt"
     local start; start=$(date +%s)
-    CLATCH_TEST_SCALE=$scale timeout "$SAN_TIMEOUT" "$san" --tool "$tool" --print-limit 1000 "$path" > "$log" 2>&1
+    CLATCH_TEST_SCALE=$scale timeout "$SAN_TIMEOUT" "$san" --tool "$tool" --print-limit 1000 "$path" "${args[@]}" \
+        > "$log" 2>&1
     local rc=$?
     local secs=$(( $(date +%s) - start ))
     local result; result=$(grep -E '^test result' "$log" | tail -1 | sed 's/; [0-9]* measured.*//')
@@ -82,9 +89,17 @@ one() {
     fi
     local note=""
     [ "$oom" -gt 0 ] && note=" ($oom of them out-of-memory answers to a deliberate request)"
-    printf '%-8s %-9s %s (CLATCH_TEST_SCALE=%s) rc=%s %ss: %s | %s%s\n' "$verdict" "$tool" "$name" \
+    printf '%-8s %-9s %s (CLATCH_TEST_SCALE=%s) rc=%s %ss: %s | %s%s\n' "$verdict" "$tool" "$label" \
         "$scale" "$rc" "$secs" "${result:-no test result}" "${summary:-no sanitizer summary}" "$note" \
-        >> "$OUT/$tool/summary.$name"
+        > "$OUT/$tool/runs/$label"
+    # One line appended as each run ends, so a session cut short still shows what finished.
+    cat "$OUT/$tool/runs/$label" >> "$OUT/progress.txt"
+}
+
+# trials NAME: the names of the binary's test functions (an ignored one stays ignored when run).
+trials() {
+    local path; path=$(awk -v n="$1" '$1 == n { print $2 }' "$list")
+    "$path" --list --format terse 2> /dev/null | sed -n 's/: test$//p'
 }
 
 # sequence TOOL: every binary under the tool, one after another.
@@ -100,21 +115,33 @@ sequence() {
         echo "nvidia-smi not found"
     fi
     "$san" --version | grep -i version | tail -1
-    echo "commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown), $(date -u +%Y-%m-%dT%H:%MZ)${BINARIES:+ (test binaries built elsewhere: $BINARIES; the commit is the checkout's, not theirs)}"
+    echo "commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown), $(date -u +%Y-%m-%dT%H:%MZ)${BINARIES:+ (test binaries built elsewhere: $BINARIES; the commit is that of the checkout, not of the binaries)}"
 } > "$OUT/summary.txt"
+: > "$OUT/progress.txt"
 for tool in $TOOLS; do
-    mkdir -p "$OUT/$tool"
-    rm -f "$OUT/$tool"/summary.*
+    rm -rf "$OUT/$tool"
+    mkdir -p "$OUT/$tool/runs"
 done
 if [ -n "${JOBS:-}" ]; then
-    # Every (tool, binary) pair as its own job, JOBS at a time.
-    running=0
-    for name in "${names[@]}"; do
-        for tool in $TOOLS; do
-            one "$tool" "$name" &
-            running=$(( running + 1 ))
-            if [ "$running" -ge "$JOBS" ]; then wait -n; running=$(( running - 1 )); fi
+    # Every (tool, binary) pair as its own job, or with TRIALS=1 every (tool, binary, trial), JOBS at a
+    # time. Racecheck first: it is the slowest tool.
+    jobs_list=()
+    for tool in racecheck memcheck initcheck synccheck; do
+        [[ " $TOOLS " == *" $tool "* ]] || continue
+        for name in "${names[@]}"; do
+            if [ "${TRIALS:-0}" = 1 ]; then
+                while read -r trial; do jobs_list+=("$tool $name $trial"); done < <(trials "$name")
+            else
+                jobs_list+=("$tool $name")
+            fi
         done
+    done
+    running=0
+    for job in "${jobs_list[@]}"; do
+        # shellcheck disable=SC2086 # the job's words are the arguments
+        one $job &
+        running=$(( running + 1 ))
+        if [ "$running" -ge "$JOBS" ]; then wait -n; running=$(( running - 1 )); fi
     done
     wait
 else
@@ -125,8 +152,8 @@ else
 fi
 bad=0
 for tool in $TOOLS; do
-    cat "$OUT/$tool"/summary.* > "$OUT/$tool/summary.txt" 2>/dev/null
-    for name in "${names[@]}"; do rm -f "$OUT/$tool/summary.$name"; done
+    cat "$OUT/$tool"/runs/* > "$OUT/$tool/summary.txt" 2>/dev/null
+    rm -rf "$OUT/$tool/runs"
     cat "$OUT/$tool/summary.txt" >> "$OUT/summary.txt"
     bad=$(( bad + $(grep -vc '^ok ' "$OUT/$tool/summary.txt") ))
 done

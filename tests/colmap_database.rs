@@ -321,3 +321,114 @@ fn match_list_is_colmaps_text_format() {
     assert!(list.add_pair("a b.jpg", "c.jpg", &m).is_err());
     assert!(list.add_pair("a.jpg", "a.jpg", &m).is_err());
 }
+
+/// `open_existing` + `add_two_view_geometry`: the rows a verifier adds to a database written before,
+/// every check of a new database kept (COLMAP's own reading of them is in tests/colmap_two_view.rs).
+#[test]
+fn two_view_geometries_go_into_an_existing_database_checked() {
+    use clatch::colmap::{TwoViewConfig, TwoViewGeometry};
+    let path = temp_db("two-view");
+    assert!(matches!(
+        Database::open_existing(&path),
+        Err(ColmapError::DatabaseMissing { .. })
+    ));
+    let mut db = Database::create(&path).unwrap();
+    let camera = db
+        .add_camera(&PinholeCamera::guess(64, 64).unwrap())
+        .unwrap();
+    let a = db.add_image("a.png", camera).unwrap();
+    let b = db.add_image("b.png", camera).unwrap();
+    let c = db.add_image("c.png", camera).unwrap();
+    let points = |n: usize| -> Vec<KeyPoint> {
+        (0..n)
+            .map(|i| KeyPoint::new(i as f32, 2.0 * i as f32))
+            .collect()
+    };
+    db.set_keypoints(a, &points(3)).unwrap();
+    db.set_keypoints(b, &points(5)).unwrap();
+    let first = TwoViewGeometry::new(a, b, vec![[2, 4], [0, 1]], TwoViewConfig::Calibrated);
+    db.add_two_view_geometry(&first).unwrap();
+    db.finish().unwrap();
+
+    let mut db = Database::open_existing(&path).unwrap();
+    // c has no keypoints, the pair (b, a) is there already, a has 3 keypoints.
+    assert!(matches!(
+        db.add_two_view_geometry(&TwoViewGeometry::new(a, c, vec![], TwoViewConfig::Degenerate)),
+        Err(ColmapError::UnknownImage { image_id }) if image_id == c
+    ));
+    assert!(matches!(
+        db.add_two_view_geometry(&TwoViewGeometry::new(
+            b,
+            a,
+            vec![],
+            TwoViewConfig::Degenerate
+        )),
+        Err(ColmapError::Duplicate { .. })
+    ));
+    assert!(matches!(
+        db.add_two_view_geometry(&TwoViewGeometry::new(
+            b,
+            a,
+            vec![[0, 3]],
+            TwoViewConfig::Calibrated
+        )),
+        Err(ColmapError::MatchOutOfRange {
+            keypoint: 3,
+            keypoints: 3,
+            ..
+        })
+    ));
+    assert!(matches!(
+        db.add_two_view_geometry(&TwoViewGeometry::new(
+            a,
+            a,
+            vec![],
+            TwoViewConfig::Calibrated
+        )),
+        Err(ColmapError::SamePair { .. })
+    ));
+    let not_finite = TwoViewGeometry {
+        f: Some([[f64::NAN; 3]; 3]),
+        ..TwoViewGeometry::new(b, a, vec![[0, 0]], TwoViewConfig::Uncalibrated)
+    };
+    assert!(matches!(
+        db.add_two_view_geometry(&not_finite),
+        Err(ColmapError::InvalidGeometry { .. })
+    ));
+    db.set_keypoints(c, &points(2)).unwrap();
+    // Given as (c, b): stored under pair (b, c) with the columns swapped.
+    db.add_two_view_geometry(&TwoViewGeometry::new(
+        c,
+        b,
+        vec![[1, 4]],
+        TwoViewConfig::Planar,
+    ))
+    .unwrap();
+    db.finish().unwrap();
+
+    let sql = Connection::open(&path).unwrap();
+    let mut stmt = sql
+        .prepare(
+            "SELECT pair_id, rows, cols, data, config FROM two_view_geometries ORDER BY pair_id",
+        )
+        .unwrap();
+    let rows: Vec<(i64, i64, i64, Vec<u8>, i64)> = stmt
+        .query_map([], |r| {
+            Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?))
+        })
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    assert_eq!(rows.len(), 2);
+    assert_eq!(
+        (rows[0].0, rows[0].1, rows[0].2, rows[0].4),
+        (2147483647 + 2, 2, 2, 2)
+    );
+    assert_eq!(u32s(&rows[0].3), [2, 4, 0, 1]);
+    assert_eq!(
+        (rows[1].0, rows[1].1, rows[1].4),
+        (2 * 2147483647 + 3, 1, 4)
+    );
+    assert_eq!(u32s(&rows[1].3), [4, 1]);
+    std::fs::remove_file(&path).ok();
+}

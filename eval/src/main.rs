@@ -6,6 +6,8 @@
 mod chart;
 mod degrade;
 mod error;
+mod facade;
+mod geometry;
 mod harness;
 mod inputs;
 mod json;
@@ -89,7 +91,16 @@ pub struct EvalArgs {
 }
 
 fn main() -> ExitCode {
-    match harness::run(&EvalArgs::parse()) {
+    // Subcommands ahead of the descriptor evaluation's flags, which stay as they were.
+    let first = std::env::args().nth(1);
+    let result = match first.as_deref() {
+        Some("facade") => facade::run(&facade::FacadeArgs::parse_from(std::env::args().skip(1))),
+        Some("geometry") => geometry::run(&geometry::GeometryArgs::parse_from(
+            std::env::args().skip(1),
+        )),
+        _ => harness::run(&EvalArgs::parse()),
+    };
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("clatch-eval: error: {e}");

@@ -11,6 +11,7 @@ import numpy.typing as npt
 __all__ = [
     "Extractor",
     "Matcher",
+    "OpencvLatch",
     "imread",
     "to_gray",
     "_reads_in_place",
@@ -28,12 +29,18 @@ __all__ = [
     "KEYPOINT_DTYPE",
     "MATCH_DTYPE",
     "CUDA_BUILT",
+    "MAX_PAIRS",
+    "MAX_IMAGE_SIDE",
     "__version__",
 ]
 
 __version__: str
 #: Whether this build has the CUDA backend (installed with the ``cuda`` feature).
 CUDA_BUILT: bool
+#: The most pairs ``Matcher.all_pairs`` lists (2 GiB as int64); more raise ``InvalidInputError``.
+MAX_PAIRS: int
+#: The largest image side the library processes (``clatch::MAX_IMAGE_SIDE``), checked from the shape.
+MAX_IMAGE_SIDE: int
 #: Keypoints: x, y, size, angle, response (float32), octave (int32); the library's ``KeyPoint``.
 KEYPOINT_DTYPE: np.dtype
 #: Matches: query, train, distance (uint32); the library's ``Match``.
@@ -45,7 +52,8 @@ DEFAULT_MAX_KEYPOINTS: int
 #: ``clatch.colmap``: the names of ``subpixel=``.
 SUBPIXEL_METHODS: Tuple[str, ...]
 
-#: An image: ``uint8``, 2-D gray (H x W) or H x W x 3 RGB (H x W x 4: alpha ignored).
+#: An image: ``uint8``, 2-D gray (H x W) or H x W x 3 RGB, or BGR with ``channels="bgr"`` (H x W x 4:
+#: alpha ignored).
 _Image = npt.NDArray[np.uint8]
 #: Descriptors: ``uint8``, shape (N, bits / 8), OpenCV LATCH's byte order.
 _Descriptors = npt.NDArray[np.uint8]
@@ -56,6 +64,8 @@ _Matches = np.ndarray
 #: Pairs of set indices: a sequence of ``(a, b)`` or an integer array of shape (P, 2).
 _Pairs = Union[Sequence[Tuple[int, int]], npt.NDArray[np.integer]]
 _Backend = str
+#: The colour order of an H x W x 3 image: RGB, or OpenCV's BGR (``cv2.imread``).
+_Channels = Literal["rgb", "bgr"]
 
 @final
 class Extractor:
@@ -65,8 +75,9 @@ class Extractor:
     settings start from the library's defaults (8-level pyramid of factor 1.2, 5000 keypoints shared
     among the levels, 40-pixel windows, sub-pixel positions); ``single_scale=True`` starts from the
     full-resolution speed preset (64-pixel windows, whole pixels). Keywords left at ``None`` keep the
-    preset's value. The methods release the GIL while they compute; a gray image whose rows are
-    contiguous is read in place meanwhile, so do not write to it from another thread during the call.
+    preset's value. The methods release the GIL while they compute (and copy); a gray image whose
+    rows are contiguous is read in place meanwhile, so do not write to it from another thread during
+    the call. Colour is RGB unless ``channels="bgr"``. Pickles (rebuilt from backend and config).
     """
 
     def __new__(
@@ -92,23 +103,60 @@ class Extractor:
     @property
     def config(self) -> dict[str, Any]:
         """The settings in effect, as the constructor's keywords."""
-    def detect(self, image: _Image) -> _KeyPoints:
+    def __reduce__(self) -> Tuple[Any, ...]:
+        """Pickling: rebuilt from ``backend`` and ``config``."""
+    def detect(self, image: _Image, *, channels: _Channels = "rgb") -> _KeyPoints:
         """FAST keypoints of ``image``, strongest first (``KEYPOINT_DTYPE``)."""
-    def detect_and_describe(self, image: _Image) -> Tuple[_KeyPoints, _Descriptors]:
+    def detect_and_describe(
+        self, image: _Image, *, channels: _Channels = "rgb"
+    ) -> Tuple[_KeyPoints, _Descriptors]:
         """Keypoints and their descriptors (row i describes keypoint i)."""
     def detect_and_describe_batch(
-        self, images: Sequence[_Image]
+        self, images: Sequence[_Image], *, channels: _Channels = "rgb"
     ) -> list[Tuple[_KeyPoints, _Descriptors]]:
         """``detect_and_describe`` of every image, in input order."""
     def describe(
-        self, image: _Image, keypoints: _KeyPoints
+        self, image: _Image, keypoints: _KeyPoints, *, channels: _Channels = "rgb"
     ) -> Tuple[_KeyPoints, _Descriptors, npt.NDArray[np.int64]]:
         """Descriptors of your own keypoints: (described keypoints, descriptors, input index)."""
+    def describe_opencv(
+        self, latch: OpencvLatch, image: _Image, keypoints: _KeyPoints, *, channels: _Channels = "rgb"
+    ) -> Tuple[_KeyPoints, _Descriptors, npt.NDArray[np.int64]]:
+        """OpenCV's LATCH descriptors of your keypoints, bit for bit: (described keypoints,
+        descriptors of ``latch.bytes`` bytes, input index)."""
+
+@final
+class OpencvLatch:
+    """OpenCV's LATCH settings (``cv2.xfeatures2d.LATCH_create``), validated; the defaults are
+    OpenCV's. ``Extractor.describe_opencv`` describes with them."""
+
+    def __new__(
+        cls,
+        bytes: int = 32,
+        rotation_invariance: bool = True,
+        half_ssd_size: int = 3,
+        sigma: float = 2.0,
+    ) -> OpencvLatch: ...
+    @property
+    def bytes(self) -> int:
+        """Descriptor length in bytes."""
+    @property
+    def rotation_invariance(self) -> bool:
+        """Whether the sampling pattern turns with each keypoint's angle."""
+    @property
+    def half_ssd_size(self) -> int:
+        """Half the side of each compared patch."""
+    @property
+    def sigma(self) -> float:
+        """The Gaussian blur's sigma (0: no blur)."""
+    def __reduce__(self) -> Tuple[Any, ...]:
+        """Pickling: the same settings."""
 
 @final
 class Matcher:
     """Brute-force Hamming matcher (ratio test, cross-check, distance limit; ties to the lowest
-    index). The methods release the GIL while they compute."""
+    index). The methods release the GIL while they compute. A pair that cannot match (no query, too
+    small a gallery) gives no matches in ``match`` as in ``match_pairs``. Pickles."""
 
     def __new__(
         cls,
@@ -129,6 +177,8 @@ class Matcher:
     @property
     def max_distance(self) -> Optional[int]:
         """The largest distance kept, in bits (``None``: no limit)."""
+    def __reduce__(self) -> Tuple[Any, ...]:
+        """Pickling: the same settings and backend."""
     def match(self, query: _Descriptors, train: _Descriptors) -> _Matches:
         """The best gallery match of every query that passes the tests, in query order."""
     def knn(self, query: _Descriptors, train: _Descriptors, k: int) -> _Matches:
@@ -142,8 +192,8 @@ class Matcher:
 def imread(path: Union[str, os.PathLike[str]], max_pixels: int = 100_000_000) -> _Image:
     """A PNG, JPEG or PNM file as a 2-D ``uint8`` gray image, read as the command-line tool reads it."""
 
-def to_gray(image: _Image) -> _Image:
-    """The gray image the extractor sees (RGB with OpenCV's integer weights)."""
+def to_gray(image: _Image, *, channels: _Channels = "rgb") -> _Image:
+    """The gray image the extractor sees (colour with OpenCV's integer weights)."""
 
 @final
 class ImageFolder:

@@ -105,19 +105,17 @@ class MatchFolderResult:
 
 def _result(report: Mapping[str, Any], **ray_counts: int) -> MatchFolderResult:
     """The result of the library's report (``_FolderJob.run``, ``_FolderWriter.finish``)."""
-    fields = dict(report)
+    fields: dict[str, Any] = {**report, **ray_counts}
     fields["database"] = Path(fields["database"])
     fields["match_list"] = Path(fields["match_list"])
-    return MatchFolderResult(**fields, **ray_counts)
+    return MatchFolderResult(**fields)
 
 
 def _invalid(kind: str, message: str) -> InvalidInputError:
-    error = InvalidInputError(message)
-    error.kind = kind
-    return error
+    return InvalidInputError(message, kind=kind)
 
 
-def _extractor_options(extractor: Optional[Mapping[str, Any]]) -> dict:
+def _extractor_options(extractor: Optional[Mapping[str, Any]]) -> dict[str, Any]:
     """The Extractor keywords of a run: ``clatch colmap``'s grid and budget, then the caller's (the
     sub-pixel method is ``subpixel=``'s, which the library applies)."""
     options = {"grid": DEFAULT_GRID, "max_keypoints": DEFAULT_MAX_KEYPOINTS}

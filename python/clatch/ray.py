@@ -41,7 +41,7 @@ from typing import Any, Callable, Deque, Dict, Iterator, List, Mapping, Optional
 
 import numpy as np
 
-from ._exceptions import ClatchError, ClusterError
+from ._exceptions import ClatchError, ClusterError, MissingDependencyError
 from .colmap import MatchFolderResult, PathArg, PhotoArg, Photo, Progress, _invalid, _job, _result
 
 __all__ = ["match_folder"]
@@ -54,10 +54,46 @@ def _import_ray() -> Any:
     try:
         import ray
     except ImportError as e:
-        raise ImportError(
-            "clatch.ray needs Ray, which is not installed: pip install 'ray==2.60.0'"
+        raise MissingDependencyError(
+            "clatch.ray needs Ray, which is not installed: pip install 'clatch[ray]' (or 'ray==2.60.0')"
         ) from e
     return ray
+
+
+def _cluster_error(kind: str, message: str) -> ClusterError:
+    return ClusterError(message, kind=kind)
+
+
+def _demands(options: Mapping[str, Any]) -> Dict[str, float]:
+    """The resources one actor asks for, by the names ``ray.cluster_resources()`` uses."""
+    # Without num_cpus an actor needs a CPU to be placed but holds none while it runs (Ray's
+    # default): CPUs then bound nothing.
+    demands = {"CPU": float(options.get("num_cpus", 0) or 0), "GPU": float(options.get("num_gpus", 0) or 0)}
+    if options.get("memory"):
+        demands["memory"] = float(options["memory"])
+    for name, amount in (options.get("resources") or {}).items():
+        demands[name] = float(amount)
+    return {name: amount for name, amount in demands.items() if amount > 0}
+
+
+def _check_resources(ray: Any, demands: Mapping[str, float], actors: int) -> None:
+    """Refuses, before any actor is made, actors the cluster cannot hold at once: Ray would wait for
+    them for ever (``actor_options={"num_gpus": 1}`` on a cluster without GPUs)."""
+    total = ray.cluster_resources()
+    for name, amount in demands.items():
+        have = float(total.get(name, 0))
+        if amount > have:
+            raise _cluster_error(
+                "ResourcesUnavailable",
+                f"each actor asks for {name}={amount:g} (actor_options) but the Ray cluster has "
+                f"{have:g} {name} in all (ray.cluster_resources())",
+            )
+        if amount * actors > have:
+            raise _cluster_error(
+                "ResourcesUnavailable",
+                f"{actors} actors asking for {name}={amount:g} each need {amount * actors:g} {name}, "
+                f"but the Ray cluster has {have:g} (ray.cluster_resources()); pass fewer num_actors",
+            )
 
 
 class _Worker:
@@ -133,6 +169,7 @@ class _Pool:
         count: int,
         max_failures: int,
         kill_after: Optional[int] = None,
+        start_timeout: Optional[float] = None,
     ) -> None:
         self.ray = ray
         # Test hook: the first actor is killed (``ray.kill``) once this many results came back.
@@ -143,21 +180,42 @@ class _Pool:
         self.actors: List[Optional[Any]] = []
         self.max_failures = max_failures
         self.lost = 0
+        # Results not fetched when a run stops early (an error): fetched on close, so that Ray does
+        # not print each one's traceback again ("Unhandled error") after the error was raised.
+        self.unfetched: List[Any] = []
         try:
             for _ in range(count):
                 self._add()
             # The constructors' clatch errors (a backend unavailable on the actors) raised here.
-            self._get(ray.get, [a.ready.remote() for a in self.actors if a is not None])
+            readies = [a.ready.remote() for a in self.actors if a is not None]
+            try:
+                self._get(lambda refs: ray.get(refs, timeout=start_timeout), readies)
+            except ray.exceptions.GetTimeoutError:
+                self.unfetched.extend(readies)
+                raise _cluster_error(
+                    "ActorsNotStarted",
+                    f"the {count} Ray actors did not start within start_timeout={start_timeout} s: "
+                    "the cluster's resources are busy (ray status shows them)",
+                ) from None
         except BaseException:
             self.close()
             raise
 
     def close(self) -> None:
-        """Ends every actor."""
+        """Ends every actor, and fetches (and drops) the results nobody will read."""
         for actor in self.actors:
             if actor is not None:
                 self.ray.kill(actor)
         self.actors = [None] * len(self.actors)
+        refs, self.unfetched = self.unfetched, []
+        if refs:
+            # Their actors are gone: each is an error at once, or ready within the deadline.
+            ready, _ = self.ray.wait(refs, num_returns=len(refs), timeout=10)
+            for ref in ready:
+                try:
+                    self.ray.get(ref)
+                except Exception:
+                    pass
 
     def fetches(self) -> int:
         """Descriptor sets the living actors fetched from the object store."""
@@ -183,11 +241,10 @@ class _Pool:
         self.actors[slot] = None
         self.lost += 1
         if self.lost > self.max_failures:
-            error = ClusterError(
-                f"{self.lost} Ray actors died, more than max_actor_failures={self.max_failures}"
+            raise _cluster_error(
+                "ActorsDied",
+                f"{self.lost} Ray actors died, more than max_actor_failures={self.max_failures}",
             )
-            error.kind = "ActorsDied"
-            raise error
         self._add()
 
     def _get(self, get: Callable[[Any], Any], refs: Any) -> Any:
@@ -198,9 +255,7 @@ class _Pool:
             cause = getattr(e, "cause", None)
             if isinstance(cause, ClatchError):
                 raise cause from None
-            error = ClusterError(f"a clatch task failed on the cluster: {e}")
-            error.kind = "TaskFailed"
-            raise error from e
+            raise _cluster_error("TaskFailed", f"a clatch task failed on the cluster: {e}") from e
 
     def run(
         self, count: int, submit: Callable[[Any, int], Tuple[Any, Any]]
@@ -211,6 +266,20 @@ class _Pool:
         self.rerun = 0
         queue: Deque[int] = deque(range(count))
         in_flight: Dict[Any, Tuple[int, int, Any]] = {}
+        try:
+            yield from self._run(queue, in_flight, submit)
+        except BaseException:
+            for ref, (_, _, extra) in in_flight.items():
+                self.unfetched.append(ref)
+                self.unfetched.extend(extra or [])
+            raise
+
+    def _run(
+        self,
+        queue: Deque[int],
+        in_flight: Dict[Any, Tuple[int, int, Any]],
+        submit: Callable[[Any, int], Tuple[Any, Any]],
+    ) -> Iterator[Tuple[int, Any, Any]]:
         load: Dict[int, int] = {}
         while queue or in_flight:
             while queue:
@@ -228,7 +297,12 @@ class _Pool:
             load[slot] -= 1
             try:
                 value = self._get(self.ray.get, ref)
+            except ClatchError:
+                # The task's other results (an extraction's descriptor sets) hold the same error.
+                self.unfetched.extend(extra or [])
+                raise
             except self.ray.exceptions.RayActorError:
+                self.unfetched.extend(extra or [])
                 self._lose(slot)
                 queue.appendleft(k)
                 self.rerun += 1
@@ -276,6 +350,7 @@ def match_folder(
     photos_per_task: int = 8,
     cache_photos: Optional[int] = None,
     max_actor_failures: Optional[int] = None,
+    start_timeout: Optional[float] = 300.0,
     _exit_after: Optional[Tuple[str, int]] = None,
     _kill_after_results: Optional[int] = None,
 ) -> MatchFolderResult:
@@ -291,6 +366,11 @@ def match_folder(
     - ``cache_photos``: descriptor sets each actor keeps resident (default ``4 * block_size``).
     - ``max_actor_failures``: actor deaths tolerated (default: ``num_actors``); one more raises
       ``ClusterError``.
+    - ``start_timeout``: seconds to wait for the actors to start (``None``: no limit); past it,
+      ``ClusterError`` (kind ``"ActorsNotStarted"``: the cluster has the resources, but they are
+      busy). Resources the cluster does not have at all (``{"num_gpus": 1}`` without a GPU, more
+      actors than fit) raise ``ClusterError`` (kind ``"ResourcesUnavailable"``) before any actor
+      is made (``ray.cluster_resources()``).
 
     The result's ``blocks``, ``blocks_rerun`` (blocks and extraction tasks run again because their
     actor died), ``actors_lost`` and ``descriptor_fetches`` say how the run went. The two
@@ -325,10 +405,17 @@ def match_folder(
         options["runtime_env"] = {"env_vars": {"RAYON_NUM_THREADS": str(max(1, int(cpus)))}}
     if not ray.is_initialized():
         ray.init()
+    demands = _demands(options)
     if num_actors is None:
-        cluster_cpus = ray.cluster_resources().get("CPU", 1)
-        num_actors = max(1, min(int(cluster_cpus // cpus) if cpus else 1, max(1, len(blocks))))
+        # As many as the cluster holds at once (by each resource an actor asks for), at most one
+        # per block.
+        total = ray.cluster_resources()
+        fits = [int(float(total.get(name, 0)) // amount) for name, amount in demands.items()]
+        if "CPU" not in demands:
+            fits.append(int(total.get("CPU", 1)))
+        num_actors = max(1, min(min(fits, default=1), max(1, len(blocks))))
     num_actors = _positive("num_actors", num_actors)
+    _check_resources(ray, demands, num_actors)
     failures = num_actors if max_actor_failures is None else int(max_actor_failures)
     cache = _positive("cache_photos", cache_photos) if cache_photos is not None else 4 * block_size
     actor_class = ray.remote(_Worker)
@@ -340,7 +427,7 @@ def match_folder(
             _exit_after if index == 0 else None,
         )
 
-    pool = _Pool(ray, make, num_actors, failures, _kill_after_results)
+    pool = _Pool(ray, make, num_actors, failures, _kill_after_results, start_timeout)
     writer = plan.open_writer()
     try:
         paths = [os.fspath(p) for p in plan.paths]
@@ -389,8 +476,11 @@ def match_folder(
             if progress is not None:
                 progress("match", cursor, len(pair_list))
         rerun += pool.rerun
+        report = writer.finish()
+        if report is None:  # a plan's writer always reports
+            raise ClatchError("the plan's writer gave no report (a bug in clatch)", kind="Internal")
         return _result(
-            writer.finish(),
+            report,
             blocks=len(blocks),
             blocks_rerun=rerun,
             actors_lost=pool.lost,

@@ -1,8 +1,9 @@
 //! numpy arrays in and out: images, keypoints, descriptors and matches.
 //!
-//! - Images: `uint8`, 2-D gray or H x W x 3 (RGB; a fourth, alpha, channel is ignored). A gray array
-//!   whose rows are contiguous (C order, or a view with a positive row step, e.g. a crop) is read in
-//!   place through a [`GrayView`] with its row stride; anything else is copied once.
+//! - Images: `uint8`, 2-D gray or H x W x 3 (RGB, or BGR with `channels="bgr"`; a fourth, alpha,
+//!   channel is ignored). The shape is checked first, before any pixel is read. A gray array whose rows
+//!   are contiguous (C order, or a view with a positive row step, e.g. a crop) is read in place
+//!   through a [`GrayView`] with its row stride; anything else is copied once, with the GIL released.
 //! - Keypoints out: a structured array of [`KeyPointRecord`] (x, y, size, angle, response as
 //!   `float32`, octave as `int32`), owning the library's own `Vec<KeyPoint>` (no copy).
 //! - Descriptors: `uint8`, N x bytes, in OpenCV LATCH's byte order
@@ -11,9 +12,10 @@
 //!   the library's `Vec<Match>`.
 
 use std::mem::{offset_of, size_of};
+use std::ops::Range;
 
 use clatch::{DescriptorSet, DescriptorWidth, GrayView, KeyPoint, Match};
-use numpy::ndarray::{ArrayView2, ArrayViewD, Ix2};
+use numpy::ndarray::{ArrayView2, ArrayViewD, Ix2, s};
 use numpy::{
     Element, IntoPyArray, PyArray1, PyArrayDescr, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods,
     PyReadonlyArray1, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods,
@@ -22,7 +24,7 @@ use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::PyDict;
 
-use crate::errors::{OrRaise, invalid_input};
+use crate::errors::{Class, OrRaise, invalid_input, raise, try_buffer, type_name};
 
 /// A structured dtype with `fields` (name, numpy type code, byte offset) and `itemsize` bytes.
 fn record_dtype<'py>(
@@ -156,11 +158,7 @@ fn ndarray<'a, 'py>(
     what: &str,
 ) -> PyResult<&'a Bound<'py, PyUntypedArray>> {
     obj.cast::<PyUntypedArray>().map_err(|_| {
-        let type_name = obj
-            .get_type()
-            .name()
-            .map(|n| n.to_string())
-            .unwrap_or_else(|_| "?".into());
+        let type_name = type_name(obj);
         invalid_input(
             obj.py(),
             "NotAnArray",
@@ -191,6 +189,77 @@ fn uint8_array<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<PyReadonlyA
     })
 }
 
+/// The colour order of an H x W x 3 (or x 4) image: `channels="rgb"` (the default) or `"bgr"`
+/// (OpenCV's `cv2.imread`). A gray image has none.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Channels {
+    Rgb,
+    Bgr,
+}
+
+impl Channels {
+    /// `channels=` of a call, or an `InvalidInputError` (kind `InvalidConfig`) listing the names.
+    pub fn parse(py: Python<'_>, name: &str) -> PyResult<Self> {
+        match name {
+            "rgb" => Ok(Self::Rgb),
+            "bgr" => Ok(Self::Bgr),
+            _ => Err(invalid_input(
+                py,
+                "InvalidConfig",
+                format!("channels must be one of \"rgb\", \"bgr\", got {name:?}"),
+            )),
+        }
+    }
+
+    /// The offsets of red, green and blue within a pixel.
+    fn offsets(self) -> [usize; 3] {
+        match self {
+            Self::Rgb => [0, 1, 2],
+            Self::Bgr => [2, 1, 0],
+        }
+    }
+}
+
+/// A numpy shape as numpy writes it: `(63, 200)`, `(5,)`.
+pub fn shape_text(shape: &[usize]) -> String {
+    match shape {
+        [one] => format!("({one},)"),
+        _ => format!(
+            "({})",
+            shape
+                .iter()
+                .map(usize::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
+}
+
+/// Refuses, from the shape alone (before any pixel is read or copied), an image with no pixels or a
+/// side above the library's `MAX_IMAGE_SIDE`, naming the numpy shape `(H, W)`.
+fn check_shape(py: Python<'_>, what: &str, shape: &[usize]) -> PyResult<()> {
+    let (height, width) = (shape[0], shape[1]);
+    let shape = shape_text(shape);
+    if height == 0 || width == 0 {
+        return Err(raise(
+            py,
+            Class::InvalidInput,
+            "EmptyImage",
+            format!("{what} is empty: shape {shape}; height and width must both be at least 1"),
+        ));
+    }
+    let max = clatch::MAX_IMAGE_SIDE;
+    if height > max || width > max {
+        return Err(raise(
+            py,
+            Class::InvalidInput,
+            "ImageTooLarge",
+            format!("{what} of shape {shape} exceeds the largest supported side of {max} pixels"),
+        ));
+    }
+    Ok(())
+}
+
 /// An image from Python: borrowed array memory (read in place) or a converted copy.
 pub struct ImageInput<'py> {
     /// Keeps the array alive and registered as read-only borrowed while its memory is used.
@@ -205,58 +274,55 @@ pub struct ImageInput<'py> {
 }
 
 impl<'py> ImageInput<'py> {
-    /// Reads `obj` (see the module docs). `what` names it in errors.
-    pub fn new(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<Self> {
+    /// Reads `obj` (see the module docs) with the colour order `channels`. `what` names it in
+    /// errors. The shape is checked before anything is copied; a copy (a gray image whose rows are
+    /// not contiguous, a colour image) is made with the GIL released, from the array's memory, which
+    /// the borrow of the array keeps alive meanwhile.
+    pub fn new(obj: &Bound<'py, PyAny>, what: &str, channels: Channels) -> PyResult<Self> {
         let py = obj.py();
         let array = uint8_array(obj, what)?;
+        let shape = array.shape().to_vec();
+        let gray = match *shape.as_slice() {
+            [_, _] => true,
+            [_, _, 3 | 4] => false,
+            _ => {
+                return Err(invalid_input(
+                    py,
+                    "WrongShape",
+                    format!(
+                        "{what} must be 2-D (gray, shape (H, W)) or 3-D with 3 or 4 channels (RGB, BGR \
+                         or with alpha, shape (H, W, C)), got shape {}",
+                        shape_text(&shape)
+                    ),
+                ));
+            }
+        };
+        check_shape(py, what, &shape)?;
+        let (height, width) = (shape[0], shape[1]);
         let view = array.as_array();
-        let shape = view.shape().to_vec();
-        match *shape.as_slice() {
-            [height, width] => {
-                if let Some((ptr, len, stride)) = rows_in_place(&view) {
-                    return Ok(Self {
-                        ptr,
-                        len,
-                        stride,
-                        _array: Some(array),
-                        owned: Vec::new(),
-                        width,
-                        height,
-                    });
-                }
-                // Rows not contiguous (a transposed view, a column step): one copy, row-major.
-                let owned: Vec<u8> = view.iter().copied().collect();
-                Ok(Self::owned(owned, width, height))
-            }
-            [height, width, channels] if channels == 3 || channels == 4 => {
-                let view = view
-                    .into_dimensionality::<numpy::ndarray::Ix3>()
-                    .map_err(|e| invalid_input(py, "WrongShape", e.to_string()))?;
-                let gray = match view.as_slice() {
-                    Some(packed) => packed
-                        .chunks_exact(channels)
-                        .map(|p| clatch::decode::luma(p[0], p[1], p[2]))
-                        .collect(),
-                    None => view
-                        .outer_iter()
-                        .flat_map(|row| {
-                            row.outer_iter()
-                                .map(|p| clatch::decode::luma(p[0], p[1], p[2]))
-                                .collect::<Vec<u8>>()
-                        })
-                        .collect(),
-                };
-                Ok(Self::owned(gray, width, height))
-            }
-            _ => Err(invalid_input(
-                py,
-                "WrongShape",
-                format!(
-                    "{what} must be 2-D (gray, H x W) or 3-D with 3 or 4 channels (RGB or RGBA, H x W x C), \
-                     got shape {shape:?}"
-                ),
-            )),
+        if gray && let Some((ptr, len, stride)) = rows_in_place(&view) {
+            return Ok(Self {
+                ptr,
+                len,
+                stride,
+                _array: Some(array),
+                owned: Vec::new(),
+                width,
+                height,
+            });
         }
+        let mut owned = try_buffer(py, height * width, what)?;
+        py.detach(|| {
+            owned.resize(height * width, 0);
+            if gray {
+                // Rows not contiguous (a transposed view, a column step, a broadcast): one
+                // row-major copy.
+                gray_copy(view, &mut owned)
+            } else {
+                to_luma(view, channels, &mut owned)
+            }
+        });
+        Ok(Self::owned(owned, width, height))
     }
 
     fn owned(owned: Vec<u8>, width: usize, height: usize) -> Self {
@@ -289,6 +355,67 @@ impl<'py> ImageInput<'py> {
             unsafe { std::slice::from_raw_parts(self.ptr, self.len) }
         };
         GrayView::new(data, self.width, self.height, self.stride)
+    }
+
+    /// The gray pixels, row-major (a copy when read in place), made with the GIL released.
+    pub fn to_vec(&self, py: Python<'_>) -> PyResult<Vec<u8>> {
+        let view = self.view().or_raise(py)?;
+        let (width, height) = (view.width(), view.height());
+        let mut out = try_buffer(py, width * height, "image")?;
+        py.detach(|| {
+            out.resize(width * height, 0);
+            for (y, line) in out.chunks_exact_mut(width).enumerate() {
+                line.copy_from_slice(view.get_row(y).unwrap_or_default());
+            }
+        });
+        Ok(out)
+    }
+}
+
+/// The gray image of an H x W x C (C = 3 or 4) colour image whose colours lie in `channels` order,
+/// with OpenCV's integer weights (`clatch::decode::luma`), any strides, into `out` (H x W).
+fn to_luma(view: ArrayViewD<'_, u8>, channels: Channels, out: &mut [u8]) {
+    let [r, g, b] = channels.offsets();
+    if let Some(packed) = view.as_slice() {
+        let c = view.shape()[2];
+        for (o, p) in out.iter_mut().zip(packed.chunks_exact(c)) {
+            *o = clatch::decode::luma(p[r], p[g], p[b]);
+        }
+        return;
+    }
+    let (height, width) = (view.shape()[0], view.shape()[1]);
+    for_tiles(height, width, |rows, columns| {
+        let tile = view.slice(s![rows.clone(), columns.clone(), ..]);
+        for (y, row) in rows.zip(tile.outer_iter()) {
+            let line = &mut out[y * width..][columns.clone()];
+            for (value, pixel) in line.iter_mut().zip(row.outer_iter()) {
+                *value = clatch::decode::luma(pixel[r], pixel[g], pixel[b]);
+            }
+        }
+    });
+}
+
+/// A 2-D `uint8` array's pixels into `out`, row-major, whatever its strides.
+fn gray_copy(view: ArrayViewD<'_, u8>, out: &mut [u8]) {
+    let (height, width) = (view.shape()[0], view.shape()[1]);
+    for_tiles(height, width, |rows, columns| {
+        let tile = view.slice(s![rows.clone(), columns.clone()]);
+        for (y, row) in rows.zip(tile.outer_iter()) {
+            let line = &mut out[y * width..][columns.clone()];
+            line.iter_mut().zip(row).for_each(|(o, &v)| *o = v);
+        }
+    });
+}
+
+/// Calls `f(rows, columns)` for the 64 x 64 tiles of a `height` x `width` image, row by row: a
+/// transposed or Fortran-order array is then read a cache-sized block at a time, not a column of
+/// cache misses per row.
+fn for_tiles(height: usize, width: usize, mut f: impl FnMut(Range<usize>, Range<usize>)) {
+    const TILE: usize = 64;
+    for y in (0..height).step_by(TILE) {
+        for x in (0..width).step_by(TILE) {
+            f(y..(y + TILE).min(height), x..(x + TILE).min(width));
+        }
     }
 }
 
@@ -323,19 +450,38 @@ pub fn descriptors_in(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Descriptor
             py,
             "WrongShape",
             format!(
-                "{what} must be 2-D (one row of bytes per descriptor), got shape {:?}; \
+                "{what} must be 2-D (one row of bytes per descriptor), got shape {}; \
                  a single descriptor is descriptors.reshape(1, -1)",
-                array.shape()
+                shape_text(array.shape())
             ),
         )
     })?;
     let width = DescriptorWidth::from_bytes(view.ncols()).or_raise(py)?;
-    let set = match view.as_slice() {
+    let rows = view.nrows();
+    // Matches index descriptors with 32 bits (`Match`), and a Rust allocation failure would abort
+    // the interpreter: both checked before any copy.
+    if u32::try_from(rows).is_err() {
+        return Err(invalid_input(
+            py,
+            "TooManyDescriptors",
+            format!(
+                "{what} has {rows} descriptors; matches index at most {} (u32)",
+                u32::MAX
+            ),
+        ));
+    }
+    // The library's conversion holds each row as a 64-byte descriptor, then the packed words; a
+    // strided array is copied first. Reserved (never touched) and freed again: whether the memory is
+    // there, asked of the allocator that would otherwise abort.
+    let needed = rows.saturating_mul(64 + 8 * width.words() + width.bytes());
+    drop(try_buffer(py, needed, what)?);
+    // With the GIL released: the conversion reads every byte (a large set takes milliseconds).
+    let set = py.detach(|| match view.as_slice() {
         // C order (what numpy and the extractor give): the rows as they lie.
         Some(packed) => DescriptorSet::from_opencv_bytes(width, packed),
         // Any other strides: the bytes in row order first (`iter` walks in logical order).
         None => DescriptorSet::from_opencv_bytes(width, &view.iter().copied().collect::<Vec<u8>>()),
-    };
+    });
     set.or_raise(py)
 }
 

@@ -51,7 +51,7 @@ pub fn _rust_extract_seconds(
     repeats: usize,
 ) -> PyResult<Vec<f64>> {
     let extractor = &extractor.get().inner;
-    let input = ImageInput::new(image, "image")?;
+    let input = ImageInput::new(image, "image", crate::arrays::Channels::Rgb)?;
     let view = input.view().or_raise(py)?;
     compute(py, || {
         (0..repeats)

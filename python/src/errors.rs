@@ -30,6 +30,10 @@ pub enum Class {
     ImageRead,
     /// The COLMAP database or match list could not be written (also an `OSError`).
     Database,
+    /// An argument of the wrong Python type (also a `TypeError`).
+    ArgumentType,
+    /// A host allocation the input needs cannot be made (also a `MemoryError`).
+    OutOfMemory,
 }
 
 impl Class {
@@ -42,19 +46,13 @@ impl Class {
             Class::DeviceOutOfMemory => "DeviceOutOfMemoryError",
             Class::ImageRead => "ImageReadError",
             Class::Database => "DatabaseError",
+            Class::ArgumentType => "ArgumentTypeError",
+            Class::OutOfMemory => "OutOfMemoryError",
         }
     }
 
     fn cell(self) -> &'static PyOnceLock<Py<PyType>> {
-        static CELLS: [PyOnceLock<Py<PyType>>; 7] = [
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-            PyOnceLock::new(),
-        ];
+        static CELLS: [PyOnceLock<Py<PyType>>; 9] = [const { PyOnceLock::new() }; 9];
         &CELLS[self as usize]
     }
 }
@@ -128,8 +126,63 @@ fn class_of(e: &clatch::Error) -> Class {
 
 /// A library error as its Python exception, with the error's `Display` message and its
 /// [`clatch::Error::kind`] as `kind`.
+///
+/// Image sizes are written as numpy writes shapes, `(H, W)`, rather than the library's `W x H`.
 pub fn from_clatch(py: Python<'_>, e: clatch::Error) -> PyErr {
-    raise(py, class_of(&e), e.kind().name(), e.to_string())
+    use clatch::Error as E;
+    let message = match e {
+        E::EmptyImage { width, height } => format!(
+            "image is empty: shape ({height}, {width}); height and width must both be at least 1"
+        ),
+        E::ImageTooSmall { width, height, min } => format!(
+            "image of shape ({height}, {width}) is smaller than the {min}x{min} descriptor window"
+        ),
+        E::ImageTooLarge { width, height, max } => format!(
+            "image of shape ({height}, {width}) exceeds the largest supported side of {max} pixels"
+        ),
+        _ => e.to_string(),
+    };
+    raise(py, class_of(&e), e.kind().name(), message)
+}
+
+/// An empty buffer with room for `len` bytes for `what` (to be filled with the GIL released), or an
+/// `OutOfMemoryError` (kind `OutOfMemory`) where the allocation fails: a Rust allocation failure
+/// would abort the whole interpreter.
+pub fn try_buffer(py: Python<'_>, len: usize, what: &str) -> PyResult<Vec<u8>> {
+    let mut buffer = Vec::new();
+    buffer
+        .try_reserve_exact(len)
+        .map_err(|_| out_of_memory(py, len, what))?;
+    Ok(buffer)
+}
+
+/// An `OutOfMemoryError`: `bytes` for `what` cannot be allocated.
+pub fn out_of_memory(py: Python<'_>, bytes: usize, what: &str) -> PyErr {
+    raise(
+        py,
+        Class::OutOfMemory,
+        "OutOfMemory",
+        format!("{what} needs {bytes} bytes of memory, which cannot be allocated here"),
+    )
+}
+
+/// The name of `obj`'s Python type, for messages.
+pub fn type_name(obj: &Bound<'_, PyAny>) -> String {
+    obj.get_type()
+        .name()
+        .map(|n| n.to_string())
+        .unwrap_or_else(|_| "?".into())
+}
+
+/// An `ArgumentTypeError` (a `ClatchError` and a `TypeError`): argument `name` is not `expected`.
+pub fn wrong_type(obj: &Bound<'_, PyAny>, name: &str, expected: &str) -> PyErr {
+    let type_name = type_name(obj);
+    raise(
+        obj.py(),
+        Class::ArgumentType,
+        "WrongType",
+        format!("{name} must be {expected}, got {type_name}"),
+    )
 }
 
 /// An image decoding error (`clatch.imread`) as an `ImageReadError`.

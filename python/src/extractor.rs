@@ -4,9 +4,10 @@ use clatch::{DescriptorWidth, ExtractorConfig, GrayView, NamedOption, PatchWeigh
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyList, PyTuple};
 
-use crate::arrays::{ImageInput, descriptors_out, keypoints_in, keypoints_out};
+use crate::args;
+use crate::arrays::{Channels, ImageInput, descriptors_out, keypoints_in, keypoints_out};
 use crate::backend::{backend_error, parse_backend};
-use crate::errors::{OrRaise, compute, invalid_input};
+use crate::errors::{OrRaise, compute, invalid_input, wrong_type};
 
 /// Finds FAST keypoints and computes their 512-bit CLATCH descriptors.
 ///
@@ -39,23 +40,32 @@ use crate::errors::{OrRaise, compute, invalid_input};
 /// - ``weights`` (64 ints, 8x8 row-major): the patch weights (default LATCH's 7x7 patch).
 ///
 /// Invalid settings raise ``InvalidInputError``; an unusable backend ``BackendUnavailableError``.
-/// An Extractor can be shared by threads: its methods release the GIL while they compute. A gray
-/// image whose rows are contiguous is read in place meanwhile: do not write to it from another thread
-/// during the call.
+/// An Extractor can be shared by threads: its methods release the GIL while they compute (and
+/// while they copy an image that cannot be read in place). A gray image whose rows are contiguous is
+/// read in place meanwhile: do not write to it from another thread during the call. Colour images are
+/// RGB unless a call says ``channels="bgr"`` (``cv2.imread``). An Extractor pickles: it is rebuilt
+/// from ``backend`` and ``config``.
 #[pyclass(module = "clatch", frozen)]
 pub struct Extractor {
     pub(crate) inner: clatch::Extractor,
 }
 
-/// `value` as an integer in `lo..=hi`, or the library's `InvalidConfig` error for `field`.
-fn int_in(py: Python<'_>, field: &'static str, value: i64, lo: i64, hi: i64) -> PyResult<i64> {
+/// `value` as an integer in `lo..=hi`, or the library's `InvalidConfig` error for `field` with
+/// `reason` (the library's words for that range).
+fn int_in(
+    py: Python<'_>,
+    field: &'static str,
+    value: i64,
+    (lo, hi): (i64, i64),
+    reason: &'static str,
+) -> PyResult<i64> {
     if (lo..=hi).contains(&value) {
         return Ok(value);
     }
     Err(clatch::Error::InvalidConfig {
         field,
         value: value.to_string(),
-        reason: "out of range",
+        reason,
     })
     .or_raise(py)
 }
@@ -82,7 +92,7 @@ fn parse_pyramid(value: &Bound<'_, PyAny>) -> PyResult<Option<Pyramid>> {
             return Ok(None);
         }
     } else if let Ok((levels, scale_factor)) = value.extract::<(i64, f32)>() {
-        let levels = int_in(py, "pyramid.levels", levels, 0, i64::from(u16::MAX))? as usize;
+        let levels = int_in(py, "pyramid.levels", levels, (1, 32), "must be in 1..=32")? as usize;
         return Ok(Some(Pyramid::new(levels, scale_factor)));
     }
     Err(invalid_input(
@@ -104,6 +114,17 @@ impl Extractor {
             .collect::<PyResult<Vec<_>>>()
     }
 
+    /// `(keypoints, descriptors, index)` of a description of the caller's keypoints.
+    fn described_out<'py>(
+        py: Python<'py>,
+        features: clatch::Features,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let index: Vec<i64> = features.keypoint_index.iter().map(|&i| i as i64).collect();
+        let index = numpy::IntoPyArray::into_pyarray(index, py);
+        let pair = Self::features_out(py, features)?;
+        PyTuple::new(py, [pair.get_item(0)?, pair.get_item(1)?, index.into_any()])
+    }
+
     /// `(keypoints, descriptors)` of one image's features.
     fn features_out<'py>(
         py: Python<'py>,
@@ -119,7 +140,7 @@ impl Extractor {
 impl Extractor {
     #[new]
     #[pyo3(signature = (
-        backend = "cpu",
+        backend = "cpu".to_string(),
         *,
         single_scale = false,
         threshold = None,
@@ -133,25 +154,28 @@ impl Extractor {
         bits = None,
         smoothing = None,
         weights = None,
-    ))]
+    ),
+    text_signature = "(backend='cpu', *, single_scale=False, threshold=None, max_keypoints=None, \
+        keypoint_size=None, grid=None, level_budget=None, ranking=None, subpixel=None, pyramid=None, \
+        bits=None, smoothing=None, weights=None)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
-        backend: &str,
-        single_scale: bool,
-        threshold: Option<i64>,
-        max_keypoints: Option<i64>,
-        keypoint_size: Option<f32>,
-        grid: Option<i64>,
-        level_budget: Option<&str>,
-        ranking: Option<&str>,
-        subpixel: Option<&str>,
+        #[pyo3(from_py_with = args::backend)] backend: String,
+        #[pyo3(from_py_with = args::single_scale)] single_scale: bool,
+        #[pyo3(from_py_with = args::threshold)] threshold: Option<i64>,
+        #[pyo3(from_py_with = args::max_keypoints)] max_keypoints: Option<i64>,
+        #[pyo3(from_py_with = args::keypoint_size)] keypoint_size: Option<f32>,
+        #[pyo3(from_py_with = args::grid)] grid: Option<i64>,
+        #[pyo3(from_py_with = args::level_budget)] level_budget: Option<String>,
+        #[pyo3(from_py_with = args::ranking)] ranking: Option<String>,
+        #[pyo3(from_py_with = args::subpixel)] subpixel: Option<String>,
         pyramid: Option<&Bound<'_, PyAny>>,
-        bits: Option<i64>,
-        smoothing: Option<&str>,
-        weights: Option<Vec<i64>>,
+        #[pyo3(from_py_with = args::bits)] bits: Option<i64>,
+        #[pyo3(from_py_with = args::smoothing)] smoothing: Option<String>,
+        #[pyo3(from_py_with = args::weights)] weights: Option<Vec<i64>>,
     ) -> PyResult<Self> {
-        let backend = parse_backend(py, backend)?;
+        let backend = parse_backend(py, &backend)?;
         let mut config = if single_scale {
             ExtractorConfig::single_scale()
         } else {
@@ -159,41 +183,48 @@ impl Extractor {
         };
         let detector = &mut config.detector;
         if let Some(t) = threshold {
-            detector.threshold = int_in(py, "threshold", t, 0, 255)? as u8;
+            detector.threshold = int_in(py, "threshold", t, (1, 254), "must be in 1..=254")? as u8;
         }
         if let Some(n) = max_keypoints {
-            detector.max_keypoints = int_in(py, "max_keypoints", n, 0, i64::MAX)? as usize;
+            let range = (1, i64::MAX);
+            detector.max_keypoints =
+                int_in(py, "max_keypoints", n, range, "must be at least 1")? as usize;
         }
         if let Some(size) = keypoint_size {
             detector.keypoint_size = size;
         }
         if let Some(g) = grid {
-            detector.grid = int_in(py, "grid", g, 0, i64::from(u16::MAX))? as usize;
+            detector.grid = int_in(py, "grid", g, (1, 64), "must be in 1..=64")? as usize;
         }
         if let Some(b) = level_budget {
-            detector.level_budget = named(py, b)?;
+            detector.level_budget = named(py, &b)?;
         }
         if let Some(r) = ranking {
-            detector.ranking = named(py, r)?;
+            detector.ranking = named(py, &r)?;
         }
         if let Some(s) = subpixel {
-            detector.subpixel = named(py, s)?;
+            detector.subpixel = named(py, &s)?;
         }
         if let Some(p) = pyramid {
             config.pyramid = parse_pyramid(p)?;
         }
         let descriptor = &mut config.descriptor;
         if let Some(b) = bits {
-            let b = int_in(py, "bits", b, 0, 4096)? as usize;
+            let reason = "must be a multiple of 8 between 8 and 512";
+            let b = int_in(py, "bits", b, (0, 4096), reason)? as usize;
             descriptor.width = DescriptorWidth::from_bits(b).or_raise(py)?;
         }
         if let Some(s) = smoothing {
-            descriptor.smoothing = named(py, s)?;
+            descriptor.smoothing = named(py, &s)?;
         }
         if let Some(w) = weights {
             let w: Vec<u32> = w
                 .into_iter()
-                .map(|v| int_in(py, "weights", v, 0, i64::from(u32::MAX)).map(|v| v as u32))
+                .map(|v| {
+                    let range = (0, i64::from(u32::MAX));
+                    int_in(py, "weights", v, range, "each must be in 0..=4294967295")
+                        .map(|v| v as u32)
+                })
                 .collect::<PyResult<_>>()?;
             descriptor.weights = PatchWeights::new(&w).or_raise(py)?;
         }
@@ -244,53 +275,71 @@ impl Extractor {
         ))
     }
 
-    /// detect(image) -> keypoints
+    /// Pickling: an equal extractor on the same backend, rebuilt from its settings
+    /// (``Extractor(backend, **config)``), for ``multiprocessing``, Ray and ``copy``.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let newobj_ex = py.import("copyreg")?.getattr("__newobj_ex__")?;
+        let this = slf.get();
+        let args = PyTuple::new(py, [this.backend()])?;
+        let call = (slf.get_type(), args, this.config(py)?);
+        PyTuple::new(py, [newobj_ex, call.into_pyobject(py)?.into_any()])
+    }
+
+    /// detect(image, *, channels="rgb") -> keypoints
     ///
-    /// FAST keypoints of ``image`` (``uint8``, 2-D gray or H x W x 3 RGB), strongest first, as a
-    /// structured array of ``KEYPOINT_DTYPE`` (x, y, size, angle, response, octave), in full-
-    /// resolution pixel coordinates (OpenCV's convention: pixel centres at integers, angle in degrees
-    /// from +x towards +y).
+    /// FAST keypoints of ``image`` (``uint8``, 2-D gray or H x W x 3 colour: RGB, or BGR as
+    /// ``cv2.imread`` gives with ``channels="bgr"``), strongest first, as a structured array of
+    /// ``KEYPOINT_DTYPE`` (x, y, size, angle, response, octave), in full-resolution pixel coordinates
+    /// (OpenCV's convention: pixel centres at integers, angle in degrees from +x towards +y).
+    #[pyo3(signature = (image, *, channels = "rgb".to_string()), text_signature = "(self, image, *, channels='rgb')")]
     fn detect<'py>(
         &self,
         py: Python<'py>,
         image: &Bound<'py, PyAny>,
+        #[pyo3(from_py_with = args::channels)] channels: String,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let input = ImageInput::new(image, "image")?;
+        let input = ImageInput::new(image, "image", Channels::parse(py, &channels)?)?;
         let view = input.view().or_raise(py)?;
         let keypoints = compute(py, || self.inner.detect(&view))?;
         Ok(keypoints_out(py, keypoints).into_any())
     }
 
-    /// detect_and_describe(image) -> (keypoints, descriptors)
+    /// detect_and_describe(image, *, channels="rgb") -> (keypoints, descriptors)
     ///
     /// Keypoints (as ``detect``) and their descriptors: ``uint8``, one row of ``bits / 8`` bytes per
     /// keypoint, in OpenCV LATCH's byte order (what ``clatch extract`` writes to ``.npy``), ready
     /// for ``cv2.BFMatcher(cv2.NORM_HAMMING)``. Row i describes keypoint i.
+    #[pyo3(signature = (image, *, channels = "rgb".to_string()), text_signature = "(self, image, *, channels='rgb')")]
     fn detect_and_describe<'py>(
         &self,
         py: Python<'py>,
         image: &Bound<'py, PyAny>,
+        #[pyo3(from_py_with = args::channels)] channels: String,
     ) -> PyResult<Bound<'py, PyTuple>> {
-        let input = ImageInput::new(image, "image")?;
+        let input = ImageInput::new(image, "image", Channels::parse(py, &channels)?)?;
         let view = input.view().or_raise(py)?;
         let features = compute(py, || self.inner.detect_and_describe(&view))?;
         Self::features_out(py, features)
     }
 
-    /// detect_and_describe_batch(images) -> list[(keypoints, descriptors)]
+    /// detect_and_describe_batch(images, *, channels="rgb") -> list[(keypoints, descriptors)]
     ///
     /// ``detect_and_describe`` of every image of a sequence, in input order, each result equal to its
     /// own call. Every image is checked before any work; the CPU spreads the images over its threads,
     /// CUDA keeps several streams busy.
+    #[pyo3(signature = (images, *, channels = "rgb".to_string()), text_signature = "(self, images, *, channels='rgb')")]
     fn detect_and_describe_batch<'py>(
         &self,
         py: Python<'py>,
-        images: Vec<Bound<'py, PyAny>>,
+        #[pyo3(from_py_with = args::images)] images: Vec<Bound<'py, PyAny>>,
+        #[pyo3(from_py_with = args::channels)] channels: String,
     ) -> PyResult<Bound<'py, PyList>> {
+        let channels = Channels::parse(py, &channels)?;
         let inputs = images
             .iter()
             .enumerate()
-            .map(|(i, image)| ImageInput::new(image, &format!("images[{i}]")))
+            .map(|(i, image)| ImageInput::new(image, &format!("images[{i}]"), channels))
             .collect::<PyResult<Vec<_>>>()?;
         let views = Self::views(py, &inputs)?;
         let all = compute(py, || self.inner.detect_and_describe_batch(&views))?;
@@ -301,24 +350,146 @@ impl Extractor {
         PyList::new(py, out)
     }
 
-    /// describe(image, keypoints) -> (keypoints, descriptors, index)
+    /// describe(image, keypoints, *, channels="rgb") -> (keypoints, descriptors, index)
     ///
     /// Descriptors of your own keypoints (a 1-D array of ``KEYPOINT_DTYPE``), sampled on the full-
     /// resolution image. Keypoints whose window leaves the image are not described: the returned
     /// keypoints are those described, ``index`` (``int64``) gives each row's position in the input.
+    #[pyo3(signature = (image, keypoints, *, channels = "rgb".to_string()), text_signature = "(self, image, keypoints, *, channels='rgb')")]
     fn describe<'py>(
         &self,
         py: Python<'py>,
         image: &Bound<'py, PyAny>,
         keypoints: &Bound<'py, PyAny>,
+        #[pyo3(from_py_with = args::channels)] channels: String,
     ) -> PyResult<Bound<'py, PyTuple>> {
-        let input = ImageInput::new(image, "image")?;
+        let input = ImageInput::new(image, "image", Channels::parse(py, &channels)?)?;
         let keypoints = keypoints_in(keypoints, "keypoints")?;
         let view = input.view().or_raise(py)?;
         let features = compute(py, || self.inner.describe(&view, &keypoints))?;
-        let index: Vec<i64> = features.keypoint_index.iter().map(|&i| i as i64).collect();
-        let index = numpy::IntoPyArray::into_pyarray(index, py);
-        let pair = Self::features_out(py, features)?;
-        PyTuple::new(py, [pair.get_item(0)?, pair.get_item(1)?, index.into_any()])
+        Self::described_out(py, features)
+    }
+
+    /// describe_opencv(latch, image, keypoints, *, channels="rgb") -> (keypoints, descriptors, index)
+    ///
+    /// OpenCV's own LATCH descriptors, bit for bit (``cv2.xfeatures2d.LATCH_create(...).compute``
+    /// with ``latch``'s settings; the library's ``Extractor::describe_opencv``), of your keypoints
+    /// (``KEYPOINT_DTYPE``; x, y and angle are used) on the full-resolution image. Keypoints OpenCV
+    /// drops at the border are not described, nor, on purpose, the few OpenCV keeps but then reads
+    /// outside the image for; ``index`` gives each returned row's position in the input. Descriptors
+    /// are ``uint8`` rows of ``latch.bytes`` bytes, cv2's layout.
+    #[pyo3(signature = (latch, image, keypoints, *, channels = "rgb".to_string()), text_signature = "(self, latch, image, keypoints, *, channels='rgb')")]
+    fn describe_opencv<'py>(
+        &self,
+        py: Python<'py>,
+        #[pyo3(from_py_with = latch_arg)] latch: Bound<'py, OpencvLatch>,
+        image: &Bound<'py, PyAny>,
+        keypoints: &Bound<'py, PyAny>,
+        #[pyo3(from_py_with = args::channels)] channels: String,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let input = ImageInput::new(image, "image", Channels::parse(py, &channels)?)?;
+        let keypoints = keypoints_in(keypoints, "keypoints")?;
+        let view = input.view().or_raise(py)?;
+        let latch = &latch.get().inner;
+        let features = compute(py, || self.inner.describe_opencv(latch, &view, &keypoints))?;
+        Self::described_out(py, features)
+    }
+}
+
+/// `latch=`: an `OpencvLatch`, or an `ArgumentTypeError`.
+fn latch_arg<'py>(obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, OpencvLatch>> {
+    obj.cast::<OpencvLatch>()
+        .cloned()
+        .map_err(|_| wrong_type(obj, "latch", "a clatch.OpencvLatch"))
+}
+
+/// OpenCV's LATCH settings (``cv2.xfeatures2d.LATCH_create(bytes, rotationInvariance,
+/// half_ssd_size, sigma)``), validated: the library's ``OpencvLatch``.
+///
+/// OpencvLatch(bytes=32, rotation_invariance=True, half_ssd_size=3, sigma=2.0)
+///
+/// ``bytes`` in 1, 2, 4, 8, 16, 32, 64; ``half_ssd_size`` at most 24; ``sigma`` finite (0: no blur).
+/// The defaults are OpenCV's. ``Extractor.describe_opencv(latch, image, keypoints)`` describes with
+/// them, bit-exact with OpenCV. Invalid settings raise ``InvalidInputError``.
+#[pyclass(module = "clatch", frozen)]
+pub struct OpencvLatch {
+    inner: clatch::OpencvLatch,
+}
+
+#[pymethods]
+impl OpencvLatch {
+    #[new]
+    #[pyo3(signature = (bytes = 32, rotation_invariance = true, half_ssd_size = 3, sigma = 2.0))]
+    fn new(
+        py: Python<'_>,
+        #[pyo3(from_py_with = args::bytes)] bytes: i64,
+        #[pyo3(from_py_with = args::rotation_invariance)] rotation_invariance: bool,
+        #[pyo3(from_py_with = args::half_ssd_size)] half_ssd_size: i64,
+        #[pyo3(from_py_with = args::sigma)] sigma: f64,
+    ) -> PyResult<Self> {
+        let reason = "OpenCV's LATCH takes 1, 2, 4, 8, 16, 32 or 64 bytes";
+        let bytes = int_in(py, "bytes", bytes, (0, 64), reason)? as usize;
+        let reason = "patches may be at most 49x49 pixels (half_ssd_size <= 24)";
+        let half = int_in(py, "half_ssd_size", half_ssd_size, (0, 24), reason)? as usize;
+        let inner =
+            clatch::OpencvLatch::new(bytes, rotation_invariance, half, sigma).or_raise(py)?;
+        Ok(Self { inner })
+    }
+
+    /// Descriptor length in bytes.
+    #[getter]
+    fn bytes(&self) -> usize {
+        self.inner.bytes()
+    }
+
+    /// Whether the sampling pattern turns with each keypoint's angle.
+    #[getter]
+    fn rotation_invariance(&self) -> bool {
+        self.inner.rotation_invariance()
+    }
+
+    /// Half the side of each compared patch: patches are (2 h + 1) x (2 h + 1) pixels.
+    #[getter]
+    fn half_ssd_size(&self) -> usize {
+        self.inner.half_ssd_size()
+    }
+
+    /// The Gaussian blur's sigma (0: no blur).
+    #[getter]
+    fn sigma(&self) -> f64 {
+        self.inner.sigma()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "OpencvLatch(bytes={}, rotation_invariance={}, half_ssd_size={}, sigma={:?})",
+            self.bytes(),
+            if self.rotation_invariance() {
+                "True"
+            } else {
+                "False"
+            },
+            self.half_ssd_size(),
+            self.sigma()
+        )
+    }
+
+    /// Pickling: the same settings.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let this = slf.get();
+        let args = (
+            this.bytes(),
+            this.rotation_invariance(),
+            this.half_ssd_size(),
+            this.sigma(),
+        );
+        PyTuple::new(
+            py,
+            [
+                slf.get_type().into_any(),
+                args.into_pyobject(py)?.into_any(),
+            ],
+        )
     }
 }

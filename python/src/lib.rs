@@ -1,6 +1,7 @@
 //! The native module of the `clatch` Python package (`clatch._clatch`); `clatch/__init__.py`
 //! re-exports it. Type stubs: `clatch/_clatch.pyi`.
 
+mod args;
 mod arrays;
 mod backend;
 mod bench;
@@ -13,7 +14,7 @@ use clatch::decode::DecodeLimits;
 use numpy::{Element, IntoPyArray, PyArrayMethods};
 use pyo3::prelude::*;
 
-use arrays::{ImageInput, KeyPointRecord, MatchRecord};
+use arrays::{Channels, ImageInput, KeyPointRecord, MatchRecord};
 use errors::{OrRaise, from_decode};
 
 /// imread(path, max_pixels=100_000_000) -> image
@@ -26,8 +27,8 @@ use errors::{OrRaise, from_decode};
 #[pyo3(signature = (path, max_pixels = 100_000_000))]
 fn imread<'py>(
     py: Python<'py>,
-    path: std::path::PathBuf,
-    max_pixels: u64,
+    #[pyo3(from_py_with = args::path)] path: std::path::PathBuf,
+    #[pyo3(from_py_with = args::max_pixels)] max_pixels: u64,
 ) -> PyResult<Bound<'py, PyAny>> {
     let limits = DecodeLimits::default().with_max_pixels(max_pixels);
     let gray = py
@@ -37,23 +38,28 @@ fn imread<'py>(
     Ok(gray.into_raw().into_pyarray(py).reshape([h, w])?.into_any())
 }
 
-/// to_gray(image) -> image
+/// to_gray(image, *, channels="rgb") -> image
 ///
 /// The gray image the extractor sees: a 2-D ``uint8`` image as it is (a copy), an H x W x 3 (RGB) or
 /// H x W x 4 (RGBA, alpha ignored) ``uint8`` image converted with OpenCV's ``COLOR_RGB2GRAY``
 /// integer weights (``clatch::decode::luma``: ``(4899 R + 9617 G + 1868 B + 8192) >> 14``), as the
 /// command-line tool converts colour files. OpenCV's ``cv2.imread`` gives BGR: pass
-/// ``image[..., ::-1]``.
+/// ``channels="bgr"`` (then the result equals ``cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)``).
 #[pyfunction]
-fn to_gray<'py>(py: Python<'py>, image: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
-    let input = ImageInput::new(image, "image")?;
+#[pyo3(signature = (image, *, channels = "rgb".to_string()), text_signature = "(image, *, channels='rgb')")]
+fn to_gray<'py>(
+    py: Python<'py>,
+    image: &Bound<'py, PyAny>,
+    #[pyo3(from_py_with = args::channels)] channels: String,
+) -> PyResult<Bound<'py, PyAny>> {
+    let input = ImageInput::new(image, "image", Channels::parse(py, &channels)?)?;
     let view = input.view().or_raise(py)?;
     let (w, h) = (view.width(), view.height());
-    let mut out = Vec::with_capacity(w * h);
-    for y in 0..h {
-        out.extend_from_slice(view.get_row(y).unwrap_or_default());
-    }
-    Ok(out.into_pyarray(py).reshape([h, w])?.into_any())
+    Ok(input
+        .to_vec(py)?
+        .into_pyarray(py)
+        .reshape([h, w])?
+        .into_any())
 }
 
 /// _reads_in_place(image) -> bool
@@ -61,7 +67,7 @@ fn to_gray<'py>(py: Python<'py>, image: &Bound<'py, PyAny>) -> PyResult<Bound<'p
 /// Not public API (the tests): whether ``image`` would be read in place (no copy) by the extractor.
 #[pyfunction]
 fn _reads_in_place(image: &Bound<'_, PyAny>) -> PyResult<bool> {
-    Ok(ImageInput::new(image, "image")?.zero_copy())
+    Ok(ImageInput::new(image, "image", Channels::Rgb)?.zero_copy())
 }
 
 /// The native module.
@@ -70,6 +76,7 @@ fn _clatch(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_class::<extractor::Extractor>()?;
     m.add_class::<matcher::Matcher>()?;
+    m.add_class::<extractor::OpencvLatch>()?;
     colmap::register(m)?;
     m.add_function(wrap_pyfunction!(imread, m)?)?;
     m.add_function(wrap_pyfunction!(to_gray, m)?)?;
@@ -79,6 +86,8 @@ fn _clatch(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("KEYPOINT_DTYPE", KeyPointRecord::get_dtype(py))?;
     m.add("MATCH_DTYPE", MatchRecord::get_dtype(py))?;
     m.add("CUDA_BUILT", cfg!(feature = "cuda"))?;
+    m.add("MAX_PAIRS", matcher::MAX_PAIRS)?;
+    m.add("MAX_IMAGE_SIDE", clatch::MAX_IMAGE_SIDE)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

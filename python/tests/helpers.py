@@ -120,3 +120,14 @@ def photo_folder(folder: Path, count: int, size: int = 256, seed: int = 11) -> P
         dy, dx = offsets[k % len(offsets)]
         write_pnm(folder / f"view{k}.pgm", scene[dy : dy + size, dx : dx + size])
     return folder
+
+
+def broken_copy(folder: Path, dest: Path) -> tuple[Path, Path]:
+    """A copy of a photo folder whose last photo has a header that probes fine but pixels cut short
+    (its read fails during extraction): the copy and that photo."""
+    dest.mkdir()
+    for photo in folder.iterdir():
+        (dest / photo.name).write_bytes(photo.read_bytes())
+    last = sorted(dest.iterdir())[-1]
+    last.write_bytes(last.read_bytes()[:-5000])
+    return dest, last

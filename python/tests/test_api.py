@@ -17,7 +17,7 @@ from clatch import _clatch
 from helpers import ASTRONAUT, synthetic
 
 STUB = Path(_clatch.__file__).with_name("_clatch.pyi")
-PUBLIC_CLASSES = [clatch.Extractor, clatch.Matcher, clatch.colmap.ImageFolder]
+PUBLIC_CLASSES = [clatch.Extractor, clatch.Matcher, clatch.OpencvLatch, clatch.colmap.ImageFolder]
 # Made by the package only (no constructor): documented and in the stub all the same.
 MADE_CLASSES = [clatch.colmap.PinholeCamera]
 
@@ -59,7 +59,8 @@ def test_the_stub_lists_what_the_module_has():
     for cls in PUBLIC_CLASSES + MADE_CLASSES:
         runtime = {n for n in vars(cls) if not n.startswith("_")}
         assert runtime == {n for n in classes[cls.__name__] if not n.startswith("_")}, cls.__name__
-    assert set(clatch.__all__) <= names | {n for n in dir(clatch._exceptions) if not n.startswith("_")}
+    python_side = set(clatch._exceptions.__all__) | set(clatch._interop.__all__)
+    assert set(clatch.__all__) <= names | python_side
 
 
 def test_signatures_follow_the_stub():
@@ -89,6 +90,21 @@ def test_the_stub_passes_stubtest(tmp_path):
     config.write_text("[mypy]\n")  # none of a surrounding project's settings
     run = subprocess.run(
         [sys.executable, "-m", "mypy.stubtest", "clatch._clatch", "--mypy-config-file", str(config)],
+        cwd=tmp_path,
+        env={**os.environ, "MYPY_CACHE_DIR": str(tmp_path / "cache")},
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_the_package_passes_mypy_strict(tmp_path):
+    # The package's Python files against the stub, as a user's type checker sees them.
+    pytest.importorskip("mypy.api")
+    config = tmp_path / "mypy.ini"
+    config.write_text("[mypy]\n")
+    run = subprocess.run(
+        [sys.executable, "-m", "mypy", "--strict", "--config-file", str(config), str(Path(clatch.__file__).parent)],
         cwd=tmp_path,
         env={**os.environ, "MYPY_CACHE_DIR": str(tmp_path / "cache")},
         capture_output=True,

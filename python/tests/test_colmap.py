@@ -14,7 +14,7 @@ import pytest
 
 import clatch
 import clatch.colmap
-from helpers import photo_folder
+from helpers import broken_copy, photo_folder
 
 SIX_PAIRS = 15
 
@@ -157,13 +157,7 @@ def test_an_existing_database_is_kept_unless_forced(backend, folder, tmp_path):
 
 
 def test_an_unreadable_photo_leaves_no_output(backend, folder, tmp_path):
-    broken = tmp_path / "broken"
-    broken.mkdir()
-    for photo in folder.iterdir():
-        (broken / photo.name).write_bytes(photo.read_bytes())
-    # A header that probes fine, pixels cut short: the read fails during extraction.
-    last = sorted(broken.iterdir())[-1]
-    last.write_bytes(last.read_bytes()[:-5000])
+    broken, last = broken_copy(folder, tmp_path / "broken")
     db = tmp_path / "out.db"
     with pytest.raises(clatch.ImageReadError) as e:
         clatch.colmap.match_folder(broken, db, backend=backend)

@@ -57,9 +57,15 @@ def test_bad_images(backend, image, kind):
         raises(clatch.InvalidInputError, kind, lambda: call(image))
 
 
-def test_too_small_names_the_size(backend):
-    e = raises(clatch.InvalidInputError, "ImageTooSmall", lambda: clatch.Extractor(backend).detect(np.zeros((63, 200), np.uint8)))
-    assert "200x63" in str(e)
+def test_sizes_are_numpy_shapes(backend):
+    """Finding P8: image sizes are said as numpy shapes, (H, W), never the library's W x H."""
+    extractor = clatch.Extractor(backend)
+    e = raises(clatch.InvalidInputError, "ImageTooSmall", lambda: extractor.detect(np.zeros((63, 200), np.uint8)))
+    assert "shape (63, 200)" in str(e) and "200x63" not in str(e)
+    e = raises(clatch.InvalidInputError, "ImageTooLarge", lambda: extractor.detect(np.zeros((40_000, 64), np.uint8)))
+    assert "shape (40000, 64)" in str(e)
+    e = raises(clatch.InvalidInputError, "EmptyImage", lambda: extractor.detect(np.zeros((0, 70, 3), np.uint8)))
+    assert "shape (0, 70, 3)" in str(e)
 
 
 @pytest.mark.parametrize("name", ["gpu", "CPU", "cuda:", "cuda:x", "cuda:-1", "", "cpu "])
@@ -153,8 +159,7 @@ def test_bad_descriptors(backend):
     raises(clatch.InvalidInputError, "WrongDtype", lambda: m.match(d64.astype(np.int32), d64))
     raises(clatch.InvalidInputError, "WrongShape", lambda: m.match(d64[0], d64))
     raises(clatch.InvalidInputError, "NotAnArray", lambda: m.match(d64.tolist(), d64))
-    raises(clatch.InvalidInputError, "EmptyGallery", lambda: m.match(d64, d64[:0]))
-    raises(clatch.InvalidInputError, "InvalidK", lambda: m.match(d64, d64[:1]))  # ratio test needs 2
+    raises(clatch.InvalidInputError, "InvalidK", lambda: m.knn(d64, d64[:0], 1))
     raises(clatch.InvalidInputError, "InvalidK", lambda: m.knn(d64, d64, 0))
     raises(clatch.InvalidInputError, "InvalidK", lambda: m.knn(d64, d64, -3))
     raises(clatch.InvalidInputError, "InvalidK", lambda: m.knn(d64, d64, 11))
@@ -208,3 +213,118 @@ def test_errors_leave_the_objects_usable(backend, photo):
     with pytest.raises(clatch.ClatchError):
         matcher.match(d, d[:, :8])
     assert len(matcher.match(d, d)) == len(d)
+
+
+def test_all_pairs_refuses_a_list_too_large_to_hold():
+    """Finding P2: ``all_pairs(10**6)`` listed 5 * 10^11 pairs (24 GB, then the kernel's OOM kill).
+    Now every n whose list would pass ``MAX_PAIRS`` is refused before anything is allocated."""
+    for n in (10**6, 10**12, 2**62, 16_385):
+        e = raises(clatch.InvalidInputError, "TooManyPairs", lambda: clatch.Matcher.all_pairs(n))
+        assert str(n) in str(e) and "match_pairs" in str(e)
+    assert clatch.MAX_PAIRS == 2**27 and 16_384 * 16_383 // 2 <= clatch.MAX_PAIRS < 16_385 * 16_384 // 2
+    pairs = clatch.Matcher.all_pairs(1000)
+    assert pairs.shape == (499_500, 2) and pairs.dtype == np.int64
+    assert pairs[0].tolist() == [0, 1] and pairs[-1].tolist() == [998, 999]
+    assert clatch.Matcher.all_pairs(0).shape == clatch.Matcher.all_pairs(1).shape == (0, 2)
+
+
+@pytest.mark.parametrize("ratio", [0.8, None])
+def test_one_rule_for_a_pair_that_cannot_match(backend, ratio):
+    """Finding P6: an empty descriptor set (a blank frame) raised EmptyGallery in ``match`` but gave
+    no matches in ``match_pairs``. One rule now, the library's ``MatchConfig::can_match``: a pair
+    with no query, or fewer gallery descriptors than the rules look at (none; one with the ratio
+    test), gives no matches, in both calls."""
+    rng = np.random.default_rng(4)
+    d = random_descriptors(rng, 30, 32)
+    m = clatch.Matcher(backend, ratio=ratio)
+    sets = {"blank": d[:0], "one": d[:1], "two": d[:2], "many": d}
+    for qname, query in sets.items():
+        for tname, train in sets.items():
+            single = m.match(query, train)
+            [batch] = m.match_pairs([query, train], [(0, 1)])
+            assert single.dtype == clatch.MATCH_DTYPE
+            assert np.array_equal(single, batch), (qname, tname)
+            if qname == "blank" or tname == "blank" or (tname == "one" and ratio is not None):
+                assert len(single) == 0
+    # A width mismatch is a mistake, not data: it raises whatever the sizes.
+    raises(clatch.InvalidInputError, "DescriptorWidthMismatch", lambda: m.match(d[:0], d[:0, :16]))
+
+
+def test_knn_names_the_k_it_was_given(backend):
+    """Finding P8: ``knn(k=-1)`` said "k = 0 is invalid"."""
+    d = random_descriptors(np.random.default_rng(5), 10, 32)
+    m = clatch.Matcher(backend)
+    for k in (-1, -(2**40), 0, 11):
+        e = raises(clatch.InvalidInputError, "InvalidK", lambda: m.knn(d, d, k))
+        assert f"k = {k} is invalid" in str(e)
+    e = raises(clatch.InvalidInputError, "InvalidK", lambda: m.knn(d, d[:0], 2))
+    assert "k = 2" in str(e) and "gallery of 0" in str(e)
+
+
+def test_range_errors_say_the_range(backend):
+    """Finding P8: a setting out of range said only "(out of range)"; now the library's range."""
+    for keywords, words in [
+        ({"threshold": 300}, "threshold = 300 (must be in 1..=254)"),
+        ({"threshold": -1}, "threshold = -1 (must be in 1..=254)"),
+        ({"grid": 0}, "grid = 0 (must be in 1..=64)"),
+        ({"grid": 100000}, "grid = 100000 (must be in 1..=64)"),
+        ({"max_keypoints": -5}, "max_keypoints = -5 (must be at least 1)"),
+        ({"pyramid": (-1, 1.2)}, "pyramid.levels = -1 (must be in 1..=32)"),
+        ({"pyramid": (100, 1.2)}, "pyramid.levels = 100 (must be in 1..=32)"),
+        ({"bits": -8}, "bits = -8 (must be a multiple of 8 between 8 and 512)"),
+        ({"weights": [-1] * 64}, "weights = -1 (each must be in 0..=4294967295)"),
+    ]:
+        e = raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Extractor(backend, **keywords))
+        assert words in str(e), str(e)
+        assert "(out of range)" not in str(e)
+
+
+def test_every_error_class_has_a_kind_of_its_own():
+    """Finding P8: ``ClusterError.kind`` read "Unknown"."""
+    classes = [getattr(clatch, n) for n in clatch.__all__ if n.endswith("Error")]
+    assert len(classes) >= 10
+    for cls in classes:
+        assert issubclass(cls, clatch.ClatchError)
+        error = cls("message")
+        assert error.kind and error.kind != "Unknown", cls.__name__
+        assert cls("message", kind="Special").kind == "Special"
+    assert clatch.ClusterError("x").kind == "TaskFailed"
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda m, e, d, i: m.knn(d, d, k=2.5),
+        lambda m, e, d, i: m.knn(d, d, "2"),
+        lambda m, e, d, i: clatch.Matcher(backend=None),
+        lambda m, e, d, i: clatch.Extractor(None),
+        lambda m, e, d, i: clatch.Extractor(threshold=2.5),
+        lambda m, e, d, i: clatch.Extractor(single_scale="yes"),
+        lambda m, e, d, i: clatch.Extractor(level_budget=3),
+        lambda m, e, d, i: clatch.Extractor(weights=3),
+        lambda m, e, d, i: clatch.Matcher(ratio="0.8"),
+        lambda m, e, d, i: clatch.Matcher(cross_check=None),
+        lambda m, e, d, i: clatch.Matcher(max_distance=1.5),
+        lambda m, e, d, i: clatch.Matcher.all_pairs(2.0),
+        lambda m, e, d, i: m.match_pairs(5, [(0, 1)]),
+        lambda m, e, d, i: e.detect_and_describe_batch(5),
+        lambda m, e, d, i: e.detect(i, channels=1),
+        lambda m, e, d, i: clatch.imread(None),
+        lambda m, e, d, i: clatch.imread(ASTRONAUT, max_pixels="many"),
+        lambda m, e, d, i: clatch.OpencvLatch(bytes=32.0),
+        lambda m, e, d, i: e.describe_opencv("latch", i, np.zeros(0, clatch.KEYPOINT_DTYPE)),
+    ],
+)
+def test_type_mistakes_are_clatch_errors_and_type_errors(backend, call):
+    """Finding P8: ``k=2.5`` or ``backend=None`` raised a plain TypeError, though every error is a
+    ClatchError. Now an ArgumentTypeError, which is both, naming the argument."""
+    m, e = clatch.Matcher(backend), clatch.Extractor(backend)
+    d = random_descriptors(np.random.default_rng(6), 10, 32)
+    image = np.zeros((100, 100), np.uint8)
+    with pytest.raises(TypeError) as info:
+        call(m, e, d, image)
+    assert isinstance(info.value, clatch.ClatchError) and isinstance(info.value, clatch.ArgumentTypeError)
+    assert info.value.kind == "WrongType"
+    assert " must be " in str(info.value)
+    with pytest.raises(clatch.ClatchError):
+        call(m, e, d, image)

@@ -10,13 +10,15 @@ from __future__ import annotations
 
 import os
 import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
 
 import clatch
 import clatch.colmap
-from helpers import photo_folder
+from helpers import broken_copy, photo_folder
 
 try:
     import ray
@@ -166,12 +168,7 @@ def test_bad_input_is_refused_before_any_work(cluster, folder, tmp_path):
 
 
 def test_a_photo_that_fails_on_an_actor_raises_its_own_error(cluster, backend, folder, tmp_path):
-    broken = tmp_path / "broken"
-    broken.mkdir()
-    for photo in folder.iterdir():
-        (broken / photo.name).write_bytes(photo.read_bytes())
-    last = sorted(broken.iterdir())[-1]
-    last.write_bytes(last.read_bytes()[:-5000])  # the header probes fine; decoding fails
+    broken, last = broken_copy(folder, tmp_path / "broken")
     db = tmp_path / "out.db"
     with pytest.raises(clatch.ImageReadError) as e:
         clatch.ray.match_folder(broken, db, backend=backend, num_actors=2)
@@ -199,3 +196,77 @@ def test_a_backend_the_actors_cannot_start_raises_its_own_error(cluster, folder,
     with pytest.raises(clatch.BackendUnavailableError):
         clatch.ray.match_folder(folder, tmp_path / "out.db", backend="cuda", num_actors=2)
     assert not (tmp_path / "out.db").exists()
+
+
+@pytest.mark.parametrize(
+    "options,actors,words",
+    [
+        ({"num_gpus": 1}, None, "GPU=1"),
+        ({"num_cpus": 1, "resources": {"tpu_pod": 1}}, None, "tpu_pod=1"),
+        ({"num_cpus": 3}, None, "CPU=3"),
+        ({"num_cpus": 1}, 3, "3 actors"),
+    ],
+)
+def test_resources_the_cluster_lacks_are_refused_at_once(cluster, folder, tmp_path, options, actors, words):
+    """Finding P5: ``actor_options={"num_gpus": 1}`` on a cluster without GPUs never returned (Ray
+    waits for a GPU for ever). The cluster's resources are checked first."""
+    start = time.perf_counter()
+    with pytest.raises(clatch.ClusterError) as e:
+        clatch.ray.match_folder(folder, tmp_path / "out.db", actor_options=options, num_actors=actors)
+    assert time.perf_counter() - start < 30
+    assert e.value.kind == "ResourcesUnavailable" and words in str(e.value)
+    assert not (tmp_path / "out.db").exists()
+
+
+def test_actors_that_cannot_start_in_time_are_a_cluster_error(cluster, folder, tmp_path):
+    """Finding P5, the wait bounded: the resources exist but another job holds them."""
+
+    @ray.remote(num_cpus=2)
+    class Hog:
+        def ready(self) -> bool:
+            return True
+
+    hog = Hog.remote()
+    ray.get(hog.ready.remote())
+    try:
+        start = time.perf_counter()
+        with pytest.raises(clatch.ClusterError) as e:
+            clatch.ray.match_folder(folder, tmp_path / "out.db", num_actors=1, start_timeout=3)
+        assert e.value.kind == "ActorsNotStarted" and "start_timeout=3" in str(e.value)
+        assert time.perf_counter() - start < 30
+    finally:
+        ray.kill(hog)
+    assert not (tmp_path / "out.db").exists()
+
+
+# As in an interactive session: the error is shown, and the session goes on (Ray prints what it
+# finds unhandled a moment later).
+FAILING_RUN = """
+import time, traceback
+import ray, clatch.ray
+ray.init(num_cpus=2, include_dashboard=False)
+try:
+    clatch.ray.match_folder({folder!r}, {db!r}, num_actors=2, photos_per_task=3)
+except clatch.ClatchError:
+    traceback.print_exc()
+import gc; gc.collect()
+time.sleep(3)
+"""
+
+
+def test_a_failing_task_prints_one_traceback(folder, tmp_path):
+    """Finding P12, second half: a photo that fails on an actor printed Ray's "Unhandled error"
+    tracebacks of the task's other results besides the clean error. Now one traceback: the error."""
+    broken, last = broken_copy(folder, tmp_path / "broken")
+    env = {k: v for k, v in os.environ.items() if k != "RAY_IGNORE_UNHANDLED_ERRORS"}
+    run = subprocess.run(
+        [sys.executable, "-c", FAILING_RUN.format(folder=str(broken), db=str(tmp_path / "out.db"))],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
+    assert run.returncode == 0, run.stderr
+    err = run.stderr
+    assert err.count("Traceback") == 1 and "Unhandled error" not in err, err
+    assert "clatch._exceptions.ImageReadError" in err and last.name in err

@@ -8,6 +8,7 @@ use rusqlite::{Connection, params};
 use crate::colmap::camera::{PINHOLE_MODEL_ID, PinholeCamera};
 use crate::colmap::error::ColmapError;
 use crate::colmap::schema::SCHEMA_3_8;
+use crate::colmap::two_view::{TwoViewBlobs, TwoViewGeometry};
 use crate::colmap::{keypoints_blob, matches_blob, pair_id};
 use crate::keypoint::KeyPoint;
 use crate::matching::Match;
@@ -37,6 +38,8 @@ pub struct Database {
     /// Keypoint count of every image, 0 until its keypoints are written.
     keypoints: HashMap<u32, Option<usize>>,
     pairs: std::collections::HashSet<u64>,
+    /// Pairs of `two_view_geometries`, written now or found by [`Database::open_existing`].
+    verified_pairs: std::collections::HashSet<u64>,
 }
 
 impl Database {
@@ -58,6 +61,61 @@ impl Database {
             connection,
             keypoints: HashMap::new(),
             pairs: Default::default(),
+            verified_pairs: Default::default(),
+        })
+    }
+
+    /// Opens a COLMAP 3.8 database written before (by [`Database::create`], `clatch colmap` or
+    /// COLMAP), to add rows to it: typically [`Database::add_two_view_geometry`] for pairs verified
+    /// outside COLMAP. Its images, keypoint counts and pairs are read first, so indices and
+    /// duplicates are checked as for a new database. Nothing is changed until [`Database::finish`].
+    pub fn open_existing(path: &Path) -> Result<Self, ColmapError> {
+        if !path.is_file() {
+            return Err(ColmapError::DatabaseMissing {
+                path: path.display().to_string(),
+            });
+        }
+        let connection = Connection::open_with_flags(
+            path,
+            rusqlite::OpenFlags::SQLITE_OPEN_READ_WRITE | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX,
+        )
+        .map_err(ColmapError::sql("opening the file"))?;
+        let read_ids =
+            |sql: &str, operation: &'static str| -> Result<Vec<(i64, i64)>, ColmapError> {
+                let mut statement = connection
+                    .prepare(sql)
+                    .map_err(ColmapError::sql(operation))?;
+                let rows = statement
+                    .query_map([], |row| Ok((row.get(0)?, row.get(1)?)))
+                    .map_err(ColmapError::sql(operation))?;
+                rows.collect::<Result<_, _>>()
+                    .map_err(ColmapError::sql(operation))
+            };
+        let mut keypoints: HashMap<u32, Option<usize>> = HashMap::new();
+        for (image_id, _) in read_ids("SELECT image_id, 0 FROM images", "reading the images")? {
+            keypoints.insert(image_id as u32, None);
+        }
+        let counts = read_ids(
+            "SELECT image_id, rows FROM keypoints",
+            "reading the keypoint counts",
+        )?;
+        for (image_id, rows) in counts {
+            keypoints.insert(image_id as u32, Some(rows as usize));
+        }
+        let pair_ids = |table: &str, operation| {
+            read_ids(&format!("SELECT pair_id, 0 FROM {table}"), operation)
+                .map(|rows| rows.into_iter().map(|(id, _)| id as u64).collect())
+        };
+        let pairs = pair_ids("matches", "reading the matched pairs")?;
+        let verified_pairs = pair_ids("two_view_geometries", "reading the verified pairs")?;
+        connection
+            .execute_batch("BEGIN")
+            .map_err(ColmapError::sql("starting the transaction"))?;
+        Ok(Self {
+            connection,
+            keypoints,
+            pairs,
+            verified_pairs,
         })
     }
 
@@ -195,6 +253,74 @@ impl Database {
         Ok(())
     }
 
+    /// Writes the verified geometry of a pair into `two_view_geometries`, the table COLMAP's `mapper`
+    /// reads, so that it can run without `matches_importer`. The pair may be given in either order
+    /// ([`TwoViewGeometry::in_colmap_order`] turns it round as COLMAP does); both images' keypoints
+    /// must be in the database, every inlier index is checked against them, and a pair can be
+    /// written once. See [`crate::colmap::two_view`] for the layout.
+    ///
+    /// ```
+    /// use clatch::colmap::{Database, PinholeCamera, TwoViewConfig, TwoViewGeometry};
+    /// use clatch::KeyPoint;
+    ///
+    /// let path = std::env::temp_dir().join(format!("clatch-doc-tvg-{}.db", std::process::id()));
+    /// # std::fs::remove_file(&path).ok();
+    /// let mut db = Database::create(&path)?;
+    /// let camera = db.add_camera(&PinholeCamera::guess(640, 480)?)?;
+    /// let a = db.add_image("a.png", camera)?;
+    /// let b = db.add_image("b.png", camera)?;
+    /// db.set_keypoints(a, &[KeyPoint::new(10.0, 20.0), KeyPoint::new(30.0, 40.0)])?;
+    /// db.set_keypoints(b, &[KeyPoint::new(11.0, 21.0)])?;
+    /// let verified = TwoViewGeometry {
+    ///     f: Some([[0.0, -1e-4, 0.01], [1e-4, 0.0, -0.02], [-0.01, 0.02, 1.0]]),
+    ///     ..TwoViewGeometry::new(b, a, vec![[0, 1]], TwoViewConfig::Uncalibrated)
+    /// };
+    /// db.add_two_view_geometry(&verified)?;
+    /// db.finish()?;
+    /// # std::fs::remove_file(&path).ok();
+    /// # Ok::<(), clatch::colmap::ColmapError>(())
+    /// ```
+    pub fn add_two_view_geometry(&mut self, geometry: &TwoViewGeometry) -> Result<(), ColmapError> {
+        geometry.check()?;
+        let (image_id1, image_id2) = (geometry.image_id1, geometry.image_id2);
+        let (n1, n2) = (
+            self.keypoint_count(image_id1)?,
+            self.keypoint_count(image_id2)?,
+        );
+        let pairs = geometry.inliers.iter().map(|&[k1, k2]| (k1, k2));
+        check_index_pairs(image_id1, image_id2, pairs, n1, n2)?;
+        let rows = i64::try_from(geometry.inliers.len()).map_err(|_| ColmapError::TooMany {
+            what: "inlier matches",
+            count: geometry.inliers.len(),
+        })?;
+        let pair = geometry.pair_id();
+        if self.verified_pairs.contains(&pair) {
+            return Err(ColmapError::Duplicate {
+                what: format!("two-view geometry of pair ({image_id1}, {image_id2})"),
+            });
+        }
+        let blobs = TwoViewBlobs::of(&geometry.in_colmap_order()?);
+        self.connection
+            .execute(
+                "INSERT INTO two_view_geometries (pair_id, rows, cols, data, config, F, E, H, qvec, tvec) \
+                 VALUES (?1, ?2, 2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)",
+                params![
+                    pair as i64,
+                    rows,
+                    blobs.inliers,
+                    geometry.config.code(),
+                    blobs.f,
+                    blobs.e,
+                    blobs.h,
+                    blobs.qvec,
+                    blobs.tvec
+                ],
+            )
+            .map_err(ColmapError::sql("inserting a two-view geometry"))?;
+        self.verified_pairs.insert(pair);
+        Ok(())
+    }
+
     /// Commits everything written.
     pub fn finish(self) -> Result<(), ColmapError> {
         self.connection
@@ -218,9 +344,20 @@ pub fn check_match_indices(
     n1: usize,
     n2: usize,
 ) -> Result<(), ColmapError> {
-    for (index, m) in matches.iter().enumerate() {
-        for (image_id, keypoint, keypoints) in [(image_id1, m.query, n1), (image_id2, m.train, n2)]
-        {
+    let pairs = matches.iter().map(|m| (m.query, m.train));
+    check_index_pairs(image_id1, image_id2, pairs, n1, n2)
+}
+
+/// Checks index pairs `(keypoint of image 1, keypoint of image 2)` against the keypoint counts.
+fn check_index_pairs(
+    image_id1: u32,
+    image_id2: u32,
+    pairs: impl Iterator<Item = (u32, u32)>,
+    n1: usize,
+    n2: usize,
+) -> Result<(), ColmapError> {
+    for (index, (k1, k2)) in pairs.enumerate() {
+        for (image_id, keypoint, keypoints) in [(image_id1, k1, n1), (image_id2, k2, n2)] {
             if keypoint as usize >= keypoints {
                 return Err(ColmapError::MatchOutOfRange {
                     index,

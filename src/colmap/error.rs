@@ -21,6 +21,19 @@ pub enum ColmapError {
     #[error("COLMAP database {path} already exists; remove it or choose another path")]
     DatabaseExists { path: String },
 
+    /// [`crate::colmap::Database::open_existing`] of a path that is not a file.
+    #[error("COLMAP database {path} does not exist")]
+    DatabaseMissing { path: String },
+
+    /// A two-view geometry that cannot be stored (a matrix not finite, a singular homography to turn
+    /// round, a quaternion not of unit length).
+    #[error("two-view geometry of pair ({image_id1}, {image_id2}): {reason}")]
+    InvalidGeometry {
+        image_id1: u32,
+        image_id2: u32,
+        reason: &'static str,
+    },
+
     /// A camera whose size or intrinsics make no sense.
     #[error("invalid camera: {reason}")]
     InvalidCamera { reason: String },

@@ -23,7 +23,10 @@
 //! COLMAP cannot match binary descriptors and needs none: it gets keypoints in its SQLite database
 //! ([`Database`]) and putative matches as a text file ([`MatchList`]) that
 //! `colmap matches_importer --match_type raw` reads, verifies geometrically and stores in
-//! `two_view_geometries`, the only match table its `mapper` reads.
+//! `two_view_geometries`, the only match table its `mapper` reads. Pairs verified outside COLMAP
+//! go straight into that table instead ([`Database::add_two_view_geometry`] of a
+//! [`TwoViewGeometry`], into a new database or one opened by [`Database::open_existing`]), and the
+//! mapper runs without `matches_importer`.
 //!
 //! **Target: COLMAP 3.8** (Debian 12's), whose schema is [`schema::SCHEMA_3_8`]. Conventions, from
 //! COLMAP 3.8's source and checked by running it:
@@ -54,6 +57,7 @@ mod plan;
 mod report;
 mod run;
 pub mod schema;
+pub mod two_view;
 mod writer;
 
 pub use camera::{DEFAULT_FOCAL_FACTOR, PINHOLE_MODEL_ID, PinholeCamera};
@@ -70,6 +74,7 @@ pub use match_list::MatchList;
 pub use pairs::{PhotoRef, match_photo_pairs, resolve_pairs};
 pub use plan::FolderPlan;
 pub use report::{FolderProgress, FolderReport, FolderStage, FolderTimes};
+pub use two_view::{Matrix3, RelativePose, TwoViewConfig, TwoViewGeometry};
 pub use writer::{FolderCounts, FolderWriter};
 
 use crate::keypoint::KeyPoint;

@@ -14,6 +14,7 @@ use cudarc::driver::{DeviceRepr, LaunchConfig, PushKernelArg};
 use super::device::GpuDevice;
 use super::error::driver_error;
 use super::header::CLATCH_OPENCV_THREADS;
+use super::kernels;
 use super::memory::{alloc_zeros, upload};
 use crate::describe::Described;
 use crate::describe::opencv::{OpencvLatch, Placed, Placement};
@@ -69,7 +70,7 @@ pub(crate) fn describe_opencv(
     let mut out = alloc_zeros::<u32>(&stream, count * chunks, "descriptor allocation")?;
     let (stride, count_arg) = (w as i32, count as i32);
     let (half, bits) = (latch.half_ssd_size() as i32, width.bits() as i32);
-    let kernel = "clatch_describe_opencv";
+    let kernel = kernels::DESCRIBE_OPENCV;
     let mut launch = stream.launch_builder(dev.kernel(kernel));
     launch
         .arg(&device_image)
@@ -88,7 +89,7 @@ pub(crate) fn describe_opencv(
     // SAFETY: the argument list matches clatch_describe_opencv's signature; the image holds every pixel
     // the placements' patches touch (the border rule), the table 512 triplets, `out` count * chunks
     // words.
-    unsafe { launch.launch(config) }.map_err(driver_error(kernel))?;
+    unsafe { launch.launch(config) }.map_err(driver_error(kernel.name()))?;
     let halves = stream.clone_dtoh(&out).map_err(driver_error(
         "clatch_describe_opencv (running, or copying descriptors back)",
     ))?;

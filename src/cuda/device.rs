@@ -12,7 +12,7 @@ use cudarc::nvrtc::Ptx;
 use super::error::driver_error;
 #[cfg(feature = "internals")]
 use super::kernels::BENCH_KERNELS;
-use super::kernels::{KERNELS, KernelFile};
+use super::kernels::{KERNELS, Kernel, KernelFile};
 use super::matching_tensor::{self, MatchKernel};
 use super::memory::arena::LanePool;
 use super::ptx;
@@ -26,7 +26,7 @@ use crate::error::{Error, Result};
 #[derive(Debug)]
 pub struct GpuDevice {
     pub(crate) ctx: Arc<CudaContext>,
-    kernels: HashMap<&'static str, CudaFunction>,
+    kernels: HashMap<Kernel, CudaFunction>,
     pub(crate) rotation: CudaSlice<i32>,
     pub(crate) triplets: CudaSlice<u8>,
     /// `angle::quadrant_boundaries()`, flattened `(x, y)` pairs: the detector's orientation bins.
@@ -42,7 +42,7 @@ pub struct GpuDevice {
     #[cfg(feature = "internals")]
     force_ptx: bool,
     #[cfg(feature = "internals")]
-    bench_kernels: OnceLock<HashMap<&'static str, CudaFunction>>,
+    bench_kernels: OnceLock<HashMap<Kernel, CudaFunction>>,
     /// Idle streams with their scratch arenas, for blocking calls and batches.
     pub(crate) lanes: LanePool,
     /// Descriptor weight tables uploaded so far, by value.
@@ -276,14 +276,14 @@ impl GpuDevice {
     /// A loaded kernel, by its `extern "C"` name (one listed in `KERNELS`, or with the `internals`
     /// feature in `BENCH_KERNELS` once loaded). Every name the crate asks for is one of its own
     /// constants, so a miss is a bug in clatch.
-    pub(crate) fn kernel(&self, name: &'static str) -> &CudaFunction {
+    pub(crate) fn kernel(&self, kernel: Kernel) -> &CudaFunction {
         #[cfg(feature = "internals")]
-        if let Some(f) = self.bench_kernels.get().and_then(|k| k.get(name)) {
+        if let Some(f) = self.bench_kernels.get().and_then(|k| k.get(&kernel)) {
             return f;
         }
         self.kernels
-            .get(name)
-            .unwrap_or_else(|| panic!("kernel {name} is not listed in KERNELS"))
+            .get(&kernel)
+            .unwrap_or_else(|| panic!("kernel {} is not listed in KERNELS", kernel.name()))
     }
 
     /// The device's name, e.g. "NVIDIA H100 80GB HBM3".
@@ -311,7 +311,7 @@ fn load_module(
     ctx: &Arc<CudaContext>,
     force_ptx: bool,
     file: &KernelFile,
-    kernels: &mut HashMap<&'static str, CudaFunction>,
+    kernels: &mut HashMap<Kernel, CudaFunction>,
 ) -> Result<()> {
     let image = if force_ptx {
         Ptx::from_src(file.ptx)
@@ -319,10 +319,11 @@ fn load_module(
         Ptx::from_binary(file.fatbin.to_vec())
     };
     let module = ctx.load_module(image).map_err(driver_error(file.path))?;
-    for &name in file.names {
+    for kernel in file.entry_points() {
+        let name = kernel.name();
         let function = module.load_function(name).map_err(driver_error(name))?;
         matching_tensor::configure(name, &function)?;
-        kernels.insert(name, function);
+        kernels.insert(kernel, function);
     }
     Ok(())
 }

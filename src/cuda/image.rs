@@ -14,6 +14,7 @@ use super::header::{
     CLATCH_DETECT_TILE_Y, CLATCH_PYRAMID_TILE_X, CLATCH_PYRAMID_TILE_Y, CLATCH_SMOOTH_TILE_X,
     CLATCH_SMOOTH_TILE_Y,
 };
+use super::kernels;
 use super::memory::arena::{Lane, Scratch};
 use super::memory::{band_rows, copy_rows_2d, is_pinned, upload_rows};
 use crate::describe::Smoothing;
@@ -278,7 +279,7 @@ impl DeviceImage {
         let mut pixels = lane.scratch::<u8>(pitch * height, "pyramid level")?;
         let (src_pitch, src_w, src_h) = (self.pitch as i32, self.width as i32, self.height as i32);
         let (dst_pitch, dst_w, dst_h) = (pitch as i32, width as i32, height as i32);
-        let mut launch = lane.launch_builder(dev.kernel("clatch_downscale"));
+        let mut launch = lane.launch_builder(dev.kernel(kernels::DOWNSCALE));
         launch
             .arg(self.pixels.whole())
             .arg(&src_pitch)
@@ -321,8 +322,8 @@ impl DeviceImage {
     ) -> Result<Option<Scratch<u8>>> {
         let kernel = match smoothing {
             Smoothing::None => return Ok(None),
-            Smoothing::Binomial3 => "clatch_smooth_binomial3",
-            Smoothing::Binomial5 => "clatch_smooth_binomial5",
+            Smoothing::Binomial3 => kernels::SMOOTH_BINOMIAL3,
+            Smoothing::Binomial5 => kernels::SMOOTH_BINOMIAL5,
         };
         self.arrived(lane)?;
         let mut smoothed = lane.scratch::<u8>(self.pitch * self.height, "smoothed image")?;
@@ -348,7 +349,7 @@ impl DeviceImage {
         // SAFETY: matches the kernel's signature (source, pitch, width, height, destination, pitch);
         // both buffers hold at least `height` rows of `pitch` bytes; every read is clamped inside the
         // image and only pixels with x < width, y < height are written (and read afterwards).
-        unsafe { launch.launch(config) }.map_err(driver_error(kernel))?;
+        unsafe { launch.launch(config) }.map_err(driver_error(kernel.name()))?;
         Ok(Some(smoothed))
     }
 
@@ -384,7 +385,7 @@ impl DeviceImage {
         let mut texels = lane.scratch::<u8>(pitch * qh, "quad texture")?;
         let (pitch_i, width, height) = (self.pitch as i32, self.width as i32, self.height as i32);
         let quad_pitch = (pitch / 4) as i32;
-        let mut launch = lane.launch_builder(dev.kernel("clatch_build_quads"));
+        let mut launch = lane.launch_builder(dev.kernel(kernels::BUILD_QUADS));
         launch
             .arg(source)
             .arg(&pitch_i)

@@ -1,91 +1,199 @@
 //! The registry of kernels: every kernel file the build compiles (`kernels/*.cu`), its PTX and fatbin,
-//! and the entry points the crate launches from it. The device loads what is listed here; each stage
-//! module lists its own entry points.
+//! and every entry point the crate launches from it, as a typed [`Kernel`]. A launch site names one of
+//! the constants here (or indexes one of the families), never a string, so a kernel it asks for is a
+//! kernel the device loaded; `kernel_lists_match_the_ptx` checks the lists against the PTX.
 
 use super::ptx;
+
+/// One entry point of clatch's kernels. Made only in this file, from the lists below.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub(crate) struct Kernel(&'static str);
+
+impl Kernel {
+    /// The `extern "C"` name, as in the PTX.
+    pub(crate) const fn name(self) -> &'static str {
+        self.0
+    }
+}
+
+// kernels/describe.cu
+pub(crate) const DESCRIBE: Kernel = Kernel("clatch_describe");
+pub(crate) const DESCRIBE_BINARY: Kernel = Kernel("clatch_describe_binary");
+pub(crate) const BUILD_QUADS: Kernel = Kernel("clatch_build_quads");
+pub(crate) const SMOOTH_BINOMIAL3: Kernel = Kernel("clatch_smooth_binomial3");
+pub(crate) const SMOOTH_BINOMIAL5: Kernel = Kernel("clatch_smooth_binomial5");
+pub(crate) const GATHER_ROWS: Kernel = Kernel("clatch_gather_rows");
+// kernels/describe_opencv.cu
+pub(crate) const DESCRIBE_OPENCV: Kernel = Kernel("clatch_describe_opencv");
+// kernels/detect.cu
+pub(crate) const DETECT_NMS: Kernel = Kernel("clatch_detect_nms");
+pub(crate) const SCAN_REDUCE: Kernel = Kernel("clatch_scan_reduce");
+pub(crate) const SCAN_PARTIALS: Kernel = Kernel("clatch_scan_partials");
+pub(crate) const SCAN_APPLY: Kernel = Kernel("clatch_scan_apply");
+pub(crate) const DETECT_SCATTER: Kernel = Kernel("clatch_detect_scatter");
+pub(crate) const DETECT_ORIENT: Kernel = Kernel("clatch_detect_orient");
+pub(crate) const ORIENT_REFINE: Kernel = Kernel("clatch_orient_refine");
+// kernels/pyramid.cu
+pub(crate) const DOWNSCALE: Kernel = Kernel("clatch_downscale");
+// kernels/matching.cu
+pub(crate) const KNN_MERGE: Kernel = Kernel("clatch_knn_merge");
+pub(crate) const MATCH_FILTER: Kernel = Kernel("clatch_match_filter");
+pub(crate) const MATCH_SCAN: Kernel = Kernel("clatch_match_scan");
+pub(crate) const MATCH_COMPACT: Kernel = Kernel("clatch_match_compact");
+// kernels/match_pairs.cu
+pub(crate) const PAIRS_COMPACT: Kernel = Kernel("clatch_pairs_compact");
+// kernels/matching_tensor.cu
+pub(crate) const EXPAND_SIGNS: Kernel = Kernel("clatch_expand_signs");
+// kernels/bench_*.cu
+#[cfg(feature = "internals")]
+pub(crate) const MMA_S8_RATE: Kernel = Kernel("clatch_mma_s8_rate");
+#[cfg(feature = "internals")]
+pub(crate) const DEBUG_READ_TEXTURE: Kernel = Kernel("clatch_debug_read_texture");
+
+macro_rules! knn_family {
+    ($($w:literal)*) => {
+        &[$(
+            Kernel(concat!("clatch_knn_w", $w, "_k1")),
+            Kernel(concat!("clatch_knn_w", $w, "_k2")),
+            Kernel(concat!("clatch_knn_w", $w, "_k4")),
+            Kernel(concat!("clatch_knn_w", $w, "_k8")),
+            Kernel(concat!("clatch_knn_mutual_w", $w, "_k1")),
+            Kernel(concat!("clatch_knn_mutual_w", $w, "_k2")),
+        )*]
+    };
+}
+
+/// The kNN kernels of `kernels/matching.cu` for rows of 1..8 words: per width, one per list length
+/// (1, 2, 4, 8), then the two with the fused reverse 1-NN (k = 1, 2). Indexed by
+/// `cuda::matching::knn_kernel`.
+pub(crate) const KNN: &[Kernel] = knn_family!(1 2 3 4 5 6 7 8);
+
+macro_rules! pairs_family {
+    ($prefix:literal, $suffix:literal: $($w:literal)*) => {
+        &[$(
+            Kernel(concat!($prefix, $suffix, $w, "_k1")),
+            Kernel(concat!($prefix, $suffix, $w, "_k2")),
+            Kernel(concat!($prefix, "mutual_", $suffix, $w, "_k1")),
+            Kernel(concat!($prefix, "mutual_", $suffix, $w, "_k2")),
+        )*]
+    };
+}
+
+/// The grouped kNN kernels of `kernels/match_pairs.cu`: per width of 1..8 words, k = 1, 2, then the
+/// same with the reverse 1-NN.
+pub(crate) const PAIRS_KNN: &[Kernel] = pairs_family!("clatch_pairs_knn_", "w": 1 2 3 4 5 6 7 8);
+/// The grouped tensor-core kNN kernels of `kernels/match_pairs_tensor.cu`: per padded row width of
+/// 64, 128, 256 and 512 bits, k = 1, 2, then the same with the reverse 1-NN.
+pub(crate) const TENSOR_PAIRS_KNN: &[Kernel] =
+    pairs_family!("clatch_knn_tensor_pairs_", "b": 64 128 256 512);
+/// The tensor-core kNN kernels of `kernels/matching_tensor.cu`, laid out as [`TENSOR_PAIRS_KNN`].
+pub(crate) const TENSOR_KNN: &[Kernel] = pairs_family!("clatch_knn_tensor_", "b": 64 128 256 512);
+
+/// The alternatives of `kernels/bench_knn_variants.cu` (512 bits, k = 2): `q` queries per thread,
+/// popcount groups of `g` words, gallery loop unrolled `u` times.
+#[cfg(feature = "internals")]
+pub(crate) const KNN_VARIANTS: &[Kernel] = &[
+    Kernel("clatch_knn_variant_q1_g1_u1"),
+    Kernel("clatch_knn_variant_q1_g3_u1"),
+    Kernel("clatch_knn_variant_q1_g7_u1"),
+    Kernel("clatch_knn_variant_q1_g15_u1"),
+    Kernel("clatch_knn_variant_q2_g1_u1"),
+    Kernel("clatch_knn_variant_q2_g3_u1"),
+    Kernel("clatch_knn_variant_q2_g7_u1"),
+    Kernel("clatch_knn_variant_q2_g15_u1"),
+    Kernel("clatch_knn_variant_q2_g7_u2"),
+];
 
 /// One kernel file: its portable PTX, its fatbin and its entry points.
 pub(crate) struct KernelFile {
     pub(crate) path: &'static str,
     pub(crate) ptx: &'static str,
     pub(crate) fatbin: &'static [u8],
-    pub(crate) names: &'static [&'static str],
+    /// Its entry points, in groups (single kernels, families).
+    pub(crate) kernels: &'static [&'static [Kernel]],
     /// Int8 MMA: loaded only on compute capability 8.0 and later.
     pub(crate) needs_tensor_cores: bool,
 }
 
-/// Every kernel entry point the library launches, by the file that defines it. Add a kernel here and
+impl KernelFile {
+    /// Every entry point of the file.
+    pub(crate) fn entry_points(&self) -> impl Iterator<Item = Kernel> + '_ {
+        self.kernels.iter().flat_map(|group| group.iter().copied())
+    }
+}
+
+/// Every kernel file the library loads, with its entry points. Add a kernel above, list it here and
 /// fetch it with `GpuDevice::kernel`.
 pub(crate) const KERNELS: &[KernelFile] = &[
     KernelFile {
         path: "kernels/describe.cu",
         ptx: ptx::DESCRIBE_PTX,
         fatbin: ptx::DESCRIBE_FATBIN,
-        names: &[
-            "clatch_describe",
-            "clatch_describe_binary",
-            "clatch_build_quads",
-            "clatch_smooth_binomial3",
-            "clatch_smooth_binomial5",
-            "clatch_gather_rows",
-        ],
+        kernels: &[&[
+            DESCRIBE,
+            DESCRIBE_BINARY,
+            BUILD_QUADS,
+            SMOOTH_BINOMIAL3,
+            SMOOTH_BINOMIAL5,
+            GATHER_ROWS,
+        ]],
         needs_tensor_cores: false,
     },
     KernelFile {
         path: "kernels/describe_opencv.cu",
         ptx: ptx::DESCRIBE_OPENCV_PTX,
         fatbin: ptx::DESCRIBE_OPENCV_FATBIN,
-        names: &["clatch_describe_opencv"],
+        kernels: &[&[DESCRIBE_OPENCV]],
         needs_tensor_cores: false,
     },
     KernelFile {
         path: "kernels/detect.cu",
         ptx: ptx::DETECT_PTX,
         fatbin: ptx::DETECT_FATBIN,
-        names: &[
-            "clatch_detect_nms",
-            "clatch_scan_reduce",
-            "clatch_scan_partials",
-            "clatch_scan_apply",
-            "clatch_detect_scatter",
-            "clatch_detect_orient",
-            "clatch_orient_refine",
-        ],
+        kernels: &[&[
+            DETECT_NMS,
+            SCAN_REDUCE,
+            SCAN_PARTIALS,
+            SCAN_APPLY,
+            DETECT_SCATTER,
+            DETECT_ORIENT,
+            ORIENT_REFINE,
+        ]],
         needs_tensor_cores: false,
     },
     KernelFile {
         path: "kernels/pyramid.cu",
         ptx: ptx::PYRAMID_PTX,
         fatbin: ptx::PYRAMID_FATBIN,
-        names: &["clatch_downscale"],
+        kernels: &[&[DOWNSCALE]],
         needs_tensor_cores: false,
     },
     KernelFile {
         path: "kernels/matching.cu",
         ptx: ptx::MATCHING_PTX,
         fatbin: ptx::MATCHING_FATBIN,
-        names: crate::cuda::matching::KERNELS,
+        kernels: &[KNN, &[KNN_MERGE, MATCH_FILTER, MATCH_SCAN, MATCH_COMPACT]],
         needs_tensor_cores: false,
     },
     KernelFile {
         path: "kernels/match_pairs.cu",
         ptx: ptx::MATCH_PAIRS_PTX,
         fatbin: ptx::MATCH_PAIRS_FATBIN,
-        names: crate::cuda::collection::KERNELS,
+        kernels: &[PAIRS_KNN, &[PAIRS_COMPACT]],
         needs_tensor_cores: false,
     },
     KernelFile {
         path: "kernels/match_pairs_tensor.cu",
         ptx: ptx::MATCH_PAIRS_TENSOR_PTX,
         fatbin: ptx::MATCH_PAIRS_TENSOR_FATBIN,
-        names: crate::cuda::collection::TENSOR_KERNELS,
+        kernels: &[TENSOR_PAIRS_KNN],
         needs_tensor_cores: true,
     },
     KernelFile {
         path: "kernels/matching_tensor.cu",
         ptx: ptx::MATCHING_TENSOR_PTX,
         fatbin: ptx::MATCHING_TENSOR_FATBIN,
-        names: crate::cuda::matching_tensor::KERNELS,
+        kernels: &[&[EXPAND_SIGNS], TENSOR_KNN],
         needs_tensor_cores: true,
     },
 ];
@@ -98,21 +206,21 @@ pub(crate) const BENCH_KERNELS: &[KernelFile] = &[
         path: "kernels/bench_knn_variants.cu",
         ptx: ptx::BENCH_KNN_VARIANTS_PTX,
         fatbin: ptx::BENCH_KNN_VARIANTS_FATBIN,
-        names: crate::cuda::matching::hooks::VARIANT_KERNELS,
+        kernels: &[KNN_VARIANTS],
         needs_tensor_cores: false,
     },
     KernelFile {
         path: "kernels/bench_mma_rate.cu",
         ptx: ptx::BENCH_MMA_RATE_PTX,
         fatbin: ptx::BENCH_MMA_RATE_FATBIN,
-        names: &["clatch_mma_s8_rate"],
+        kernels: &[&[MMA_S8_RATE]],
         needs_tensor_cores: true,
     },
     KernelFile {
         path: "kernels/bench_texture_read.cu",
         ptx: ptx::BENCH_TEXTURE_READ_PTX,
         fatbin: ptx::BENCH_TEXTURE_READ_FATBIN,
-        names: &["clatch_debug_read_texture"],
+        kernels: &[&[DEBUG_READ_TEXTURE]],
         needs_tensor_cores: false,
     },
 ];
@@ -140,7 +248,7 @@ mod tests {
                 .filter_map(|l| l.trim().strip_prefix(".visible .entry "))
                 .map(|l| l.trim_end_matches('(').trim())
                 .collect();
-            let mut listed = file.names.to_vec();
+            let mut listed: Vec<&str> = file.entry_points().map(Kernel::name).collect();
             entries.sort_unstable();
             listed.sort_unstable();
             assert_eq!(entries, listed, "{}", file.path);

@@ -32,7 +32,11 @@ pub struct ImageFolder {
 impl ImageFolder {
     #[new]
     #[pyo3(signature = (images, *, max_pixels = 100_000_000))]
-    fn new(py: Python<'_>, images: PathBuf, max_pixels: u64) -> PyResult<Self> {
+    fn new(
+        py: Python<'_>,
+        #[pyo3(from_py_with = crate::args::images_path)] images: PathBuf,
+        #[pyo3(from_py_with = crate::args::max_pixels)] max_pixels: u64,
+    ) -> PyResult<Self> {
         let limits = DecodeLimits::default().with_max_pixels(max_pixels);
         let inner = compute_with(py, || clatch::colmap::ImageFolder::open(&images, &limits))?;
         Ok(Self { inner })

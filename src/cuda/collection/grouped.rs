@@ -27,6 +27,7 @@ use crate::cuda::header::{
     CLATCH_MATCH_SELECT_THREADS, CLATCH_MATCH_THREADS, CLATCH_TENSOR_WARPS, clatch_pair,
     clatch_pair_task,
 };
+use crate::cuda::kernels::{self, Kernel};
 use crate::cuda::matching_tensor;
 use crate::cuda::memory::{alloc_pinned, alloc_zeros};
 use crate::error::Result;
@@ -300,11 +301,11 @@ impl Slot {
         // `best` holds the block's query_rows records and `reverse` its train_rows keys (best_row and
         // reverse_row pack them, see `Block::layout`), both within this slot's capacity (checked above).
         // With k = 2 every pair has two gallery rows or more (`Run::check`).
-        unsafe { launch.launch(config) }.map_err(driver_error(kernel))?;
+        unsafe { launch.launch(config) }.map_err(driver_error(kernel.name()))?;
 
         let n_pairs = pairs.len() as u32;
         let cross_check = run.config.cross_check as i32;
-        let mut launch = stream.launch_builder(run.dev.kernel("clatch_pairs_compact"));
+        let mut launch = stream.launch_builder(run.dev.kernel(kernels::PAIRS_COMPACT));
         launch
             .arg(&self.pairs)
             .arg(&n_pairs)
@@ -370,7 +371,7 @@ pub(super) struct SignRows<'a> {
     pub(super) train: &'a CudaSlice<u8>,
     pub(super) bits: usize,
     /// The `clatch_knn_tensor_pairs_*` kernel for this width, k and cross-check.
-    pub(super) kernel: &'static str,
+    pub(super) kernel: Kernel,
 }
 
 /// What every block of one run shares.

@@ -25,6 +25,7 @@ use cudarc::driver::{CudaSlice, CudaStream, CudaViewMut};
 use super::device::GpuDevice;
 use super::error::driver_error;
 use super::header::{CLATCH_MATCH_ROW_PAD, CLATCH_PAIRS_ROW_ALIGN};
+use super::kernels::{self, Kernel};
 use super::matching_tensor::{self, MatchKernel};
 use super::memory::alloc_zeros;
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
@@ -35,51 +36,16 @@ use plan::{Budget, PairRows};
 const ROW_ALIGN: usize = CLATCH_PAIRS_ROW_ALIGN as usize;
 const ROW_PAD: usize = CLATCH_MATCH_ROW_PAD as usize;
 
-macro_rules! pair_kernels {
-    ($($w:literal)*) => {
-        &[
-            $(
-                concat!("clatch_pairs_knn_w", $w, "_k1"),
-                concat!("clatch_pairs_knn_w", $w, "_k2"),
-                concat!("clatch_pairs_knn_mutual_w", $w, "_k1"),
-                concat!("clatch_pairs_knn_mutual_w", $w, "_k2"),
-            )*
-            "clatch_pairs_compact",
-        ]
-    };
-}
-
-/// Every entry point of `kernels/match_pairs.cu`: four grouped kNN kernels per width of 1..8 words
-/// (see [`kernel_name`]), then the compaction.
-pub(crate) const KERNELS: &[&str] = pair_kernels!(1 2 3 4 5 6 7 8);
-
-macro_rules! tensor_pair_kernels {
-    ($($b:literal)*) => {
-        &[
-            $(
-                concat!("clatch_knn_tensor_pairs_b", $b, "_k1"),
-                concat!("clatch_knn_tensor_pairs_b", $b, "_k2"),
-                concat!("clatch_knn_tensor_pairs_mutual_b", $b, "_k1"),
-                concat!("clatch_knn_tensor_pairs_mutual_b", $b, "_k2"),
-            )*
-        ]
-    };
-}
-
-/// Every entry point of `kernels/match_pairs_tensor.cu`: four grouped tensor-core kNN kernels per
-/// padded row width of 64, 128, 256 and 512 bits (see [`tensor_kernel_name`]).
-pub(crate) const TENSOR_KERNELS: &[&str] = tensor_pair_kernels!(64 128 256 512);
-
 /// The grouped tensor-core kNN kernel for sign rows of `bits` (64, 128, 256, 512) bytes.
-fn tensor_kernel_name(bits: usize, k: usize, mutual: bool) -> &'static str {
+fn tensor_kernel_name(bits: usize, k: usize, mutual: bool) -> Kernel {
     let slot = bits.trailing_zeros() as usize - 6;
-    TENSOR_KERNELS[slot * 4 + 2 * mutual as usize + (k - 1)]
+    kernels::TENSOR_PAIRS_KNN[slot * 4 + 2 * mutual as usize + (k - 1)]
 }
 
 /// The grouped kNN kernel for rows of `words` words, `k` (1, or 2 with the ratio test), with the
 /// reverse 1-NN when `mutual`.
-fn kernel_name(words: usize, k: usize, mutual: bool) -> &'static str {
-    KERNELS[(words - 1) * 4 + 2 * mutual as usize + (k - 1)]
+fn kernel_name(words: usize, k: usize, mutual: bool) -> Kernel {
+    kernels::PAIRS_KNN[(words - 1) * 4 + 2 * mutual as usize + (k - 1)]
 }
 
 /// Where one set lies in the buffer.
@@ -429,24 +395,24 @@ mod tests {
         for words in 1..=8 {
             for k in 1..=2 {
                 assert_eq!(
-                    kernel_name(words, k, false),
+                    kernel_name(words, k, false).name(),
                     format!("clatch_pairs_knn_w{words}_k{k}")
                 );
                 assert_eq!(
-                    kernel_name(words, k, true),
+                    kernel_name(words, k, true).name(),
                     format!("clatch_pairs_knn_mutual_w{words}_k{k}")
                 );
             }
         }
-        assert_eq!(KERNELS.len(), 8 * 4 + 1);
+        assert_eq!(kernels::PAIRS_KNN.len(), 8 * 4);
         for bits in [64, 128, 256, 512] {
             for k in 1..=2 {
                 assert_eq!(
-                    tensor_kernel_name(bits, k, false),
+                    tensor_kernel_name(bits, k, false).name(),
                     format!("clatch_knn_tensor_pairs_b{bits}_k{k}")
                 );
                 assert_eq!(
-                    tensor_kernel_name(bits, k, true),
+                    tensor_kernel_name(bits, k, true).name(),
                     format!("clatch_knn_tensor_pairs_mutual_b{bits}_k{k}")
                 );
             }

@@ -10,6 +10,7 @@ use super::device::GpuDevice;
 use super::error::driver_error;
 use super::header::{CLATCH_DESCRIBE_WARPS, CLATCH_GATHER_THREADS};
 use super::image::{DeviceImage, ImageLife};
+use super::kernels;
 use super::memory::arena::{Lane, Leased, PinnedScratch, Scratch, settled};
 use crate::describe::{Described, DescriptorConfig, SamplingFrame, SkipReason, Skipped};
 use crate::descriptor::DescriptorSet;
@@ -194,9 +195,9 @@ pub(crate) fn launch_describe(
         .len()
         .clamp(1, dev.multiprocessors * BLOCKS_PER_SM) as u32;
     let kernel = if weights.binary {
-        "clatch_describe_binary"
+        kernels::DESCRIBE_BINARY
     } else {
-        "clatch_describe"
+        kernels::DESCRIBE
     };
     let mut launch = lane.launch_builder(dev.kernel(kernel));
     launch
@@ -219,7 +220,7 @@ pub(crate) fn launch_describe(
     // SAFETY: the argument list matches clatch_describe's signature; every buffer holds what the
     // kernel indexes (capacity keypoints, one count, 2880 rotations, 512 triplets, 64 weights,
     // capacity * words outputs).
-    unsafe { launch.launch(config) }.map_err(driver_error(kernel))?;
+    unsafe { launch.launch(config) }.map_err(driver_error(kernel.name()))?;
     lane.keep_until_passed(&weights.values)
 }
 
@@ -252,7 +253,7 @@ pub(crate) fn gather_rows(
     let blocks = (rows * words)
         .div_ceil(threads)
         .min(dev.multiprocessors * BLOCKS_PER_SM) as u32;
-    let mut launch = stream.launch_builder(dev.kernel("clatch_gather_rows"));
+    let mut launch = stream.launch_builder(dev.kernel(kernels::GATHER_ROWS));
     launch
         .arg(src)
         .arg(source)

@@ -57,7 +57,7 @@ pub fn debug_detect_stages(
     let mut texels =
         crate::cuda::memory::alloc_zeros::<u8>(&stream, width * height, "debug texels")?;
     device_image.arrived(&stream)?;
-    let mut read = stream.launch_builder(dev.kernel("clatch_debug_read_texture"));
+    let mut read = stream.launch_builder(dev.kernel(crate::cuda::kernels::DEBUG_READ_TEXTURE));
     let texture = device_image.texture();
     let (w, h) = (width as i32, height as i32);
     read.arg(&texture).arg(&w).arg(&h).arg(&mut texels);

@@ -26,6 +26,7 @@ use super::header::{
     clatch_levels,
 };
 use super::image::{DeviceImage, ImageLife};
+use super::kernels;
 use super::memory::arena::{Lane, Leased, Scratch, settled};
 use crate::detect::DetectorConfig;
 use crate::error::Result;
@@ -239,7 +240,7 @@ impl DetectJob {
                 continue;
             }
             let first_tile_row = done as i32;
-            let mut nms = stream.launch_builder(dev.kernel("clatch_detect_nms"));
+            let mut nms = stream.launch_builder(dev.kernel(kernels::DETECT_NMS));
             nms.arg(&texture)
                 .arg(&width)
                 .arg(&height)
@@ -275,7 +276,7 @@ impl DetectJob {
             block_dim: (threads, 1, 1),
             shared_mem_bytes: 0,
         };
-        let mut reduce = stream.launch_builder(dev.kernel("clatch_scan_reduce"));
+        let mut reduce = stream.launch_builder(dev.kernel(kernels::SCAN_REDUCE));
         reduce
             .arg(self.counts.whole())
             .arg(&counts_len)
@@ -285,7 +286,7 @@ impl DetectJob {
         unsafe { reduce.launch(scan(scan_blocks, CLATCH_SCAN_THREADS)) }
             .map_err(driver_error("launching clatch_scan_reduce"))?;
 
-        let mut partials = stream.launch_builder(dev.kernel("clatch_scan_partials"));
+        let mut partials = stream.launch_builder(dev.kernel(kernels::SCAN_PARTIALS));
         partials
             .arg(self.partials.whole_mut())
             .arg(&scan_blocks)
@@ -294,7 +295,7 @@ impl DetectJob {
         unsafe { partials.launch(scan(1, CLATCH_SCAN_TOP_THREADS)) }
             .map_err(driver_error("launching clatch_scan_partials"))?;
 
-        let mut apply = stream.launch_builder(dev.kernel("clatch_scan_apply"));
+        let mut apply = stream.launch_builder(dev.kernel(kernels::SCAN_APPLY));
         apply
             .arg(self.counts.whole_mut())
             .arg(&counts_len)
@@ -307,7 +308,7 @@ impl DetectJob {
         }
 
         let warps = CLATCH_DETECT_WARPS as usize;
-        let mut scatter = stream.launch_builder(dev.kernel("clatch_detect_scatter"));
+        let mut scatter = stream.launch_builder(dev.kernel(kernels::DETECT_SCATTER));
         scatter
             .arg(self.kept.whole())
             .arg(&pitch)
@@ -335,7 +336,7 @@ impl DetectJob {
             .capacity
             .div_ceil(warps)
             .clamp(1, dev.multiprocessors * ORIENT_BLOCKS_PER_SM);
-        let mut orient = stream.launch_builder(dev.kernel("clatch_detect_orient"));
+        let mut orient = stream.launch_builder(dev.kernel(kernels::DETECT_ORIENT));
         orient
             .arg(&texture)
             .arg(self.output.total.whole())
@@ -441,7 +442,7 @@ pub(crate) fn launch_orient_refine(
         .div_ceil(warps)
         .clamp(1, dev.multiprocessors * ORIENT_BLOCKS_PER_SM);
     let no_offsets: u64 = 0;
-    let mut launch = stream.launch_builder(dev.kernel("clatch_orient_refine"));
+    let mut launch = stream.launch_builder(dev.kernel(kernels::ORIENT_REFINE));
     launch
         .arg(&table)
         .arg(&dev.boundaries)

@@ -4,20 +4,6 @@ use super::*;
 use crate::cuda::device::time_launches;
 use cudarc::driver::sys;
 
-/// The alternatives of `kernels/bench_knn_variants.cu` (512 bits, k = 2): `q` queries per thread, popcount
-/// groups of `g` words, gallery loop unrolled `u` times.
-pub const VARIANT_KERNELS: &[&str] = &[
-    "clatch_knn_variant_q1_g1_u1",
-    "clatch_knn_variant_q1_g3_u1",
-    "clatch_knn_variant_q1_g7_u1",
-    "clatch_knn_variant_q1_g15_u1",
-    "clatch_knn_variant_q2_g1_u1",
-    "clatch_knn_variant_q2_g3_u1",
-    "clatch_knn_variant_q2_g7_u1",
-    "clatch_knn_variant_q2_g15_u1",
-    "clatch_knn_variant_q2_g7_u2",
-];
-
 /// [`knn`] with the gallery cut into segments of `segment_tiles` tiles of
 /// `CLATCH_MATCH_TILE` descriptors (1 = one block per tile, `usize::MAX` = one segment): lets the
 /// tests reach both the direct and the merged path at every size.
@@ -166,8 +152,8 @@ pub fn time_knn_variants(
     let q = upload(&stream, query, "query descriptor upload")?;
     let t = upload(&stream, train, "gallery descriptor upload")?;
     let mut results = Vec::new();
-    for &kernel in VARIANT_KERNELS {
-        let qpt = if kernel.contains("_q2_") { 2 } else { 1 };
+    for &kernel in crate::cuda::kernels::KNN_VARIANTS {
+        let qpt = if kernel.name().contains("_q2_") { 2 } else { 1 };
         let mut run = KnnRun::with_kernel(
             dev,
             &stream,
@@ -187,14 +173,15 @@ pub fn time_knn_variants(
             return Err(Error::Internal {
                 operation: "kNN variant check",
                 message: format!(
-                    "{kernel} differs from the production kernel (first at {first:?})"
+                    "{} differs from the production kernel (first at {first:?})",
+                    kernel.name()
                 ),
             });
         }
         let times = time_launches(dev, &stream, warmup, repeats, || {
             run.launch(dev, &stream, &q, &t, &mut out)
         })?;
-        results.push((kernel, times));
+        results.push((kernel.name(), times));
     }
     Ok(results)
 }

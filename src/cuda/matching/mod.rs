@@ -23,6 +23,7 @@ use super::header::{
     CLATCH_MATCH_QUERIES_PER_THREAD, CLATCH_MATCH_ROW_PAD, CLATCH_MATCH_SCAN_THREADS,
     CLATCH_MATCH_SELECT_THREADS, CLATCH_MATCH_THREADS, CLATCH_MATCH_TILE,
 };
+use super::kernels::{self, Kernel};
 use super::matching_tensor::{MatchKernel, TensorKnn};
 use super::memory::alloc_zeros;
 use crate::descriptor::DescriptorSet;
@@ -43,38 +44,15 @@ const LIST_LENGTHS: [usize; 4] = [1, 2, 4, 8];
 /// kNN kernels per descriptor width: one per list length, then the two with the reverse 1-NN.
 const KERNELS_PER_WIDTH: usize = 6;
 
-macro_rules! match_kernels {
-    ($($w:literal)*) => {
-        &[
-            $(
-                concat!("clatch_knn_w", $w, "_k1"),
-                concat!("clatch_knn_w", $w, "_k2"),
-                concat!("clatch_knn_w", $w, "_k4"),
-                concat!("clatch_knn_w", $w, "_k8"),
-                concat!("clatch_knn_mutual_w", $w, "_k1"),
-                concat!("clatch_knn_mutual_w", $w, "_k2"),
-            )*
-            "clatch_knn_merge",
-            "clatch_match_filter",
-            "clatch_match_scan",
-            "clatch_match_compact",
-        ]
-    };
-}
-
-/// Every entry point of `kernels/matching.cu`: for descriptor widths of 1..8 words, the kNN kernels
-/// (`KERNELS_PER_WIDTH` each, see [`knn_kernel`]), then the merge and selection kernels.
-pub(crate) const KERNELS: &[&str] = match_kernels!(1 2 3 4 5 6 7 8);
-
 /// The kNN kernel for rows of `words` 64-bit words and `k` neighbours, with the reverse 1-NN of the
 /// cross-check when `mutual` (then `k` is 1 or 2).
-fn knn_kernel(words: usize, k: usize, mutual: bool) -> &'static str {
+fn knn_kernel(words: usize, k: usize, mutual: bool) -> Kernel {
     let slot = LIST_LENGTHS
         .iter()
         .position(|&len| len >= k)
         .expect("k checked against MAX_K");
     let slot = if mutual { 4 + slot } else { slot };
-    KERNELS[(words - 1) * KERNELS_PER_WIDTH + slot]
+    kernels::KNN[(words - 1) * KERNELS_PER_WIDTH + slot]
 }
 
 const THREADS: usize = CLATCH_MATCH_THREADS as usize;
@@ -165,7 +143,7 @@ impl Geometry {
 /// One kNN on the device: kernel choice, geometry, the per-segment scratch buffer and, for the
 /// cross-check, the reverse 1-NN keys.
 struct KnnRun {
-    kernel: &'static str,
+    kernel: Kernel,
     geometry: Geometry,
     nq: u32,
     nt: u32,
@@ -220,7 +198,7 @@ impl KnnRun {
     fn with_kernel(
         dev: &GpuDevice,
         stream: &Arc<CudaStream>,
-        kernel: &'static str,
+        kernel: Kernel,
         qpt: usize,
         (nq, nt): (usize, usize),
         k: usize,
@@ -285,7 +263,7 @@ impl KnnRun {
         // ROW_PAD-row blocks (so every tile and query block the kernel loads is in bounds), `out` holds
         // nq * k matches, `partial` segments * nq * k keys when there is more than one segment, and
         // `reverse` nt keys for the mutual kernels (the only ones that touch it).
-        unsafe { launch.launch(config) }.map_err(driver_error(self.kernel))?;
+        unsafe { launch.launch(config) }.map_err(driver_error(self.kernel.name()))?;
         if g.segments > 1 {
             launch_merge(
                 dev,
@@ -323,7 +301,7 @@ pub(crate) fn launch_merge(
             )
         },
     )?;
-    let mut launch = stream.launch_builder(dev.kernel("clatch_knn_merge"));
+    let mut launch = stream.launch_builder(dev.kernel(kernels::KNN_MERGE));
     launch
         .arg(partial)
         .arg(&nq)
@@ -473,7 +451,7 @@ impl MatchJob {
             shared_mem_bytes: 0,
         };
 
-        let mut launch = stream.launch_builder(dev.kernel("clatch_match_filter"));
+        let mut launch = stream.launch_builder(dev.kernel(kernels::MATCH_FILTER));
         launch
             .arg(&self.forward)
             .arg(&n)
@@ -492,7 +470,7 @@ impl MatchJob {
         unsafe { launch.launch(shape(blocks, CLATCH_MATCH_SELECT_THREADS)) }
             .map_err(driver_error("clatch_match_filter"))?;
 
-        let mut launch = stream.launch_builder(dev.kernel("clatch_match_scan"));
+        let mut launch = stream.launch_builder(dev.kernel(kernels::MATCH_SCAN));
         launch
             .arg(&mut self.counts)
             .arg(&blocks32)
@@ -501,7 +479,7 @@ impl MatchJob {
         unsafe { launch.launch(shape(1, CLATCH_MATCH_SCAN_THREADS)) }
             .map_err(driver_error("clatch_match_scan"))?;
 
-        let mut launch = stream.launch_builder(dev.kernel("clatch_match_compact"));
+        let mut launch = stream.launch_builder(dev.kernel(kernels::MATCH_COMPACT));
         launch
             .arg(&self.forward)
             .arg(&n)
@@ -543,19 +521,19 @@ mod tests {
             for k in 1..=MAX_K {
                 let len = LIST_LENGTHS.iter().find(|&&len| len >= k).unwrap();
                 assert_eq!(
-                    knn_kernel(words, k, false),
+                    knn_kernel(words, k, false).name(),
                     format!("clatch_knn_w{words}_k{len}")
                 );
             }
             for k in 1..=2 {
                 assert_eq!(
-                    knn_kernel(words, k, true),
+                    knn_kernel(words, k, true).name(),
                     format!("clatch_knn_mutual_w{words}_k{k}")
                 );
             }
         }
         assert_eq!(*LIST_LENGTHS.last().unwrap(), MAX_K);
-        assert_eq!(KERNELS.len(), 8 * KERNELS_PER_WIDTH + 4);
+        assert_eq!(kernels::KNN.len(), 8 * KERNELS_PER_WIDTH);
     }
 
     #[test]

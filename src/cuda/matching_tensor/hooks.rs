@@ -19,7 +19,7 @@ pub fn measure_mma_s8_rate(dev: &GpuDevice, blocks_per_sm: usize) -> Result<f64>
     let mut sink = alloc_zeros::<i32>(&stream, THREADS as usize, "mma rate sink")?;
     let blocks = (blocks_per_sm.max(1) * dev.multiprocessors) as u32;
     let times = time_launches(dev, &stream, 1, 5, || {
-        let mut launch = stream.launch_builder(dev.kernel("clatch_mma_s8_rate"));
+        let mut launch = stream.launch_builder(dev.kernel(crate::cuda::kernels::MMA_S8_RATE));
         launch.arg(&ITERATIONS).arg(&mut sink);
         // SAFETY: matches clatch_mma_s8_rate(unsigned, int*); `sink` holds THREADS ints.
         unsafe {

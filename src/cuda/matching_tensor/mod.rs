@@ -18,6 +18,7 @@ use super::header::{
     CLATCH_EXPAND_THREADS, CLATCH_MATCH_ROW_PAD, CLATCH_TENSOR_QUERIES, CLATCH_TENSOR_STAGES,
     CLATCH_TENSOR_TILE, CLATCH_TENSOR_WARPS,
 };
+use super::kernels::{self, Kernel};
 use super::memory::alloc_zeros;
 use crate::error::Result;
 use crate::matching::Match;
@@ -47,27 +48,6 @@ pub(crate) const MAX_K: usize = 2;
 /// Row widths (bits) the tensor kernels are compiled for; narrower rows are padded up to one.
 const BITS: [usize; 4] = [64, 128, 256, 512];
 
-/// Every entry point of `kernels/matching_tensor.cu`.
-pub(crate) const KERNELS: &[&str] = &[
-    "clatch_expand_signs",
-    "clatch_knn_tensor_b64_k1",
-    "clatch_knn_tensor_b64_k2",
-    "clatch_knn_tensor_mutual_b64_k1",
-    "clatch_knn_tensor_mutual_b64_k2",
-    "clatch_knn_tensor_b128_k1",
-    "clatch_knn_tensor_b128_k2",
-    "clatch_knn_tensor_mutual_b128_k1",
-    "clatch_knn_tensor_mutual_b128_k2",
-    "clatch_knn_tensor_b256_k1",
-    "clatch_knn_tensor_b256_k2",
-    "clatch_knn_tensor_mutual_b256_k1",
-    "clatch_knn_tensor_mutual_b256_k2",
-    "clatch_knn_tensor_b512_k1",
-    "clatch_knn_tensor_b512_k2",
-    "clatch_knn_tensor_mutual_b512_k1",
-    "clatch_knn_tensor_mutual_b512_k2",
-];
-
 const THREADS: u32 = CLATCH_TENSOR_WARPS * 32;
 const BLOCK_QUERIES: usize = CLATCH_TENSOR_QUERIES as usize;
 const TILE: usize = CLATCH_TENSOR_TILE as usize;
@@ -95,8 +75,8 @@ fn slot(bits: usize) -> usize {
 }
 
 /// The kNN kernel for `bits`-wide rows and k (1 or 2) neighbours, with the reverse 1-NN if `mutual`.
-fn knn_kernel(bits: usize, k: usize, mutual: bool) -> &'static str {
-    KERNELS[1 + 4 * slot(bits) + 2 * mutual as usize + (k - 1)]
+fn knn_kernel(bits: usize, k: usize, mutual: bool) -> Kernel {
+    kernels::TENSOR_KNN[4 * slot(bits) + 2 * mutual as usize + (k - 1)]
 }
 
 /// Lets the kNN kernels use the shared memory they need (over the default 48 KiB); called once per
@@ -168,7 +148,7 @@ impl Geometry {
 /// One tensor-core kNN on the device: the sign-expanded sets, the geometry of each pass and the
 /// per-segment lists.
 pub(crate) struct TensorKnn {
-    kernel: &'static str,
+    kernel: Kernel,
     bits: usize,
     words: u32,
     nq: u32,
@@ -248,7 +228,7 @@ impl TensorKnn {
         // ROW_PAD-row blocks of `bits` bytes (every query block and tile the kernel reads is in
         // bounds), `out` holds nq * k matches, `partial` segments * nq * k keys when there is more
         // than one segment, and `reverse` nt keys for the mutual kernels (the only ones that touch it).
-        unsafe { launch.launch(config(g, bits)) }.map_err(driver_error(kernel))?;
+        unsafe { launch.launch(config(g, bits)) }.map_err(driver_error(kernel.name()))?;
         if g.segments > 1 {
             super::matching::launch_merge(
                 dev,
@@ -290,7 +270,7 @@ pub(crate) fn expand(
     let row_bytes = bits as u32;
     let units = signs.len() / 8;
     let blocks = units.div_ceil(CLATCH_EXPAND_THREADS as usize).min(1 << 16) as u32;
-    let mut launch = stream.launch_builder(dev.kernel("clatch_expand_signs"));
+    let mut launch = stream.launch_builder(dev.kernel(kernels::EXPAND_SIGNS));
     launch
         .arg(bits_buffer)
         .arg(&rows)
@@ -325,8 +305,8 @@ mod tests {
             for k in 1..=2 {
                 let plain = format!("clatch_knn_tensor_b{bits}_k{k}");
                 let mutual = format!("clatch_knn_tensor_mutual_b{bits}_k{k}");
-                assert_eq!(knn_kernel(bits, k, false), plain);
-                assert_eq!(knn_kernel(bits, k, true), mutual);
+                assert_eq!(knn_kernel(bits, k, false).name(), plain);
+                assert_eq!(knn_kernel(bits, k, true).name(), mutual);
             }
         }
     }

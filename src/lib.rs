@@ -46,6 +46,7 @@ pub mod homography;
 pub mod output;
 pub mod prefetch;
 pub mod synthetic;
+pub mod verify;
 
 /// The numeric contract: every rule whose arithmetic decides a keypoint, a bit or a match, exactly as
 /// every backend computes it.

@@ -3,6 +3,7 @@
 
 use clatch::colmap::Photo;
 use clatch::decode::DecodeLimits;
+use clatch::verify::VerifyConfig;
 use clatch::{
     Backend, DescriptorConfig, DescriptorWidth, DetectorConfig, Extractor, ExtractorConfig,
     KeyPoint, LevelBudget, MatchConfig, Matcher, PatchWeights, Pyramid, Ranking, Smoothing,
@@ -122,6 +123,64 @@ fn each_match_method_sets_its_field_only() {
     // A matcher takes what the methods built, and checks it as before.
     assert!(Matcher::new(Backend::Cpu, base.clone().with_ratio(Some(0.6))).is_ok());
     assert!(Matcher::new(Backend::Cpu, base.with_ratio(Some(1.5))).is_err());
+}
+
+#[test]
+fn each_verify_method_sets_its_field_only() {
+    let base = VerifyConfig::default();
+    let cases = [
+        ("max_error", base.clone().with_max_error(2.0)),
+        ("confidence", base.clone().with_confidence(0.99)),
+        (
+            "trials_multiplier",
+            base.clone().with_trials_multiplier(1.0),
+        ),
+        ("min_num_trials", base.clone().with_min_num_trials(10)),
+        ("max_num_trials", base.clone().with_max_num_trials(500)),
+        ("min_inlier_ratio", base.clone().with_min_inlier_ratio(0.1)),
+        ("min_num_inliers", base.clone().with_min_num_inliers(30)),
+        (
+            "min_e_f_inlier_ratio",
+            base.clone().with_min_e_f_inlier_ratio(0.9),
+        ),
+        (
+            "max_h_inlier_ratio",
+            base.clone().with_max_h_inlier_ratio(0.7),
+        ),
+        (
+            "detect_watermark",
+            base.clone().with_detect_watermark(false),
+        ),
+        (
+            "watermark_min_inlier_ratio",
+            base.clone().with_watermark_min_inlier_ratio(0.5),
+        ),
+        (
+            "watermark_border_size",
+            base.clone().with_watermark_border_size(0.05),
+        ),
+        ("seed", base.clone().with_seed(9)),
+    ];
+    only_its_field(
+        &base,
+        &cases,
+        fields!(
+            max_error,
+            confidence,
+            trials_multiplier,
+            min_num_trials,
+            max_num_trials,
+            min_inlier_ratio,
+            min_num_inliers,
+            min_e_f_inlier_ratio,
+            max_h_inlier_ratio,
+            detect_watermark,
+            watermark_min_inlier_ratio,
+            watermark_border_size,
+            seed
+        ),
+    );
+    assert_eq!((cases[0].1.max_error, cases[12].1.seed), (2.0, 9));
 }
 
 #[test]

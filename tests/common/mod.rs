@@ -5,6 +5,7 @@ pub mod golden;
 pub mod gpu;
 pub mod reference;
 pub mod scale;
+pub mod two_view;
 
 use clatch::synthetic::SplitMix64;
 use clatch::{DescriptorSet, DescriptorWidth, GrayView};

@@ -326,7 +326,8 @@ fn match_list_is_colmaps_text_format() {
 /// every check of a new database kept (COLMAP's own reading of them is in tests/colmap_two_view.rs).
 #[test]
 fn two_view_geometries_go_into_an_existing_database_checked() {
-    use clatch::colmap::{TwoViewConfig, TwoViewGeometry};
+    use clatch::colmap::TwoViewGeometry;
+    use clatch::verify::GeometryConfig;
     let path = temp_db("two-view");
     assert!(matches!(
         Database::open_existing(&path),
@@ -346,14 +347,14 @@ fn two_view_geometries_go_into_an_existing_database_checked() {
     };
     db.set_keypoints(a, &points(3)).unwrap();
     db.set_keypoints(b, &points(5)).unwrap();
-    let first = TwoViewGeometry::new(a, b, vec![[2, 4], [0, 1]], TwoViewConfig::Calibrated);
+    let first = TwoViewGeometry::new(a, b, vec![[2, 4], [0, 1]], GeometryConfig::Calibrated);
     db.add_two_view_geometry(&first).unwrap();
     db.finish().unwrap();
 
     let mut db = Database::open_existing(&path).unwrap();
     // c has no keypoints, the pair (b, a) is there already, a has 3 keypoints.
     assert!(matches!(
-        db.add_two_view_geometry(&TwoViewGeometry::new(a, c, vec![], TwoViewConfig::Degenerate)),
+        db.add_two_view_geometry(&TwoViewGeometry::new(a, c, vec![], GeometryConfig::Degenerate)),
         Err(ColmapError::UnknownImage { image_id }) if image_id == c
     ));
     assert!(matches!(
@@ -361,7 +362,7 @@ fn two_view_geometries_go_into_an_existing_database_checked() {
             b,
             a,
             vec![],
-            TwoViewConfig::Degenerate
+            GeometryConfig::Degenerate
         )),
         Err(ColmapError::Duplicate { .. })
     ));
@@ -370,7 +371,7 @@ fn two_view_geometries_go_into_an_existing_database_checked() {
             b,
             a,
             vec![[0, 3]],
-            TwoViewConfig::Calibrated
+            GeometryConfig::Calibrated
         )),
         Err(ColmapError::MatchOutOfRange {
             keypoint: 3,
@@ -383,13 +384,13 @@ fn two_view_geometries_go_into_an_existing_database_checked() {
             a,
             a,
             vec![],
-            TwoViewConfig::Calibrated
+            GeometryConfig::Calibrated
         )),
         Err(ColmapError::SamePair { .. })
     ));
     let not_finite = TwoViewGeometry {
         f: Some([[f64::NAN; 3]; 3]),
-        ..TwoViewGeometry::new(b, a, vec![[0, 0]], TwoViewConfig::Uncalibrated)
+        ..TwoViewGeometry::new(b, a, vec![[0, 0]], GeometryConfig::Uncalibrated)
     };
     assert!(matches!(
         db.add_two_view_geometry(&not_finite),
@@ -401,7 +402,7 @@ fn two_view_geometries_go_into_an_existing_database_checked() {
         c,
         b,
         vec![[1, 4]],
-        TwoViewConfig::Planar,
+        GeometryConfig::Planar,
     ))
     .unwrap();
     db.finish().unwrap();

@@ -335,3 +335,115 @@ fn a_run_that_fails_keeps_the_old_database_and_leaves_no_file() {
     assert!(names_in(&dir.join("out-colmap")).is_empty());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The keypoints (COLMAP's pixel convention) of every image, by image id.
+fn keypoints_of(db: &rusqlite::Connection) -> std::collections::HashMap<u32, Vec<[f32; 2]>> {
+    let mut query = db
+        .prepare("SELECT image_id, cols, data FROM keypoints")
+        .unwrap();
+    let rows = query
+        .query_map([], |row| {
+            let (id, cols, data): (u32, i64, Vec<u8>) = (row.get(0)?, row.get(1)?, row.get(2)?);
+            let cols = cols as usize;
+            let floats: Vec<f32> = data
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+                .collect();
+            Ok((
+                id,
+                floats.chunks_exact(cols).map(|k| [k[0], k[1]]).collect(),
+            ))
+        })
+        .unwrap();
+    rows.map(Result::unwrap).collect()
+}
+
+/// With verification, every pair's two-view geometry is in the database, as COLMAP's
+/// `matches_importer` would write it, so the mapper runs on it directly: the crops differ by a pure
+/// translation, so each pair is a homography (planar or panoramic, COLMAP's code 6), every inlier
+/// lies on its true epipolar line and nearly all where the translation puts it; two runs write the same bytes; without verification
+/// the table stays empty.
+#[test]
+fn verification_writes_every_pair_s_geometry_and_only_true_inliers() {
+    let dir = workdir("verify");
+    let run = |db: &str| {
+        FolderJob::new(dir.join("images"), dir.join(db))
+            .with_verification(clatch::verify::VerifyConfig::default())
+            .run(None)
+            .unwrap()
+    };
+    let (one, two) = (run("one.db"), run("two.db"));
+    assert_eq!(bytes(&one.database), bytes(&two.database));
+    let counts = one.counts;
+    assert_eq!(counts.pairs_verified, PAIRS, "{counts:?}");
+    assert!(counts.pairs_with_inliers >= PAIRS - 1, "{counts:?}");
+    assert!(
+        counts.inliers > counts.matches / 2 && counts.inliers <= counts.matches,
+        "{counts:?}"
+    );
+
+    let db = rusqlite::Connection::open(&one.database).unwrap();
+    let keypoints = keypoints_of(&db);
+    let mut query = db
+        .prepare("SELECT pair_id, rows, data, config FROM two_view_geometries")
+        .unwrap();
+    let rows: Vec<(i64, i64, Option<Vec<u8>>, i64)> = query
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)))
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    assert_eq!(rows.len(), PAIRS);
+    let mut inliers = 0;
+    let mut errors = Vec::new();
+    let mut across_worst = 0.0f32;
+    for (pair, count, data, config) in rows {
+        let (a, b) = clatch::colmap::image_ids_of_pair(pair as u64);
+        if count == 0 {
+            continue;
+        }
+        assert_eq!(config, 6, "pair {a}-{b}: a translation is a homography");
+        let shift = (b - a) as f32;
+        for index in data.unwrap().chunks_exact(8) {
+            let ka = u32::from_le_bytes(index[..4].try_into().unwrap()) as usize;
+            let kb = u32::from_le_bytes(index[4..].try_into().unwrap()) as usize;
+            let (pa, pb) = (keypoints[&a][ka], keypoints[&b][kb]);
+            // The offset from where the translation puts it, and its part across the translation's
+            // direction (the epipolar line of a pure translation).
+            let (dx, dy) = (
+                pb[0] - (pa[0] - 40.0 * shift),
+                pb[1] - (pa[1] - 25.0 * shift),
+            );
+            let error = (dx * dx + dy * dy).sqrt();
+            let across = (dx * 25.0 - dy * 40.0).abs() / (40.0f32 * 40.0 + 25.0 * 25.0).sqrt();
+            across_worst = across_worst.max(across);
+            errors.push(error);
+            inliers += 1;
+        }
+    }
+    assert_eq!(inliers, counts.inliers);
+    // COLMAP's rules keep the fundamental matrix's inliers unless the homography has more: every
+    // inlier lies on its true epipolar line (within the threshold, 4 px), and nearly all where the
+    // translation puts it. The few that do not are the repeated rectangles' wrong matches along that
+    // line, which no epipolar model can tell from right ones.
+    let threshold = clatch::verify::VerifyConfig::default().max_error as f32;
+    let close = errors.iter().filter(|&&e| e <= 2.0).count();
+    assert!(
+        across_worst <= threshold,
+        "an inlier {across_worst} px off its epipolar line"
+    );
+    assert!(
+        close as f64 >= 0.97 * errors.len() as f64,
+        "{close} of {}",
+        errors.len()
+    );
+
+    let plain = FolderJob::new(dir.join("images"), dir.join("plain.db"))
+        .run(None)
+        .unwrap();
+    let db = rusqlite::Connection::open(&plain.database).unwrap();
+    let stored: i64 = db
+        .query_row("SELECT COUNT(*) FROM two_view_geometries", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!((stored, plain.counts.pairs_verified), (0, 0));
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -17,10 +17,9 @@ use std::process::Command;
 
 use clatch::KeyPoint;
 use clatch::colmap::two_view::{f64s_of_blob, matrix_of_blob, quaternion_rotation};
-use clatch::colmap::{
-    Database, Matrix3, PinholeCamera, RelativePose, TwoViewConfig, TwoViewGeometry,
-};
+use clatch::colmap::{Database, Matrix3, PinholeCamera, RelativePose, TwoViewGeometry};
 use clatch::synthetic::SplitMix64;
+use clatch::verify::GeometryConfig;
 use libtest_mimic::{Arguments, Failed, Trial};
 use rusqlite::Connection;
 
@@ -294,7 +293,7 @@ fn mapper_registers_images() -> Result<(), Failed> {
                 ids[a],
                 ids[b],
                 (0..POINTS as u32).map(|k| [k, k]).collect(),
-                TwoViewConfig::Calibrated,
+                GeometryConfig::Calibrated,
             )
         })?;
     }
@@ -444,7 +443,7 @@ fn inliers_import_writes_our_rows() -> Result<(), Failed> {
             ids[a],
             ids[b],
             chosen_inliers(a, b),
-            TwoViewConfig::Calibrated,
+            GeometryConfig::Calibrated,
         ))?;
     }
     db.finish()?;
@@ -573,8 +572,8 @@ fn estimated_geometry_round_trip() -> Result<(), Failed> {
     for (pair, row) in &theirs {
         let (lo, hi) = clatch::colmap::image_ids_of_pair(*pair as u64);
         let (a, b) = (view_of(lo), view_of(hi));
-        let config = TwoViewConfig::from_code(row.config).ok_or("unknown config")?;
-        if config != TwoViewConfig::Calibrated {
+        let config = GeometryConfig::from_colmap_code(row.config).ok_or("unknown config")?;
+        if config != GeometryConfig::Calibrated {
             return Err(format!("pair ({a}, {b}): config {config:?}").into());
         }
         let f = matrix_of_blob(&row.f).ok_or("F is not 3x3")?;
@@ -696,7 +695,7 @@ fn failed_pair_as_colmap() -> Result<(), Failed> {
         ids[0],
         ids[1],
         vec![],
-        TwoViewConfig::Degenerate,
+        GeometryConfig::Degenerate,
     ))?;
     db.finish()?;
     let describe = |path: &Path| -> Vec<String> {

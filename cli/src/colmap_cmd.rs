@@ -85,7 +85,13 @@ fn folder_job(args: &ColmapArgs) -> Result<FolderJob, CliError> {
         },
         None => FolderCamera::PerPhoto,
     };
-    Ok(FolderJob::new(&args.images, &args.database)
+    let job = FolderJob::new(&args.images, &args.database);
+    let job = if args.verify {
+        job.with_verification(clatch::verify::VerifyConfig::default())
+    } else {
+        job
+    };
+    Ok(job
         .with_workspace(workspace_path(args))
         .with_camera(camera)
         .with_backend(backend)
@@ -199,14 +205,19 @@ fn write_and_run(
 
     let mut times = ColmapTimes::default();
     let built = TempDir::beside(workspace.sparse.path())?;
-    let [(_, import_args), (_, mapper_args)] = &colmap_steps(
+    let steps = colmap_steps(
         args,
         (written.database(), written.match_list(), built.path()),
     );
     let watch = Stopwatch::start();
     let steps = (|| {
-        colmap.run("matches_importer", import_args)?;
-        times.verify = watch.stop();
+        let [.., (_, mapper_args)] = steps.as_slice() else {
+            unreachable!("the mapper is always a step")
+        };
+        if let [(step, import_args), _] = steps.as_slice() {
+            colmap.run(step, import_args)?;
+            times.verify = watch.stop();
+        }
         let (verified, inliers) = verified_pairs(written.database())?;
         let watch = Stopwatch::start();
         colmap.run("mapper", mapper_args)?;
@@ -355,15 +366,16 @@ fn extraction_config(
     config
 }
 
-/// The two COLMAP steps after the database: import with verification, then the mapper, on the given
-/// database, match list and model folder.
 /// The mapper option that `clatch colmap` sets to 0 when --camera-k is given (unless given itself).
 const KEEP_FOCAL_LENGTH: &str = "Mapper.ba_refine_focal_length";
+
+/// The COLMAP steps after the database, on the given database, match list and model folder: import
+/// with verification (unless clatch verified, `--verify`), then the mapper.
 
 fn colmap_steps(
     args: &ColmapArgs,
     (database, match_list, sparse): (&Path, &Path, &Path),
-) -> [(&'static str, Vec<OsString>); 2] {
+) -> Vec<(&'static str, Vec<OsString>)> {
     let os = |s: &str| OsString::from(s);
     let import = vec![
         os("--database_path"),
@@ -407,7 +419,11 @@ fn colmap_steps(
         mapper.push(format!("--{key}").into());
         mapper.push(value.into());
     }
-    [("matches_importer", import), ("mapper", mapper)]
+    if args.verify {
+        vec![("mapper", mapper)]
+    } else {
+        vec![("matches_importer", import), ("mapper", mapper)]
+    }
 }
 
 fn shell_words(args: &[OsString]) -> String {
@@ -479,6 +495,18 @@ fn print_extraction_report(
         times.matching.as_secs_f64(),
         report::per_second(counts.pairs, times.matching, "pairs")
     );
+    if counts.pairs_verified > 0 {
+        println!(
+            "  verify      {:.2} s ({}): {} of {} pairs kept, {} of {} matches ({:.1} %)",
+            times.verification.as_secs_f64(),
+            report::per_second(counts.pairs_verified, times.verification, "pairs"),
+            counts.pairs_with_inliers,
+            counts.pairs_verified,
+            counts.inliers,
+            counts.matches,
+            100.0 * counts.inliers as f64 / counts.matches.max(1) as f64
+        );
+    }
     println!("  write       {:.2} s", times.writing.as_secs_f64());
     println!("  total       {run}: extract, match and write");
 }
@@ -490,11 +518,18 @@ fn print_colmap_report(
     models: &[ModelStats],
     times: &ColmapTimes,
 ) {
-    println!(
-        "  verified    {verified} of {} pairs, {inliers} inlier matches (colmap matches_importer)",
-        report.counts.pairs
-    );
-    println!("  verify      {}", times.verify);
+    if report.counts.pairs_verified > 0 {
+        println!(
+            "  verified    {verified} of {} pairs, {inliers} inlier matches (clatch)",
+            report.counts.pairs
+        );
+    } else {
+        println!(
+            "  verified    {verified} of {} pairs, {inliers} inlier matches (colmap matches_importer)",
+            report.counts.pairs
+        );
+        println!("  verify      {}", times.verify);
+    }
     println!("  map         {}", times.map);
     println!("  analyze     {}", times.analyze);
     match models.iter().max_by_key(|m| m.registered) {
@@ -536,13 +571,27 @@ mod tests {
         c
     }
 
+    #[test]
+    fn with_verify_the_mapper_runs_straight_on_the_database() {
+        let paths = (Path::new("d.db"), Path::new("m.txt"), Path::new("sparse"));
+        let steps = colmap_steps(&colmap_args(&["--verify"]), paths);
+        let names: Vec<_> = steps.iter().map(|(step, _)| *step).collect();
+        assert_eq!(names, ["mapper"]);
+        let steps = colmap_steps(&colmap_args(&[]), paths);
+        let names: Vec<_> = steps.iter().map(|(step, _)| *step).collect();
+        assert_eq!(names, ["matches_importer", "mapper"]);
+    }
+
     fn mapper_args(extra: &[&str]) -> Vec<String> {
         let args = colmap_args(extra);
-        let [_, (step, mapper)] = colmap_steps(
+        let steps = colmap_steps(
             &args,
             (Path::new("d.db"), Path::new("m.txt"), Path::new("sparse")),
         );
-        assert_eq!(step, "mapper");
+        let [_, (step, mapper)] = steps.as_slice() else {
+            panic!("two steps without --verify")
+        };
+        assert_eq!(*step, "mapper");
         mapper
             .iter()
             .map(|a| a.to_string_lossy().into_owned())

@@ -247,6 +247,11 @@ pub struct ColmapArgs {
     /// Only write the database and match list; do not run COLMAP.
     #[arg(long)]
     pub no_colmap: bool,
+    /// Verify every pair in clatch (two-view geometry by LO-RANSAC with COLMAP 3.8's rules) and
+    /// write the geometries into the database: COLMAP's mapper then runs straight on it, without
+    /// `colmap matches_importer`.
+    #[arg(long)]
+    pub verify: bool,
     /// The COLMAP 3.8 executable (default: `colmap` on PATH, skipped with a note if absent).
     #[arg(long, value_name = "PROGRAM", conflicts_with = "no_colmap")]
     pub colmap: Option<PathBuf>,

@@ -260,7 +260,8 @@ impl Database {
     /// written once. See [`crate::colmap::two_view`] for the layout.
     ///
     /// ```
-    /// use clatch::colmap::{Database, PinholeCamera, TwoViewConfig, TwoViewGeometry};
+    /// use clatch::colmap::{Database, PinholeCamera, TwoViewGeometry};
+    /// use clatch::verify::GeometryConfig;
     /// use clatch::KeyPoint;
     ///
     /// let path = std::env::temp_dir().join(format!("clatch-doc-tvg-{}.db", std::process::id()));
@@ -273,7 +274,7 @@ impl Database {
     /// db.set_keypoints(b, &[KeyPoint::new(11.0, 21.0)])?;
     /// let verified = TwoViewGeometry {
     ///     f: Some([[0.0, -1e-4, 0.01], [1e-4, 0.0, -0.02], [-0.01, 0.02, 1.0]]),
-    ///     ..TwoViewGeometry::new(b, a, vec![[0, 1]], TwoViewConfig::Uncalibrated)
+    ///     ..TwoViewGeometry::new(b, a, vec![[0, 1]], GeometryConfig::Uncalibrated)
     /// };
     /// db.add_two_view_geometry(&verified)?;
     /// db.finish()?;
@@ -308,7 +309,7 @@ impl Database {
                     pair as i64,
                     rows,
                     blobs.inliers,
-                    geometry.config.code(),
+                    i64::from(geometry.config.colmap_code()),
                     blobs.f,
                     blobs.e,
                     blobs.h,

@@ -157,6 +157,22 @@ impl FolderOutput {
         self.timed(|w| w.add_matches(i, j, matches))
     }
 
+    /// Adds a pair's verified geometry: [`FolderWriter::add_geometry`].
+    pub fn add_geometry(
+        &mut self,
+        i: usize,
+        j: usize,
+        matches: &[Match],
+        verified: &crate::verify::TwoViewGeometry,
+    ) -> Result<(), ColmapError> {
+        self.timed(|w| w.add_geometry(i, j, matches, verified))
+    }
+
+    /// Photo `i`'s camera as verification takes it: [`FolderWriter::verify_camera`].
+    pub fn verify_camera(&self, i: usize) -> Option<&crate::verify::Camera> {
+        self.writer.verify_camera(i)
+    }
+
     /// `write` on the writer, its time added to the writing time; a failure to write (a full disk)
     /// names the file.
     fn timed<T>(

@@ -15,6 +15,7 @@ use crate::colmap::report::{FolderProgress, FolderReport};
 use crate::decode::DecodeLimits;
 use crate::extract::ExtractorConfig;
 use crate::matching::MatchConfig;
+use crate::verify::VerifyConfig;
 
 /// The match list's file name in a workspace folder.
 pub const MATCH_LIST_NAME: &str = "matches.txt";
@@ -135,6 +136,10 @@ pub struct FolderJob {
     pub limits: DecodeLimits,
     /// What may happen to an existing database.
     pub overwrite: Overwrite,
+    /// Whether and how every pair's matches are verified ([`crate::verify`]) and their two-view
+    /// geometries written into the database, as COLMAP's `matches_importer` would, so that COLMAP's
+    /// mapper runs straight on it (default `None`: the match list alone, for COLMAP to verify).
+    pub verification: Option<VerifyConfig>,
 }
 
 impl FolderJob {
@@ -156,6 +161,7 @@ impl FolderJob {
             refinement: Refinement::Score,
             limits: DecodeLimits::default(),
             overwrite: Overwrite::default(),
+            verification: None,
         }
     }
 
@@ -233,6 +239,13 @@ impl FolderJob {
     /// What may happen to an existing database.
     pub fn with_overwrite(mut self, overwrite: Overwrite) -> Self {
         self.overwrite = overwrite;
+        self
+    }
+
+    /// Verifies every pair with `config` and writes the geometries into the database
+    /// ([`FolderJob::verification`]).
+    pub fn with_verification(mut self, config: VerifyConfig) -> Self {
+        self.verification = Some(config);
         self
     }
 

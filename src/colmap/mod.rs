@@ -77,7 +77,7 @@ pub use match_list::MatchList;
 pub use pairs::{PhotoRef, match_photo_pairs, resolve_pairs};
 pub use plan::FolderPlan;
 pub use report::{FolderProgress, FolderReport, FolderStage, FolderTimes};
-pub use two_view::{Matrix3, RelativePose, TwoViewConfig, TwoViewGeometry};
+pub use two_view::{Matrix3, RelativePose, TwoViewGeometry};
 pub use writer::{FolderCounts, FolderWriter};
 
 use crate::keypoint::KeyPoint;

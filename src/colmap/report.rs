@@ -12,7 +12,8 @@ use crate::prefetch::Prefetched;
 pub enum FolderStage {
     /// Photos decoded, detected, described, refined and written to the database.
     Extraction,
-    /// Pairs matched and written to the match list.
+    /// Pairs matched and written to the match list (and verified, with
+    /// [`super::FolderJob::verification`]).
     Matching,
 }
 
@@ -52,6 +53,8 @@ pub struct FolderTimes {
     pub decoding: Prefetched,
     /// Matching every pair (writing the matches excluded).
     pub matching: Duration,
+    /// Verifying every pair's matches ([`super::FolderJob::verification`]; zero without it).
+    pub verification: Duration,
     /// Writing the database and the match list, and putting them in place.
     pub writing: Duration,
 }

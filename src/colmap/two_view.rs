@@ -5,20 +5,20 @@
 //! against rows that `colmap matches_importer` writes (`tests/colmap_two_view.rs`):
 //! - `pair_id` as for matches ([`super::pair_id`]); `rows`/`cols`/`data` the inlier matches, uint32
 //!   `(index in the smaller image id's keypoints, index in the larger's)`, `cols` 2;
-//! - `config` COLMAP's `TwoViewGeometry::ConfigurationType` ([`TwoViewConfig`]);
+//! - `config` COLMAP's `TwoViewGeometry::ConfigurationType` ([`GeometryConfig`]);
 //! - `F`, `E`, `H`: nine float64 each, row-major (COLMAP transposes its column-major Eigen matrices
 //!   before writing), mapping image `min id` to image `max id` (`x_max' F x_min = 0`,
 //!   `x_max ~ H x_min`);
 //! - `qvec` (w, x, y, z, four float64) and `tvec` (three float64): the pose of the larger id's camera
 //!   relative to the smaller's (`X_max = R(qvec) X_min + tvec`);
-//! - a pair without inliers (a failed verification, config [`TwoViewConfig::Degenerate`] for
+//! - a pair without inliers (a failed verification, config [`GeometryConfig::Degenerate`] for
 //!   COLMAP) has `rows` 0, `cols` 2 and NULL in `data` and every matrix column, as COLMAP writes it;
 //! - a matrix or pose not given is stored as zeros: what COLMAP 3.8 stores for a geometry it did not
 //!   estimate (`matches_importer --match_type inliers` writes zero F, E, H, qvec and tvec, and
-//!   config [`TwoViewConfig::Calibrated`]).
+//!   config [`GeometryConfig::Calibrated`]).
 //!
 //! What COLMAP 3.8's `mapper` reads of a row: the inliers and `config` (it leaves out pairs with
-//! fewer than `Mapper.min_num_matches` inliers, 15 by default, and [`TwoViewConfig::Watermark`]
+//! fewer than `Mapper.min_num_matches` inliers, 15 by default, and [`GeometryConfig::Watermark`]
 //! pairs when `Mapper.ignore_watermarks` is set); it estimates the initial pair's geometry itself and
 //! does not read F, E, H or the pose. Checked: a database of the courtyard-corner scene
 //! (docs/eval/geometry.md) with those columns zeroed maps to the same model (5/5 images, 1674 points,
@@ -29,70 +29,11 @@
 
 use crate::colmap::error::ColmapError;
 use crate::colmap::pair_id;
+use crate::matching::Match;
+use crate::verify::GeometryConfig;
 
 /// A 3×3 matrix, row-major: `m[row][column]`.
 pub type Matrix3 = [[f64; 3]; 3];
-
-/// COLMAP's `TwoViewGeometry::ConfigurationType`: what kind of geometry verified a pair. The mapper
-/// of COLMAP 3.8 uses the inliers of every pair whatever its configuration (but
-/// [`TwoViewConfig::Watermark`] with `Mapper.ignore_watermarks`), and estimates the initial pair's
-/// geometry itself; the configuration still tells a reader how the inliers were found.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[non_exhaustive]
-pub enum TwoViewConfig {
-    /// Not verified (0).
-    Undefined,
-    /// Verification failed: too few inliers for any model (1).
-    Degenerate,
-    /// Essential matrix with known intrinsics (2); also what `matches_importer --match_type inliers`
-    /// stores for matches it takes as verified.
-    Calibrated,
-    /// Fundamental matrix, unknown intrinsics (3).
-    Uncalibrated,
-    /// Homography of a plane seen with some translation (4).
-    Planar,
-    /// Homography of a pure rotation (5).
-    Panoramic,
-    /// Homography, planar or panoramic undecided (6).
-    PlanarOrPanoramic,
-    /// Homography of a watermark or border, pure image-space translation (7).
-    Watermark,
-    /// Several models (8).
-    Multiple,
-}
-
-impl TwoViewConfig {
-    const ALL: [TwoViewConfig; 9] = [
-        Self::Undefined,
-        Self::Degenerate,
-        Self::Calibrated,
-        Self::Uncalibrated,
-        Self::Planar,
-        Self::Panoramic,
-        Self::PlanarOrPanoramic,
-        Self::Watermark,
-        Self::Multiple,
-    ];
-
-    /// The integer COLMAP stores in `config`.
-    pub fn code(self) -> i64 {
-        Self::ALL.iter().position(|&c| c == self).unwrap_or(0) as i64
-    }
-
-    /// The configuration of a stored `config`, `None` for an integer COLMAP 3.8 does not define.
-    ///
-    /// ```
-    /// use clatch::colmap::TwoViewConfig;
-    /// assert_eq!(TwoViewConfig::from_code(2), Some(TwoViewConfig::Calibrated));
-    /// assert_eq!(TwoViewConfig::Planar.code(), 4);
-    /// assert_eq!(TwoViewConfig::from_code(9), None);
-    /// ```
-    pub fn from_code(code: i64) -> Option<Self> {
-        usize::try_from(code)
-            .ok()
-            .and_then(|i| Self::ALL.get(i).copied())
-    }
-}
 
 /// A relative pose: camera 2's frame from camera 1's, `X2 = R(qvec) · X1 + tvec`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -150,7 +91,7 @@ pub struct TwoViewGeometry {
     /// Inlier matches: `[index into image_id1's keypoints, index into image_id2's]`.
     pub inliers: Vec<[u32; 2]>,
     /// How the inliers were verified.
-    pub config: TwoViewConfig,
+    pub config: GeometryConfig,
     /// Fundamental matrix from image 1 to image 2 (`x2ᵀ F x1 = 0`, COLMAP pixel coordinates), if
     /// estimated; stored as zeros otherwise, as COLMAP does.
     pub f: Option<Matrix3>,
@@ -168,7 +109,7 @@ impl TwoViewGeometry {
         image_id1: u32,
         image_id2: u32,
         inliers: Vec<[u32; 2]>,
-        config: TwoViewConfig,
+        config: GeometryConfig,
     ) -> Self {
         Self {
             image_id1,
@@ -180,6 +121,41 @@ impl TwoViewGeometry {
             h: None,
             pose: None,
         }
+    }
+
+    /// What [`crate::verify`] found for a pair, as COLMAP stores it: images `image_id1` (whose
+    /// keypoints the matches' `query` indexes) and `image_id2` (`train`), the matches verification
+    /// kept as inliers, F and H in COLMAP's pixel convention
+    /// ([`crate::verify::TwoViewGeometry::in_colmap_pixels`]), E as it is; no relative pose (COLMAP
+    /// 3.8's mapper reads only the inliers and the configuration).
+    ///
+    /// An inlier index that is not one of `matches` is [`ColmapError::InvalidGeometry`].
+    pub fn from_verified(
+        image_id1: u32,
+        image_id2: u32,
+        matches: &[Match],
+        verified: &crate::verify::TwoViewGeometry,
+    ) -> Result<Self, ColmapError> {
+        let inliers = verified
+            .inliers
+            .iter()
+            .map(|&m| {
+                matches.get(m as usize).map(|m| [m.query, m.train]).ok_or(
+                    ColmapError::InvalidGeometry {
+                        image_id1,
+                        image_id2,
+                        reason: "an inlier is not one of the pair's matches",
+                    },
+                )
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let in_colmap = verified.in_colmap_pixels();
+        Ok(Self {
+            f: in_colmap.f,
+            e: in_colmap.e,
+            h: in_colmap.h,
+            ..Self::new(image_id1, image_id2, inliers, verified.config)
+        })
     }
 
     /// COLMAP's id of the pair.
@@ -356,12 +332,12 @@ mod tests {
 
     #[test]
     fn configuration_codes_are_colmaps() {
-        for (code, config) in TwoViewConfig::ALL.iter().enumerate() {
-            assert_eq!(config.code(), code as i64);
-            assert_eq!(TwoViewConfig::from_code(code as i64), Some(*config));
+        for (code, config) in GeometryConfig::ALL.iter().enumerate() {
+            assert_eq!(i64::from(config.colmap_code()), code as i64);
+            assert_eq!(GeometryConfig::from_colmap_code(code as i64), Some(*config));
         }
-        assert_eq!(TwoViewConfig::Uncalibrated.code(), 3);
-        assert_eq!(TwoViewConfig::from_code(-1), None);
+        assert_eq!(GeometryConfig::Uncalibrated.colmap_code(), 3);
+        assert_eq!(GeometryConfig::from_colmap_code(-1), None);
     }
 
     #[test]
@@ -389,7 +365,7 @@ mod tests {
                 qvec: [half, 0.0, half, 0.0],
                 tvec: [1.0, 2.0, 3.0],
             }),
-            ..TwoViewGeometry::new(5, 2, vec![[7, 1], [3, 4]], TwoViewConfig::Planar)
+            ..TwoViewGeometry::new(5, 2, vec![[7, 1], [3, 4]], GeometryConfig::Planar)
         };
         let turned = geometry.in_colmap_order().unwrap();
         assert_eq!((turned.image_id1, turned.image_id2), (2, 5));
@@ -424,7 +400,7 @@ mod tests {
     fn a_singular_homography_cannot_be_turned_round() {
         let geometry = TwoViewGeometry {
             h: Some([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 0.0, 1.0]]),
-            ..TwoViewGeometry::new(3, 1, vec![], TwoViewConfig::Planar)
+            ..TwoViewGeometry::new(3, 1, vec![], GeometryConfig::Planar)
         };
         assert!(matches!(
             geometry.in_colmap_order(),
@@ -434,11 +410,11 @@ mod tests {
 
     #[test]
     fn a_pair_without_inliers_has_null_blobs() {
-        let empty = TwoViewGeometry::new(1, 2, vec![], TwoViewConfig::Degenerate);
+        let empty = TwoViewGeometry::new(1, 2, vec![], GeometryConfig::Degenerate);
         let blobs = TwoViewBlobs::of(&empty);
         assert!(blobs.inliers.is_none() && blobs.f.is_none() && blobs.h.is_none());
         assert!(blobs.qvec.is_none() && blobs.tvec.is_none());
-        let one = TwoViewGeometry::new(1, 2, vec![[0, 1]], TwoViewConfig::Uncalibrated);
+        let one = TwoViewGeometry::new(1, 2, vec![[0, 1]], GeometryConfig::Uncalibrated);
         let blobs = TwoViewBlobs::of(&one);
         assert_eq!(blobs.inliers.unwrap(), [0, 0, 0, 0, 1, 0, 0, 0]);
         assert_eq!(f64s_of_blob(&blobs.qvec.unwrap()), [0.0; 4]);

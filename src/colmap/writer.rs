@@ -9,7 +9,9 @@ use crate::colmap::database::{Database, check_match_indices};
 use crate::colmap::error::ColmapError;
 use crate::colmap::folder::{Photo, photo_camera};
 use crate::colmap::match_list::MatchList;
+use crate::colmap::two_view::TwoViewGeometry;
 use crate::matching::Match;
+use crate::verify::{self, Intrinsics};
 
 /// A camera's key without a shared K: one camera per image size and EXIF focal length.
 type CameraKey = ((u32, u32), Option<u16>);
@@ -28,6 +30,12 @@ pub struct FolderCounts {
     pub matches: usize,
     /// Pairs with at least one match: the pairs of the match list.
     pub pairs_with_matches: usize,
+    /// Pairs whose two-view geometry was written ([`FolderWriter::add_geometry`]).
+    pub pairs_verified: usize,
+    /// Of those, pairs with inliers (a geometry the mapper uses).
+    pub pairs_with_inliers: usize,
+    /// Inlier matches over all verified pairs.
+    pub inliers: usize,
 }
 
 /// Writes a folder's photos into a new COLMAP 3.8 database and their matches into a match list.
@@ -63,8 +71,12 @@ pub struct FolderWriter<W: Write> {
     /// The given camera's id and size.
     shared: Option<(u32, (u32, u32))>,
     cameras: Vec<(CameraKey, u32)>,
+    /// Every camera written, by id.
+    pinholes: Vec<(u32, PinholeCamera)>,
     /// Name, image id and keypoint count of each photo written.
     photos: Vec<(String, u32, usize)>,
+    /// Each photo's camera as verification sees it.
+    verify_cameras: Vec<verify::Camera>,
     counts: FolderCounts,
 }
 
@@ -80,12 +92,19 @@ impl<W: Write> FolderWriter<W> {
         let shared = camera
             .map(|c| db.add_camera(c).map(|id| (id, (c.width, c.height))))
             .transpose()?;
+        let pinholes = shared
+            .iter()
+            .zip(camera)
+            .map(|(&(id, _), c)| (id, c.clone()))
+            .collect();
         Ok(Self {
             db,
             list: MatchList::new(match_list),
             shared,
             cameras: Vec::new(),
+            pinholes,
             photos: Vec::new(),
+            verify_cameras: Vec::new(),
             counts: FolderCounts::default(),
         })
     }
@@ -113,6 +132,7 @@ impl<W: Write> FolderWriter<W> {
                         let camera = photo_camera(photo.width, photo.height, photo.focal_35mm)?;
                         let id = self.db.add_camera(&camera)?;
                         self.cameras.push((key, id));
+                        self.pinholes.push((id, camera));
                         id
                     }
                 }
@@ -120,6 +140,15 @@ impl<W: Write> FolderWriter<W> {
         };
         let image_id = self.db.add_image(&photo.name, camera_id)?;
         self.db.set_keypoints(image_id, &photo.keypoints)?;
+        // Every camera id here was written with its camera (without one, no intrinsics).
+        let camera = self
+            .pinholes
+            .iter()
+            .find(|(id, _)| *id == camera_id)
+            .map_or(verify::Camera::new(photo.width, photo.height), |(_, c)| {
+                verify_camera(c)
+            });
+        self.verify_cameras.push(camera);
         self.photos
             .push((photo.name.clone(), image_id, photo.keypoints.len()));
         self.counts.photos += 1;
@@ -161,6 +190,44 @@ impl<W: Write> FolderWriter<W> {
         Ok(())
     }
 
+    /// Writes what [`crate::verify`] found for the pair `i`, `j` whose matches were `matches`
+    /// ([`FolderWriter::add_matches`]'s indices and order) into the database's
+    /// `two_view_geometries`, as COLMAP's own verification would
+    /// ([`TwoViewGeometry::from_verified`]).
+    pub fn add_geometry(
+        &mut self,
+        i: usize,
+        j: usize,
+        matches: &[Match],
+        verified: &verify::TwoViewGeometry,
+    ) -> Result<(), ColmapError> {
+        let photos = self.photos.len();
+        let (Some((_, id_i, _)), Some((_, id_j, _))) = (self.photos.get(i), self.photos.get(j))
+        else {
+            return Err(ColmapError::BadPair {
+                i,
+                j,
+                photos,
+                reason: "an index is not one of the photos written",
+            });
+        };
+        let geometry = TwoViewGeometry::from_verified(*id_i, *id_j, matches, verified)?;
+        self.db.add_two_view_geometry(&geometry)?;
+        self.counts.pairs_verified += 1;
+        if !geometry.inliers.is_empty() {
+            self.counts.pairs_with_inliers += 1;
+        }
+        self.counts.inliers += geometry.inliers.len();
+        Ok(())
+    }
+
+    /// Photo `i`'s camera as verification takes it: its size and, where its focal length is known
+    /// (a given K, an EXIF focal length: COLMAP's `prior_focal_length`), its intrinsics, so that a
+    /// pair of such photos is verified calibrated as COLMAP would.
+    pub fn verify_camera(&self, i: usize) -> Option<&verify::Camera> {
+        self.verify_cameras.get(i)
+    }
+
     /// Photos written so far.
     pub fn photos(&self) -> usize {
         self.photos.len()
@@ -175,5 +242,21 @@ impl<W: Write> FolderWriter<W> {
     pub fn finish(self) -> Result<W, ColmapError> {
         self.db.finish()?;
         self.list.into_inner()
+    }
+}
+
+/// A database camera as [`crate::verify`] takes it: COLMAP's principal point is in its pixel
+/// convention (centres at `+ 0.5`), verification's in clatch's.
+fn verify_camera(camera: &PinholeCamera) -> verify::Camera {
+    let plain = verify::Camera::new(camera.width, camera.height);
+    if camera.focal_is_known {
+        plain.with_intrinsics(Intrinsics::new(
+            camera.fx,
+            camera.fy,
+            camera.cx - 0.5,
+            camera.cy - 0.5,
+        ))
+    } else {
+        plain
     }
 }

@@ -46,6 +46,12 @@ pub struct VerifyConfig {
     pub watermark_border_size: f64,
     /// Seed of the sampler: with the pair's key, it fixes every sample. Default 0.
     pub seed: u64,
+    /// Whether a planar-or-panoramic pair keeps the homography's inliers (default true) rather than
+    /// the larger set, often the fundamental matrix's, as COLMAP 3.8 does (false). Where a homography
+    /// explains the matches, F is under-determined: its epipolar lines are one choice among many, and
+    /// the matches it adds to H's lie on those lines, not on the true ones (on repeated structure, a
+    /// window matched to its neighbour).
+    pub planar_keeps_homography_inliers: bool,
 }
 
 impl Default for VerifyConfig {
@@ -64,6 +70,7 @@ impl Default for VerifyConfig {
             watermark_min_inlier_ratio: 0.7,
             watermark_border_size: 0.1,
             seed: 0,
+            planar_keeps_homography_inliers: true,
         }
     }
 }
@@ -96,6 +103,9 @@ impl VerifyConfig {
         with_watermark_border_size => watermark_border_size: f64;
         /// The same settings with this sampler seed ([`VerifyConfig::seed`]).
         with_seed => seed: u64;
+        /// The same settings with this inlier rule for planar-or-panoramic pairs
+        /// ([`VerifyConfig::planar_keeps_homography_inliers`]).
+        with_planar_keeps_homography_inliers => planar_keeps_homography_inliers: bool;
     }
 
     /// `Error::InvalidConfig` for a setting out of its range.

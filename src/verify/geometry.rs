@@ -39,6 +39,33 @@ impl GeometryConfig {
     pub fn colmap_code(self) -> i32 {
         self as i32
     }
+
+    /// The configuration of a stored `config`, `None` for an integer COLMAP 3.8 does not define.
+    ///
+    /// ```
+    /// use clatch::verify::GeometryConfig;
+    ///
+    /// assert_eq!(GeometryConfig::from_colmap_code(2), Some(GeometryConfig::Calibrated));
+    /// assert_eq!(GeometryConfig::from_colmap_code(9), None);
+    /// ```
+    pub fn from_colmap_code(code: i64) -> Option<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|c| i64::from(c.colmap_code()) == code)
+    }
+
+    /// Every configuration, in COLMAP's order.
+    pub const ALL: [GeometryConfig; 9] = [
+        Self::Undefined,
+        Self::Degenerate,
+        Self::Calibrated,
+        Self::Uncalibrated,
+        Self::Planar,
+        Self::Panoramic,
+        Self::PlanarOrPanoramic,
+        Self::Watermark,
+        Self::Multiple,
+    ];
 }
 
 /// Inliers of each model LO-RANSAC found (0 for a model not estimated).

@@ -2,6 +2,9 @@
 //! COLMAP 3.8 would find (`TwoViewGeometry::Estimate`): a fundamental matrix, an essential matrix
 //! when both cameras' intrinsics are known, a homography, each by LO-RANSAC, COLMAP's rules to
 //! choose among them ([`GeometryConfig`], numbered as COLMAP numbers them), and the inlier matches.
+//! One rule differs by default: a planar-or-panoramic pair keeps the homography's inliers, not the
+//! under-determined fundamental matrix's larger set
+//! ([`VerifyConfig::planar_keeps_homography_inliers`]; off, COLMAP's rule).
 //!
 //! This is the CPU reference, written as the specification a CUDA twin reproduces bit for bit:
 //! every solver uses `+ − × ÷` and `sqrt` in `f64` in a written order, roots come from Sturm

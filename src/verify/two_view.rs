@@ -94,6 +94,7 @@ pub(crate) fn estimate_two_view(
         Some(e) => choose_calibrated(e, &f, &h, counts, config),
         None => choose_uncalibrated(&f, &h, counts, config),
     };
+    let chosen = planar_inliers(chosen, &h, counts, config);
     let Some((config_type, mask)) = chosen else {
         return TwoViewGeometry::degenerate(counts);
     };
@@ -223,6 +224,26 @@ fn choose_uncalibrated<'r, M>(
     };
     // COLMAP keeps F's inlier mask here even when H has more inliers (or F did not succeed).
     Some((config_type, &f.inlier_mask))
+}
+
+/// The inliers a planar-or-panoramic pair keeps: H's (when H succeeded with enough of them) with
+/// [`VerifyConfig::planar_keeps_homography_inliers`], else what COLMAP's rules chose.
+fn planar_inliers<'r, M>(
+    chosen: Option<(GeometryConfig, &'r [bool])>,
+    h: &'r RansacReport<M>,
+    counts: InlierCounts,
+    config: &VerifyConfig,
+) -> Option<(GeometryConfig, &'r [bool])> {
+    match chosen {
+        Some((GeometryConfig::PlanarOrPanoramic, _))
+            if config.planar_keeps_homography_inliers
+                && h.success
+                && counts.h >= config.min_num_inliers =>
+        {
+            Some((GeometryConfig::PlanarOrPanoramic, &h.inlier_mask))
+        }
+        other => other,
+    }
 }
 
 /// `DetectWatermark`: most inliers lie in the border band of both images, and most of them follow

@@ -91,6 +91,11 @@ class MatchFolderResult:
     matches: int
     #: Pairs with at least one match (the pairs in the match list).
     pairs_with_matches: int
+    #: With ``verify=True``: pairs whose two-view geometry was written, those of them with inliers,
+    #: and the inlier matches over all pairs.
+    pairs_verified: int = 0
+    pairs_with_inliers: int = 0
+    inliers: int = 0
     #: ``clatch.ray`` only: blocks of pairs; blocks and extraction tasks run again because their
     #: actor died; actors lost; descriptor sets the surviving actors fetched from the object store.
     blocks: int = 0
@@ -98,7 +103,8 @@ class MatchFolderResult:
     actors_lost: int = 0
     descriptor_fetches: int = 0
     #: Wall time of each stage in seconds: ``set_up`` (the backend's), ``extraction``, ``decoding``
-    #: (summed over the decoding threads), ``matching`` (each without writing), ``writing``; stages
+    #: (summed over the decoding threads), ``matching``, ``verification`` (each without writing),
+    #: ``writing``; stages
     #: that ran on Ray's actors are 0.
     stage_seconds: Mapping[str, float] = field(default_factory=dict)
 
@@ -219,6 +225,7 @@ def match_folder(
     subpixel_radius: int = 3,
     max_pixels: int = 100_000_000,
     force: bool = False,
+    verify: bool = False,
     progress: Optional[Progress] = None,
 ) -> MatchFolderResult:
     """Features and matches of a folder of photos into a new COLMAP 3.8 database and match list.
@@ -236,6 +243,9 @@ def match_folder(
       keywords on top of ``grid=8``; ``matcher``: ``Matcher`` keywords (ratio 0.8, cross-check).
     - ``subpixel``: ``"score"`` (default), ``"none"`` or ``"corner"`` (over a ``2 subpixel_radius + 1``
       window), ``clatch colmap --subpixel``; descriptors and matches do not depend on it.
+    - ``verify``: verify every pair in clatch (``clatch::verify``, on the CPU) and write the two-view
+      geometries into the database, as ``colmap matches_importer`` would: ``colmap mapper`` then runs
+      straight on it (``clatch colmap --verify``).
     - ``progress(stage, done, total)``: called as each stage starts (``done = 0``), as photos are
       extracted and as pairs are matched; an exception it raises stops the run.
 
@@ -259,5 +269,6 @@ def match_folder(
         subpixel_radius=subpixel_radius,
         max_pixels=max_pixels,
         force=force,
+        verify=verify,
     )
     return _result(job.run(progress))

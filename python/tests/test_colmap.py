@@ -52,10 +52,11 @@ OPTIONS = [
         {"extractor": {"grid": 4, "max_keypoints": 800}, "subpixel": "corner", "subpixel_radius": 2, "matcher": {"ratio": 0.9}},
     ),
     (["--single-scale", "--subpixel", "none", "--no-cross-check"], {"extractor": {"single_scale": True}, "subpixel": "none", "matcher": {"cross_check": False}}),
+    (["--verify"], {"verify": True}),
 ]
 
 
-@pytest.mark.parametrize("flags,keywords", OPTIONS, ids=["defaults", "grid4-corner-ratio", "single-scale-none"])
+@pytest.mark.parametrize("flags,keywords", OPTIONS, ids=["defaults", "grid4-corner-ratio", "single-scale-none", "verify"])
 def test_folder_is_byte_identical_to_the_tool(cli, backend, folder, tmp_path, flags, keywords):
     run_cli(cli, folder, tmp_path / "tool.db", flags)
     calls = []
@@ -73,6 +74,10 @@ def test_folder_is_byte_identical_to_the_tool(cli, backend, folder, tmp_path, fl
     assert result.matches == sum(n for *_, n in pairs) > 200
     assert (result.images, result.pairs) == (6, SIX_PAIRS)
     assert calls[-1] == ("match", SIX_PAIRS, SIX_PAIRS) and ("extract", 6, 6) in calls
+    # Verified, every pair's geometry is in the database (the bytes above equal the tool's).
+    verified = SIX_PAIRS if keywords.get("verify") else 0
+    assert result.pairs_verified == verified
+    assert 0 < result.inliers <= result.matches if verified else result.inliers == 0
     # Nothing but the outputs is left behind.
     assert sorted(p.name for p in tmp_path.iterdir()) == ["py-colmap", "py.db", "tool-colmap", "tool.db"]
 

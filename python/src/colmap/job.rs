@@ -86,6 +86,7 @@ impl FolderJob {
         subpixel_radius = 3,
         max_pixels = 100_000_000,
         force = false,
+        verify = false,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -102,6 +103,7 @@ impl FolderJob {
         subpixel_radius: i64,
         max_pixels: u64,
         force: bool,
+        verify: bool,
     ) -> PyResult<Self> {
         let mut job = clatch::colmap::FolderJob::new(images, database)
             .with_backend(extractor.inner.backend())
@@ -116,6 +118,9 @@ impl FolderJob {
             });
         if let Some(workspace) = workspace {
             job = job.with_workspace(workspace);
+        }
+        if verify {
+            job = job.with_verification(clatch::verify::VerifyConfig::default());
         }
         if let Some(pairs) = pairs {
             job = job.with_pairs(pairs);

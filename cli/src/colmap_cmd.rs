@@ -371,7 +371,6 @@ const KEEP_FOCAL_LENGTH: &str = "Mapper.ba_refine_focal_length";
 
 /// The COLMAP steps after the database, on the given database, match list and model folder: import
 /// with verification (unless clatch verified, `--verify`), then the mapper.
-
 fn colmap_steps(
     args: &ColmapArgs,
     (database, match_list, sparse): (&Path, &Path, &Path),

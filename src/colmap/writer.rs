@@ -95,7 +95,7 @@ impl<W: Write> FolderWriter<W> {
         let pinholes = shared
             .iter()
             .zip(camera)
-            .map(|(&(id, _), c)| (id, c.clone()))
+            .map(|(&(id, _), c)| (id, *c))
             .collect();
         Ok(Self {
             db,

@@ -343,6 +343,7 @@ def match_folder(
     subpixel_radius: int = 3,
     max_pixels: int = 100_000_000,
     force: bool = False,
+    verify: bool = False,
     progress: Optional[Progress] = None,
     num_actors: Optional[int] = None,
     actor_options: Optional[Mapping[str, Any]] = None,
@@ -372,6 +373,9 @@ def match_folder(
       actors than fit) raise ``ClusterError`` (kind ``"ResourcesUnavailable"``) before any actor
       is made (``ray.cluster_resources()``).
 
+    With ``verify=True`` the driver verifies each pair as it writes its matches (on its CPU), as
+    ``clatch.colmap.match_folder(verify=True)`` does.
+
     The result's ``blocks``, ``blocks_rerun`` (blocks and extraction tasks run again because their
     actor died), ``actors_lost`` and ``descriptor_fetches`` say how the run went. The two
     underscored keywords are test hooks: ``_exit_after=(stage, n)`` makes the first actor's process
@@ -395,7 +399,9 @@ def match_folder(
     )
     # Every check before any work, here, where the errors are plain clatch errors; the driver only
     # writes, so its job runs on the CPU.
-    job = _job(backend="cpu", workspace=workspace, pairs=pairs, camera_k=camera_k, force=force, **settings)
+    job = _job(
+        backend="cpu", workspace=workspace, pairs=pairs, camera_k=camera_k, force=force, verify=verify, **settings
+    )
     plan = job.plan()
     pair_list = plan.pairs
     blocks = _blocks(pair_list, block_size)

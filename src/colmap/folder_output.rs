@@ -10,10 +10,13 @@ use std::time::{Duration, Instant};
 use crate::colmap::camera::PinholeCamera;
 use crate::colmap::error::ColmapError;
 use crate::colmap::folder::Photo;
+use crate::colmap::pair_id;
 use crate::colmap::report::{FolderReport, FolderTimes};
 use crate::colmap::writer::{FolderCounts, FolderWriter};
+use crate::keypoint::KeyPoint;
 use crate::matching::Match;
 use crate::output::{OutputError, OutputLock, Staged};
+use crate::verify::{self, VerifyConfig, ViewPair, verify_pairs};
 
 /// The file in a match list's folder naming the database the list belongs to.
 pub const OWNER_NAME: &str = ".clatch-database";
@@ -61,8 +64,19 @@ pub struct FolderOutput {
     temp: (PathBuf, PathBuf),
     outputs: (PathBuf, PathBuf),
     writing: Duration,
+    /// The pairs' verification, when the job asks for it.
+    verification: Option<Verification>,
     /// Declared last: removed (if still empty) after the temporary files.
     made: MadeFolders,
+}
+
+/// What verifying the pairs as they are written needs: the settings, every photo's keypoints, and
+/// the time spent.
+#[derive(Debug)]
+struct Verification {
+    config: VerifyConfig,
+    keypoints: Vec<Vec<KeyPoint>>,
+    time: Duration,
 }
 
 /// The folders a run created for its outputs, innermost first: removed again, each only while empty,
@@ -132,8 +146,21 @@ impl FolderOutput {
             temp: (temp_database, temp_list),
             outputs: (database.to_path_buf(), match_list.to_path_buf()),
             writing: began.elapsed(),
+            verification: None,
             made,
         })
+    }
+
+    /// The same output verifying every pair it is given with `config` ([`crate::verify`], on the
+    /// CPU) and writing its two-view geometry into the database ([`FolderWriter::add_geometry`]);
+    /// `None`: the matches alone.
+    pub(crate) fn with_verification(mut self, config: Option<VerifyConfig>) -> Self {
+        self.verification = config.map(|config| Verification {
+            config,
+            keypoints: Vec::new(),
+            time: Duration::ZERO,
+        });
+        self
     }
 
     /// The same output holding `lock` too (the plan's lock on the database) until it is committed.
@@ -142,35 +169,91 @@ impl FolderOutput {
         self
     }
 
-    /// Adds the next photo: [`FolderWriter::add_photo`].
+    /// Adds the next photo: [`FolderWriter::add_photo`] (and keeps its keypoints when the pairs are
+    /// verified).
     pub fn add_photo(&mut self, photo: &Photo) -> Result<usize, ColmapError> {
-        self.timed(|w| w.add_photo(photo))
+        let index = self.timed(|w| w.add_photo(photo))?;
+        if let Some(verification) = &mut self.verification {
+            verification.keypoints.push(photo.keypoints.clone());
+        }
+        Ok(index)
     }
 
-    /// Adds the matches of a pair: [`FolderWriter::add_matches`].
+    /// Adds the matches of a pair ([`FolderWriter::add_matches`]) and, when the job verifies, its
+    /// two-view geometry.
     pub fn add_matches(
         &mut self,
         i: usize,
         j: usize,
         matches: &[Match],
     ) -> Result<(), ColmapError> {
-        self.timed(|w| w.add_matches(i, j, matches))
+        self.add_pairs(&[(i, j)], &[matches])
     }
 
-    /// Adds a pair's verified geometry: [`FolderWriter::add_geometry`].
-    pub fn add_geometry(
+    /// Adds the matches of several pairs, in order, and, when the job verifies, their two-view
+    /// geometries, the pairs verified side by side (rayon); the bytes are those of adding each pair
+    /// in turn.
+    pub fn add_pairs(
         &mut self,
-        i: usize,
-        j: usize,
-        matches: &[Match],
-        verified: &crate::verify::TwoViewGeometry,
+        pairs: &[(usize, usize)],
+        matches: &[&[Match]],
     ) -> Result<(), ColmapError> {
-        self.timed(|w| w.add_geometry(i, j, matches, verified))
+        for (&(i, j), found) in pairs.iter().zip(matches) {
+            self.timed(|w| w.add_matches(i, j, found))?;
+        }
+        let Some(verification) = &self.verification else {
+            return Ok(());
+        };
+        let began = Instant::now();
+        let geometries = self.geometries(verification, pairs, matches)?;
+        if let Some(verification) = &mut self.verification {
+            verification.time += began.elapsed();
+        }
+        for ((&(i, j), found), geometry) in pairs.iter().zip(matches).zip(&geometries) {
+            self.timed(|w| w.add_geometry(i, j, found, geometry))?;
+        }
+        Ok(())
     }
 
-    /// Photo `i`'s camera as verification takes it: [`FolderWriter::verify_camera`].
-    pub fn verify_camera(&self, i: usize) -> Option<&crate::verify::Camera> {
-        self.writer.verify_camera(i)
+    /// The verified geometries of `pairs` (photo indices, matches already written), each pair's
+    /// sampler keyed by COLMAP's pair id.
+    fn geometries(
+        &self,
+        verification: &Verification,
+        pairs: &[(usize, usize)],
+        matches: &[&[Match]],
+    ) -> Result<Vec<verify::TwoViewGeometry>, ColmapError> {
+        let photos = verification.keypoints.len();
+        let views = pairs
+            .iter()
+            .zip(matches)
+            .map(|(&(i, j), found)| {
+                let (Some(a), Some(b), Some(ca), Some(cb)) = (
+                    verification.keypoints.get(i),
+                    verification.keypoints.get(j),
+                    self.writer.verify_camera(i),
+                    self.writer.verify_camera(j),
+                ) else {
+                    return Err(ColmapError::BadPair {
+                        i,
+                        j,
+                        photos,
+                        reason: "an index is not one of the photos written",
+                    });
+                };
+                Ok(ViewPair::new(a, b, found)
+                    .with_cameras(ca, cb)
+                    .with_key(pair_id(i as u32 + 1, j as u32 + 1)))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(verify_pairs(&views, &verification.config)?)
+    }
+
+    /// Time spent verifying so far (zero without verification).
+    pub(crate) fn verifying(&self) -> Duration {
+        self.verification
+            .as_ref()
+            .map_or(Duration::ZERO, |v| v.time)
     }
 
     /// `write` on the writer, its time added to the writing time; a failure to write (a full disk)
@@ -217,6 +300,7 @@ impl FolderOutput {
                 counts,
                 times: FolderTimes {
                     writing: self.writing + began.elapsed(),
+                    verification: self.verification.map_or(Duration::ZERO, |v| v.time),
                     ..FolderTimes::default()
                 },
             },

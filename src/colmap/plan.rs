@@ -99,7 +99,11 @@ impl FolderPlan {
             &self.job.match_list,
             self.camera.as_ref(),
         )
-        .map(|output| output.holding(self.lock.clone()))
+        .map(|output| {
+            output
+                .holding(self.lock.clone())
+                .with_verification(self.job.verification.clone())
+        })
     }
 }
 

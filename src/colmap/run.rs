@@ -8,17 +8,14 @@ use crate::collection::DescriptorCollection;
 use crate::colmap::error::ColmapError;
 use crate::colmap::folder::extract_each_photo;
 use crate::colmap::folder_output::{FolderOutput, WrittenFolder};
-use crate::colmap::pair_id;
 #[cfg(doc)]
 use crate::colmap::pairs::match_photo_pairs;
 use crate::colmap::plan::FolderPlan;
 use crate::colmap::report::{FolderProgress, FolderStage};
 use crate::descriptor::DescriptorSet;
-use crate::keypoint::KeyPoint;
 use crate::matcher::Matcher;
 use crate::matching::Match;
 use crate::prefetch::Prefetched;
-use crate::verify::{Camera, TwoViewGeometry, VerifyConfig, ViewPair, verify_pairs};
 
 /// Pairs matched in one call: about this many calls over the stage (its progress steps), each of
 /// [`MIN_PAIRS_PER_CALL`] to [`MAX_PAIRS_PER_CALL`] pairs. Only the descriptors stay in memory
@@ -64,20 +61,13 @@ impl FolderPlan {
     ) -> Result<WrittenFolder, ColmapError> {
         let mut progress = Progress(progress);
         let mut output = self.open_output()?;
-        let (photos, extraction, decoding) = self.extract(&mut output, &mut progress)?;
+        let (descriptors, extraction, decoding) = self.extract(&mut output, &mut progress)?;
         let set_up = self.start.wait()?;
         let matcher = Matcher::new(self.job.backend, self.job.matching.clone())?;
-        let verifier = self
-            .job
-            .verification
-            .as_ref()
-            .map(|config| Verifier::new(config, &photos.keypoints, &output))
-            .transpose()?;
-        let (matching, verification) = match_into(
+        let matching = match_into(
             &matcher,
-            &photos.descriptors,
+            &descriptors,
             &self.pairs,
-            verifier.as_ref(),
             &mut output,
             &mut progress,
         )?;
@@ -87,22 +77,20 @@ impl FolderPlan {
         times.extraction = extraction;
         times.decoding = decoding;
         times.matching = matching;
-        times.verification = verification;
         Ok(written)
     }
 
-    /// Extracts every photo into `output`; returns their descriptors (and keypoints, when the pairs
-    /// are verified), the stage's time (writing excluded) and the decoders' timings.
+    /// Extracts every photo into `output`; returns their descriptors, the stage's time (writing
+    /// excluded) and the decoders' timings.
     fn extract(
         &self,
         output: &mut FolderOutput,
         progress: &mut Progress<'_>,
-    ) -> Result<(Extracted, Duration, Prefetched), ColmapError> {
+    ) -> Result<(Vec<DescriptorSet>, Duration, Prefetched), ColmapError> {
         let total = self.folder.paths.len();
         progress.tell(FolderStage::Extraction, 0, total)?;
         let (began, wrote) = (Instant::now(), output.writing());
-        let keep_keypoints = self.job.verification.is_some();
-        let mut photos = Extracted::default();
+        let mut descriptors = Vec::with_capacity(total);
         let decoding = extract_each_photo(
             &self.extractor,
             (&self.folder.paths, &self.folder.names),
@@ -110,70 +98,12 @@ impl FolderPlan {
             self.job.refinement,
             |i, photo, set| {
                 output.add_photo(&photo)?;
-                photos.descriptors.push(set);
-                if keep_keypoints {
-                    photos.keypoints.push(photo.keypoints);
-                }
+                descriptors.push(set);
                 progress.tell(FolderStage::Extraction, i + 1, total)
             },
         )?;
         let stage = began.elapsed().saturating_sub(output.writing() - wrote);
-        Ok((photos, stage, decoding))
-    }
-}
-
-/// What extraction keeps of every photo for the pairs.
-#[derive(Default)]
-struct Extracted {
-    descriptors: Vec<DescriptorSet>,
-    /// Only when the pairs are verified.
-    keypoints: Vec<Vec<KeyPoint>>,
-}
-
-/// Verifies the pairs of a group on the CPU ([`crate::verify::verify_pairs`], over rayon): every
-/// photo's keypoints and camera, each pair's sampler keyed by COLMAP's pair id.
-struct Verifier<'a> {
-    config: &'a VerifyConfig,
-    keypoints: &'a [Vec<KeyPoint>],
-    cameras: Vec<Camera>,
-}
-
-impl<'a> Verifier<'a> {
-    fn new(
-        config: &'a VerifyConfig,
-        keypoints: &'a [Vec<KeyPoint>],
-        output: &FolderOutput,
-    ) -> Result<Self, ColmapError> {
-        let cameras = (0..keypoints.len())
-            .map(|i| output.verify_camera(i).cloned())
-            .collect::<Option<Vec<_>>>()
-            .ok_or(ColmapError::Clatch(crate::Error::Internal {
-                operation: "verification",
-                message: "a photo without its camera".into(),
-            }))?;
-        Ok(Self {
-            config,
-            keypoints,
-            cameras,
-        })
-    }
-
-    /// The geometries of `pairs`, whose matches are `found`, in order.
-    fn verify(
-        &self,
-        pairs: &[(usize, usize)],
-        found: &[Vec<Match>],
-    ) -> Result<Vec<TwoViewGeometry>, ColmapError> {
-        let views: Vec<ViewPair<'_>> = pairs
-            .iter()
-            .zip(found)
-            .map(|(&(i, j), matches)| {
-                ViewPair::new(&self.keypoints[i], &self.keypoints[j], matches)
-                    .with_cameras(&self.cameras[i], &self.cameras[j])
-                    .with_key(pair_id(i as u32 + 1, j as u32 + 1))
-            })
-            .collect();
-        Ok(verify_pairs(&views, self.config)?)
+        Ok((descriptors, stage, decoding))
     }
 }
 
@@ -185,41 +115,29 @@ fn match_into(
     matcher: &Matcher,
     descriptors: &[DescriptorSet],
     pairs: &[(usize, usize)],
-    verifier: Option<&Verifier<'_>>,
     output: &mut FolderOutput,
     progress: &mut Progress<'_>,
-) -> Result<(Duration, Duration), ColmapError> {
+) -> Result<Duration, ColmapError> {
     let total = pairs.len();
     progress.tell(FolderStage::Matching, 0, total)?;
-    let (began, wrote) = (Instant::now(), output.writing());
-    let mut verification = Duration::ZERO;
+    let (began, wrote, verified) = (Instant::now(), output.writing(), output.verifying());
     let Some(width) = descriptors.first().map(DescriptorSet::width) else {
-        return Ok((began.elapsed(), verification)); // no photos, so no pairs
+        return Ok(began.elapsed()); // no photos, so no pairs
     };
     let mut collection = DescriptorCollection::new(matcher, width)?;
     collection.add(&descriptors.iter().collect::<Vec<_>>())?;
     let mut done = 0;
     for group in pairs.chunks(pairs_per_call(total)) {
         let found = collection.match_pairs(group)?;
-        for (&(i, j), matches) in group.iter().zip(&found) {
-            output.add_matches(i, j, matches)?;
-        }
-        if let Some(verifier) = verifier {
-            let started = Instant::now();
-            let geometries = verifier.verify(group, &found)?;
-            verification += started.elapsed();
-            for ((&(i, j), matches), geometry) in group.iter().zip(&found).zip(&geometries) {
-                output.add_geometry(i, j, matches, geometry)?;
-            }
-        }
+        let found: Vec<&[Match]> = found.iter().map(Vec::as_slice).collect();
+        output.add_pairs(group, &found)?;
         done += group.len();
         progress.tell(FolderStage::Matching, done, total)?;
     }
-    let matching = began
+    Ok(began
         .elapsed()
         .saturating_sub(output.writing() - wrote)
-        .saturating_sub(verification);
-    Ok((matching, verification))
+        .saturating_sub(output.verifying() - verified))
 }
 
 #[cfg(test)]

@@ -19,9 +19,9 @@ use crate::errors::{Class, OrRaise, raise};
 /// Where a writer writes.
 enum Writing {
     /// Straight to the two paths given.
-    Direct(Writer<BufWriter<File>>),
+    Direct(Box<Writer<BufWriter<File>>>),
     /// Under temporary names, renamed into place by `finish` ([`FolderOutput`]).
-    Staged(FolderOutput),
+    Staged(Box<FolderOutput>),
 }
 
 impl Writing {
@@ -60,7 +60,7 @@ impl FolderWriter {
     /// A writer of `output`, a plan's temporary files.
     pub fn staged(output: FolderOutput) -> Self {
         Self {
-            inner: Mutex::new(Some(Writing::Staged(output))),
+            inner: Mutex::new(Some(Writing::Staged(Box::new(output)))),
         }
     }
 
@@ -117,7 +117,7 @@ impl FolderWriter {
         let writer = Writer::create(&database, BufWriter::new(list), camera.map(|c| &c.inner))
             .or_raise(py)?;
         Ok(Self {
-            inner: Mutex::new(Some(Writing::Direct(writer))),
+            inner: Mutex::new(Some(Writing::Direct(Box::new(writer)))),
         })
     }
 

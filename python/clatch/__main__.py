@@ -89,10 +89,12 @@ def colmap(args: argparse.Namespace) -> int:
         matcher={"ratio": args.ratio},
         max_pixels=args.max_pixels,
         force=args.force,
+        verify=args.verify,
     )
+    verified = f", {result.inliers} verified in {result.pairs_with_inliers} pairs" if args.verify else ""
     print(
-        f"{result.images} photos, {result.keypoints} keypoints, {result.pairs} pairs, {result.matches} matches "
-        f"-> {result.database}, {result.match_list}"
+        f"{result.images} photos, {result.keypoints} keypoints, {result.pairs} pairs, {result.matches} matches"
+        f"{verified} -> {result.database}, {result.match_list}"
     )
     return 0
 
@@ -120,6 +122,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--workspace")
     p.add_argument("--camera-k", help="a K file: 9 numbers, row-major")
     p.add_argument("--force", action="store_true", help="replace an existing database")
+    p.add_argument("--verify", action="store_true", help="verify every pair and write the geometries (clatch colmap --verify)")
     p.add_argument("--ratio", type=float, default=0.8)
     _extractor_options(p)
     p.set_defaults(run=colmap)

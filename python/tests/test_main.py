@@ -41,6 +41,10 @@ def test_match_and_colmap(tmp_path):
     assert done.returncode == 0, done.stderr
     single = clatch.colmap.match_folder(folder, tmp_path / "lib.db", backend="cpu")
     assert (tmp_path / "py.db").read_bytes() == single.database.read_bytes()
+    done = run("colmap", "--images", str(folder), "--database", str(tmp_path / "v.db"), "--backend", "cpu", "--verify")
+    assert done.returncode == 0 and " verified in " in done.stdout, done.stderr
+    single = clatch.colmap.match_folder(folder, tmp_path / "lib_v.db", backend="cpu", verify=True)
+    assert (tmp_path / "v.db").read_bytes() == single.database.read_bytes()
 
 
 def test_errors_are_one_line(tmp_path):

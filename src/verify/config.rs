@@ -52,6 +52,10 @@ pub struct VerifyConfig {
     /// the matches it adds to H's lie on those lines, not on the true ones (on repeated structure, a
     /// window matched to its neighbour).
     pub planar_keeps_homography_inliers: bool,
+    /// Before RANSAC, keep only the matches whose neighbours in the first image move with them into
+    /// the second ([`super::NeighbourConsistency`]: drops matches one period off on repeated
+    /// structure). The geometry's inliers still index the pair's matches. Default `None` (off).
+    pub neighbour_consistency: Option<super::NeighbourConsistency>,
 }
 
 impl Default for VerifyConfig {
@@ -71,6 +75,7 @@ impl Default for VerifyConfig {
             watermark_border_size: 0.1,
             seed: 0,
             planar_keeps_homography_inliers: true,
+            neighbour_consistency: None,
         }
     }
 }

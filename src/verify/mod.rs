@@ -38,6 +38,7 @@
 
 mod camera;
 mod config;
+mod consistency;
 mod essential;
 mod fundamental;
 mod geometry;
@@ -54,6 +55,7 @@ mod tests;
 
 pub use camera::{Camera, Intrinsics};
 pub use config::VerifyConfig;
+pub use consistency::NeighbourConsistency;
 pub use geometry::{GeometryConfig, InlierCounts, TwoViewGeometry};
 
 use crate::error::{Error, Result};
@@ -172,7 +174,16 @@ impl<'a> ViewPair<'a> {
             .iter()
             .map(|m| position(&self.keypoints_b[m.train as usize]))
             .collect();
-        two_view::estimate_two_view(&a, &b, self.cameras, config, self.key)
+        let Some(rule) = &config.neighbour_consistency else {
+            return two_view::estimate_two_view(&a, &b, self.cameras, config, self.key);
+        };
+        let kept = rule.kept(self.keypoints_a, self.keypoints_b, self.matches);
+        let pick = |points: &[[f64; 2]]| -> Vec<[f64; 2]> { kept.iter().map(|&i| points[i as usize]).collect() };
+        let mut geometry = two_view::estimate_two_view(&pick(&a), &pick(&b), self.cameras, config, self.key);
+        for inlier in &mut geometry.inliers {
+            *inlier = kept[*inlier as usize];
+        }
+        geometry
     }
 }
 

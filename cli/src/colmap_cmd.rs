@@ -88,15 +88,8 @@ fn folder_job(args: &ColmapArgs) -> Result<FolderJob, CliError> {
     let job = FolderJob::new(&args.images, &args.database);
     let job = if args.verify {
         let mut config = clatch::verify::VerifyConfig::default();
-        if let Ok(v) = std::env::var("CLATCH_NC") {
-            let v: Vec<u32> = v.split(',').map(|x| x.parse().unwrap()).collect();
-            let mut rule = clatch::verify::NeighbourConsistency::default();
-            rule.radius = v[0];
-            rule.tolerance = v[1];
-            rule.relative = v[2];
-            rule.min_neighbours = v[3];
-            rule.min_share_percent = v[4];
-            config.neighbour_consistency = Some(rule);
+        if args.no_neighbour_consistency {
+            config.neighbour_consistency = None;
         }
         job.with_verification(config)
     } else {

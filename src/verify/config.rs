@@ -54,7 +54,10 @@ pub struct VerifyConfig {
     pub planar_keeps_homography_inliers: bool,
     /// Before RANSAC, keep only the matches whose neighbours in the first image move with them into
     /// the second ([`super::NeighbourConsistency`]: drops matches one period off on repeated
-    /// structure). The geometry's inliers still index the pair's matches. Default `None` (off).
+    /// structure). The geometry's inliers still index the pair's matches. Default: on, with
+    /// [`super::NeighbourConsistency::default`] (not COLMAP's rule: `None` for COLMAP 3.8's
+    /// verification; on the generated facades it took the verified inliers within 4 px of the true
+    /// correspondence from 61-77 % to 97-99 %, EVALUATION.md, "Repeated structure").
     pub neighbour_consistency: Option<super::NeighbourConsistency>,
 }
 
@@ -75,7 +78,7 @@ impl Default for VerifyConfig {
             watermark_border_size: 0.1,
             seed: 0,
             planar_keeps_homography_inliers: true,
-            neighbour_consistency: None,
+            neighbour_consistency: Some(super::NeighbourConsistency::default()),
         }
     }
 }

@@ -28,32 +28,41 @@ use crate::matching::Match;
 /// use clatch::verify::NeighbourConsistency;
 ///
 /// let rule = NeighbourConsistency::default();
-/// assert_eq!((rule.radius, rule.min_share_percent), (120, 50));
+/// assert_eq!((rule.radius, rule.min_share_percent, rule.passes), (160, 20, 2));
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[non_exhaustive]
 pub struct NeighbourConsistency {
-    /// Neighbourhood radius in the first image, pixels. Default 120.
+    /// Neighbourhood radius in the first image, pixels. Default 160.
     pub radius: u32,
     /// Absolute part of the tolerance on the difference of the moves, pixels (L1). Default 24.
     pub tolerance: u32,
     /// Relative part of the tolerance, sixteenths of the neighbour's offset in the first image (L1).
-    /// Default 4 (a quarter).
+    /// Default 6 (three eighths).
     pub relative: u32,
     /// Fewest neighbours for the rule to judge a match; below that it is kept. Default 4.
     pub min_neighbours: u32,
-    /// Share of agreeing neighbours that keeps a match, percent. Default 50.
+    /// Share of agreeing neighbours that keeps a match in the first pass, percent (the putative
+    /// matches hold outliers, which agree with nobody). Default 20.
     pub min_share_percent: u32,
+    /// Passes: each later one judges the matches the previous kept against each other only (the
+    /// outliers gone, a true match's neighbours are mostly true). Default 2.
+    pub passes: u32,
+    /// Share of agreeing neighbours that keeps a match in the passes after the first, percent.
+    /// Default 50.
+    pub later_share_percent: u32,
 }
 
 impl Default for NeighbourConsistency {
     fn default() -> Self {
         Self {
-            radius: 120,
+            radius: 160,
             tolerance: 24,
-            relative: 4,
+            relative: 6,
             min_neighbours: 4,
-            min_share_percent: 50,
+            min_share_percent: 20,
+            passes: 2,
+            later_share_percent: 50,
         }
     }
 }
@@ -66,18 +75,50 @@ fn fixed(v: f32) -> i64 {
 impl NeighbourConsistency {
     /// The indices (into `matches`, increasing) of the matches this rule keeps. `matches` must name
     /// keypoints of `keypoints_a` (query) and `keypoints_b` (train) at finite positions.
-    pub fn kept(&self, keypoints_a: &[KeyPoint], keypoints_b: &[KeyPoint], matches: &[Match]) -> Vec<u32> {
+    pub fn kept(
+        &self,
+        keypoints_a: &[KeyPoint],
+        keypoints_b: &[KeyPoint],
+        matches: &[Match],
+    ) -> Vec<u32> {
         let at = |k: &KeyPoint| (fixed(k.x), fixed(k.y));
-        let a: Vec<(i64, i64)> = matches.iter().map(|m| at(&keypoints_a[m.query as usize])).collect();
-        let b: Vec<(i64, i64)> = matches.iter().map(|m| at(&keypoints_b[m.train as usize])).collect();
+        let a: Vec<(i64, i64)> = matches
+            .iter()
+            .map(|m| at(&keypoints_a[m.query as usize]))
+            .collect();
+        let b: Vec<(i64, i64)> = matches
+            .iter()
+            .map(|m| at(&keypoints_b[m.train as usize]))
+            .collect();
+        let mut kept: Vec<u32> = (0..matches.len() as u32).collect();
+        for pass in 0..self.passes.max(1) {
+            let share = if pass == 0 {
+                self.min_share_percent
+            } else {
+                self.later_share_percent
+            };
+            let pa: Vec<(i64, i64)> = kept.iter().map(|&i| a[i as usize]).collect();
+            let pb: Vec<(i64, i64)> = kept.iter().map(|&i| b[i as usize]).collect();
+            kept = self
+                .pass(&pa, &pb, share)
+                .into_iter()
+                .map(|i| kept[i as usize])
+                .collect();
+        }
+        kept
+    }
+
+    /// One pass: the indices of the matches (first-image positions `a`, second-image `b`, sixteenths
+    /// of a pixel) that `min_share_percent` of their neighbours agree with.
+    fn pass(&self, a: &[(i64, i64)], b: &[(i64, i64)], min_share_percent: u32) -> Vec<u32> {
         // Sorted by x in the first image, so that each match scans only the band |dxA| <= radius.
-        let mut order: Vec<u32> = (0..matches.len() as u32).collect();
+        let mut order: Vec<u32> = (0..a.len() as u32).collect();
         order.sort_by_key(|&i| (a[i as usize].0, i));
         let xs: Vec<i64> = order.iter().map(|&i| a[i as usize].0).collect();
         let r = 16 * i64::from(self.radius);
         let tol = 256 * i64::from(self.tolerance);
         let rel = i64::from(self.relative);
-        (0..matches.len())
+        (0..a.len())
             .filter(|&m| {
                 let (ax, ay) = a[m];
                 let (bx, by) = b[m];
@@ -101,7 +142,7 @@ impl NeighbourConsistency {
                     }
                 }
                 neighbours < u64::from(self.min_neighbours)
-                    || 100 * agreeing >= u64::from(self.min_share_percent) * neighbours
+                    || 100 * agreeing >= u64::from(min_share_percent) * neighbours
             })
             .map(|m| m as u32)
             .collect()
@@ -114,6 +155,19 @@ mod tests {
 
     fn kp(x: f32, y: f32) -> KeyPoint {
         KeyPoint::new(x, y)
+    }
+
+    /// One pass, radius 120 px, tolerance 24 px + a quarter of the offset.
+    fn one_pass(min_neighbours: u32, min_share_percent: u32) -> NeighbourConsistency {
+        NeighbourConsistency {
+            radius: 120,
+            tolerance: 24,
+            relative: 4,
+            min_neighbours,
+            min_share_percent,
+            passes: 1,
+            later_share_percent: 50,
+        }
     }
 
     /// A grid of matches moved by (30, 5), with one match moved a period (200 px) further.
@@ -129,35 +183,51 @@ mod tests {
             }
         }
         b[45].x += 200.0;
-        let matches: Vec<Match> =
-            (0..100).map(|i| Match { query: i, train: i, distance: 0 }).collect();
+        let matches: Vec<Match> = (0..100)
+            .map(|i| Match {
+                query: i,
+                train: i,
+                distance: 0,
+            })
+            .collect();
         let rule = NeighbourConsistency::default();
         let kept = rule.kept(&a, &b, &matches);
         assert_eq!(kept.len(), 99);
         assert!(!kept.contains(&45));
         // The order of the matches does not change what is kept.
         let reversed: Vec<Match> = matches.iter().rev().copied().collect();
-        let kept_reversed: Vec<u32> =
-            rule.kept(&a, &b, &reversed).into_iter().map(|i| 99 - i).rev().collect();
+        let kept_reversed: Vec<u32> = rule
+            .kept(&a, &b, &reversed)
+            .into_iter()
+            .map(|i| 99 - i)
+            .rev()
+            .collect();
         assert_eq!(kept_reversed, kept);
     }
 
     #[test]
     fn a_shifted_majority_wins_and_isolated_matches_are_kept() {
-        // Five matches together, three moved by 0 and two by a period: the two are dropped. A sixth
-        // match far away has no neighbours and is kept.
-        let a: Vec<KeyPoint> = (0..5).map(|i| kp(10.0 * i as f32, 0.0)).chain([kp(1000.0, 0.0)]).collect();
+        // Five matches together, three moved by 0 and two by a period; a sixth far away, with no
+        // neighbours, is always kept. At 50 % the three (2 of 4 neighbours agreeing) stay and the two
+        // (1 of 4) go; at 60 % even the three fall short.
+        let a: Vec<KeyPoint> = (0..5)
+            .map(|i| kp(10.0 * i as f32, 0.0))
+            .chain([kp(1000.0, 0.0)])
+            .collect();
         let mut b = a.clone();
         b[1].x += 250.0;
         b[3].x += 250.0;
-        let matches: Vec<Match> = (0..6).map(|i| Match { query: i, train: i, distance: 0 }).collect();
-        let rule = NeighbourConsistency { min_neighbours: 2, min_share_percent: 60, ..Default::default() };
-        assert_eq!(rule.kept(&a, &b, &matches), vec![0, 2, 4, 5]);
-        // With 50 %, matches 1 and 3 (1 of 4 neighbours agreeing) still go; 0, 2, 4 (2 of 4) stay.
-        let half = NeighbourConsistency { min_neighbours: 2, ..Default::default() };
-        assert_eq!(half.kept(&a, &b, &matches), vec![0, 2, 4, 5]);
+        let matches: Vec<Match> = (0..6)
+            .map(|i| Match {
+                query: i,
+                train: i,
+                distance: 0,
+            })
+            .collect();
+        assert_eq!(one_pass(2, 50).kept(&a, &b, &matches), vec![0, 2, 4, 5]);
+        assert_eq!(one_pass(2, 60).kept(&a, &b, &matches), vec![5]);
         // Too few neighbours for the rule: every match kept.
-        let strict = NeighbourConsistency { min_neighbours: 5, ..Default::default() };
+        let strict = one_pass(5, 50);
         assert_eq!(strict.kept(&a, &b, &matches).len(), 6);
     }
 
@@ -165,9 +235,20 @@ mod tests {
     fn the_bounds_are_inclusive_in_sixteenths_of_a_pixel() {
         // Neighbour exactly at the radius (120 px) counts; its move differs by exactly the tolerance
         // (24 px absolute + 120/4 = 30 px relative = 54 px): it agrees. One sixteenth more: it does not.
-        let rule = NeighbourConsistency { min_neighbours: 1, min_share_percent: 100, ..Default::default() };
+        let rule = one_pass(1, 100);
         let a = [kp(0.0, 0.0), kp(120.0, 0.0)];
-        let matches = [Match { query: 0, train: 0, distance: 0 }, Match { query: 1, train: 1, distance: 0 }];
+        let matches = [
+            Match {
+                query: 0,
+                train: 0,
+                distance: 0,
+            },
+            Match {
+                query: 1,
+                train: 1,
+                distance: 0,
+            },
+        ];
         let b = [kp(0.0, 0.0), kp(120.0 + 54.0, 0.0)];
         assert_eq!(rule.kept(&a, &b, &matches), vec![0, 1]);
         let b = [kp(0.0, 0.0), kp(120.0 + 54.0625, 0.0)];
@@ -175,5 +256,78 @@ mod tests {
         // Beyond the radius: no neighbours, both kept.
         let a = [kp(0.0, 0.0), kp(120.0625, 0.0)];
         assert_eq!(rule.kept(&a, &b, &matches), vec![0, 1]);
+    }
+
+    #[test]
+    fn a_second_pass_judges_the_survivors_only() {
+        // Ten matches in a row, all within the radius of each other: 0..6 move by 0, 6..9 by a period,
+        // 9 elsewhere (an outlier). First pass at 20 %: a true match has 5 of 9 neighbours agreeing, a
+        // shifted one 2 of 9 (22 %): both stay, the outlier (0 of 9) goes. Second pass at 50 % among
+        // the nine survivors: the shifted ones have 2 of 8 (25 %) and go, the true ones 5 of 8 stay.
+        let a: Vec<KeyPoint> = (0..10).map(|i| kp(5.0 * i as f32, 0.0)).collect();
+        let mut b = a.clone();
+        for (i, shift) in [(6, 250.0), (7, 250.0), (8, 250.0), (9, -400.0)] {
+            b[i].x += shift;
+        }
+        b[9].y += 300.0;
+        let matches: Vec<Match> = (0..10)
+            .map(|i| Match {
+                query: i,
+                train: i,
+                distance: 0,
+            })
+            .collect();
+        let first = one_pass(4, 20);
+        assert_eq!(
+            first.kept(&a, &b, &matches),
+            vec![0, 1, 2, 3, 4, 5, 6, 7, 8]
+        );
+        let two = NeighbourConsistency {
+            passes: 2,
+            later_share_percent: 50,
+            ..first
+        };
+        assert_eq!(two.kept(&a, &b, &matches), vec![0, 1, 2, 3, 4, 5]);
+    }
+
+    #[test]
+    fn verification_with_the_rule_reports_inliers_by_the_pair_s_match_index() {
+        // A 12 x 12 grid moved by (40, 10) in the second image; every seventh match is moved a period
+        // (300 px) further. With the rule those never reach RANSAC, and the inliers it reports are the
+        // indices of the pair's own matches (each one a true match).
+        let mut a = Vec::new();
+        let mut b = Vec::new();
+        for i in 0..12 {
+            for j in 0..12 {
+                let (x, y) = (
+                    100.0 + 31.0 * i as f32 + 0.3 * j as f32,
+                    80.0 + 29.0 * j as f32,
+                );
+                a.push(kp(x, y));
+                b.push(kp(x + 40.0 + 0.02 * y, y + 10.0));
+            }
+        }
+        let matches: Vec<Match> = (0..144)
+            .map(|i| Match {
+                query: i,
+                train: i,
+                distance: 0,
+            })
+            .collect();
+        for i in (3..144).step_by(7) {
+            b[i].x += 300.0;
+        }
+        let config = crate::verify::VerifyConfig {
+            neighbour_consistency: Some(NeighbourConsistency::default()),
+            ..Default::default()
+        };
+        let geometry = crate::verify::verify_pair(&a, &b, &matches, None, &config).unwrap();
+        let shifted = |i: u32| i >= 3 && (i - 3) % 7 == 0;
+        assert!(
+            geometry.inliers.iter().all(|&i| !shifted(i)),
+            "{:?}",
+            geometry.inliers
+        );
+        assert_eq!(geometry.inliers.len(), 144 - 21);
     }
 }

@@ -178,8 +178,11 @@ impl<'a> ViewPair<'a> {
             return two_view::estimate_two_view(&a, &b, self.cameras, config, self.key);
         };
         let kept = rule.kept(self.keypoints_a, self.keypoints_b, self.matches);
-        let pick = |points: &[[f64; 2]]| -> Vec<[f64; 2]> { kept.iter().map(|&i| points[i as usize]).collect() };
-        let mut geometry = two_view::estimate_two_view(&pick(&a), &pick(&b), self.cameras, config, self.key);
+        let pick = |points: &[[f64; 2]]| -> Vec<[f64; 2]> {
+            kept.iter().map(|&i| points[i as usize]).collect()
+        };
+        let mut geometry =
+            two_view::estimate_two_view(&pick(&a), &pick(&b), self.cameras, config, self.key);
         for inlier in &mut geometry.inliers {
             *inlier = kept[*inlier as usize];
         }

@@ -87,7 +87,7 @@ fn folder_job(args: &ColmapArgs) -> Result<FolderJob, CliError> {
     };
     let job = FolderJob::new(&args.images, &args.database);
     let job = if args.verify {
-        let mut config = clatch::verify::VerifyConfig::default();
+        let mut config = FolderJob::default_verification();
         if args.no_neighbour_consistency {
             config.neighbour_consistency = None;
         }

@@ -4,7 +4,10 @@
 //! choose among them ([`GeometryConfig`], numbered as COLMAP numbers them), and the inlier matches.
 //! One rule differs by default: a planar-or-panoramic pair keeps the homography's inliers, not the
 //! under-determined fundamental matrix's larger set
-//! ([`VerifyConfig::planar_keeps_homography_inliers`]; off, COLMAP's rule).
+//! ([`VerifyConfig::planar_keeps_homography_inliers`]; off, COLMAP's rule). One more can be turned
+//! on, and is in the folder run: RANSAC sees only the matches whose neighbours move with them
+//! ([`NeighbourConsistency`], [`VerifyConfig::neighbour_consistency`]), which drops matches one
+//! period off on repeated structure.
 //!
 //! This is the CPU reference, written as the specification a CUDA twin reproduces bit for bit:
 //! every solver uses `+ − × ÷` and `sqrt` in `f64` in a written order, roots come from Sturm

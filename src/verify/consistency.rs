@@ -322,7 +322,7 @@ mod tests {
             ..Default::default()
         };
         let geometry = crate::verify::verify_pair(&a, &b, &matches, None, &config).unwrap();
-        let shifted = |i: u32| i >= 3 && (i - 3) % 7 == 0;
+        let shifted = |i: u32| i >= 3 && (i - 3).is_multiple_of(7);
         assert!(
             geometry.inliers.iter().all(|&i| !shifted(i)),
             "{:?}",

@@ -575,6 +575,33 @@ mod tests {
     }
 
     #[test]
+    fn verify_drops_inconsistent_neighbours_unless_told_not_to() {
+        let rule = |extra: &[&str]| {
+            let job = folder_job(&colmap_args(extra)).unwrap();
+            job.verification.map(|v| v.neighbour_consistency.is_some())
+        };
+        assert_eq!(rule(&[]), None);
+        assert_eq!(rule(&["--verify"]), Some(true));
+        assert_eq!(
+            rule(&["--verify", "--no-neighbour-consistency"]),
+            Some(false)
+        );
+        let parsed = crate::Cli::try_parse_from([
+            "clatch",
+            "colmap",
+            "--images",
+            "d",
+            "--database",
+            "d.db",
+            "--no-neighbour-consistency",
+        ]);
+        assert!(
+            parsed.is_err(),
+            "--no-neighbour-consistency without --verify"
+        );
+    }
+
+    #[test]
     fn with_verify_the_mapper_runs_straight_on_the_database() {
         let paths = (Path::new("d.db"), Path::new("m.txt"), Path::new("sparse"));
         let steps = colmap_steps(&colmap_args(&["--verify"]), paths);

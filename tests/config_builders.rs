@@ -130,6 +130,11 @@ fn each_verify_method_sets_its_field_only() {
     let base = VerifyConfig::default();
     let cases = [
         ("max_error", base.clone().with_max_error(2.0)),
+        (
+            "neighbour_consistency",
+            base.clone()
+                .with_neighbour_consistency(Some(clatch::verify::NeighbourConsistency::default())),
+        ),
         ("confidence", base.clone().with_confidence(0.99)),
         (
             "trials_multiplier",
@@ -166,6 +171,7 @@ fn each_verify_method_sets_its_field_only() {
         &cases,
         fields!(
             max_error,
+            neighbour_consistency,
             confidence,
             trials_multiplier,
             min_num_trials,
@@ -180,7 +186,7 @@ fn each_verify_method_sets_its_field_only() {
             seed
         ),
     );
-    assert_eq!((cases[0].1.max_error, cases[12].1.seed), (2.0, 9));
+    assert_eq!((cases[0].1.max_error, cases[13].1.seed), (2.0, 9));
 }
 
 #[test]

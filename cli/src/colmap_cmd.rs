@@ -87,7 +87,11 @@ fn folder_job(args: &ColmapArgs) -> Result<FolderJob, CliError> {
     };
     let job = FolderJob::new(&args.images, &args.database);
     let job = if args.verify {
-        job.with_verification(clatch::verify::VerifyConfig::default())
+        let mut config = FolderJob::default_verification();
+        if args.no_neighbour_consistency {
+            config.neighbour_consistency = None;
+        }
+        job.with_verification(config)
     } else {
         job
     };
@@ -568,6 +572,33 @@ mod tests {
             panic!("parsed the wrong subcommand")
         };
         c
+    }
+
+    #[test]
+    fn verify_drops_inconsistent_neighbours_unless_told_not_to() {
+        let rule = |extra: &[&str]| {
+            let job = folder_job(&colmap_args(extra)).unwrap();
+            job.verification.map(|v| v.neighbour_consistency.is_some())
+        };
+        assert_eq!(rule(&[]), None);
+        assert_eq!(rule(&["--verify"]), Some(true));
+        assert_eq!(
+            rule(&["--verify", "--no-neighbour-consistency"]),
+            Some(false)
+        );
+        let parsed = crate::Cli::try_parse_from([
+            "clatch",
+            "colmap",
+            "--images",
+            "d",
+            "--database",
+            "d.db",
+            "--no-neighbour-consistency",
+        ]);
+        assert!(
+            parsed.is_err(),
+            "--no-neighbour-consistency without --verify"
+        );
     }
 
     #[test]

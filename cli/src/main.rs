@@ -252,6 +252,12 @@ pub struct ColmapArgs {
     /// `colmap matches_importer`.
     #[arg(long)]
     pub verify: bool,
+    /// With --verify: verify every putative match, as COLMAP does, without first dropping those whose
+    /// neighbours (within 160 px in the first image) do not move with them into the second
+    /// (clatch::verify::NeighbourConsistency, on by default: it drops matches one period off on
+    /// repeated structure, a facade of near-identical windows).
+    #[arg(long, requires = "verify")]
+    pub no_neighbour_consistency: bool,
     /// The COLMAP 3.8 executable (default: `colmap` on PATH, skipped with a note if absent).
     #[arg(long, value_name = "PROGRAM", conflicts_with = "no_colmap")]
     pub colmap: Option<PathBuf>,

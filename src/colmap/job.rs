@@ -165,6 +165,15 @@ impl FolderJob {
         }
     }
 
+    /// The verification settings of the folder run (`clatch colmap --verify`, the Python
+    /// `match_folder(verify=True)`): COLMAP 3.8's ([`VerifyConfig::default`]) with the neighbour rule
+    /// on ([`crate::verify::NeighbourConsistency::default`]), which drops matches one period off on
+    /// repeated structure (EVALUATION.md, "repeated structure: neighbour consistency").
+    pub fn default_verification() -> VerifyConfig {
+        VerifyConfig::default()
+            .with_neighbour_consistency(Some(crate::verify::NeighbourConsistency::default()))
+    }
+
     /// The extractor settings for structure from motion: the library's defaults with keypoints spread
     /// over a [`DEFAULT_GRID`] grid and a budget of [`DEFAULT_MAX_KEYPOINTS`].
     pub fn default_extractor() -> ExtractorConfig {

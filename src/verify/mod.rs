@@ -4,7 +4,10 @@
 //! choose among them ([`GeometryConfig`], numbered as COLMAP numbers them), and the inlier matches.
 //! One rule differs by default: a planar-or-panoramic pair keeps the homography's inliers, not the
 //! under-determined fundamental matrix's larger set
-//! ([`VerifyConfig::planar_keeps_homography_inliers`]; off, COLMAP's rule).
+//! ([`VerifyConfig::planar_keeps_homography_inliers`]; off, COLMAP's rule). One more can be turned
+//! on, and is in the folder run: RANSAC sees only the matches whose neighbours move with them
+//! ([`NeighbourConsistency`], [`VerifyConfig::neighbour_consistency`]), which drops matches one
+//! period off on repeated structure.
 //!
 //! This is the CPU reference, written as the specification a CUDA twin reproduces bit for bit:
 //! every solver uses `+ − × ÷` and `sqrt` in `f64` in a written order, roots come from Sturm
@@ -38,6 +41,7 @@
 
 mod camera;
 mod config;
+mod consistency;
 mod essential;
 mod fundamental;
 mod geometry;
@@ -54,6 +58,7 @@ mod tests;
 
 pub use camera::{Camera, Intrinsics};
 pub use config::VerifyConfig;
+pub use consistency::NeighbourConsistency;
 pub use geometry::{GeometryConfig, InlierCounts, TwoViewGeometry};
 
 use crate::error::{Error, Result};
@@ -172,7 +177,19 @@ impl<'a> ViewPair<'a> {
             .iter()
             .map(|m| position(&self.keypoints_b[m.train as usize]))
             .collect();
-        two_view::estimate_two_view(&a, &b, self.cameras, config, self.key)
+        let Some(rule) = &config.neighbour_consistency else {
+            return two_view::estimate_two_view(&a, &b, self.cameras, config, self.key);
+        };
+        let kept = rule.kept(self.keypoints_a, self.keypoints_b, self.matches);
+        let pick = |points: &[[f64; 2]]| -> Vec<[f64; 2]> {
+            kept.iter().map(|&i| points[i as usize]).collect()
+        };
+        let mut geometry =
+            two_view::estimate_two_view(&pick(&a), &pick(&b), self.cameras, config, self.key);
+        for inlier in &mut geometry.inliers {
+            *inlier = kept[*inlier as usize];
+        }
+        geometry
     }
 }
 

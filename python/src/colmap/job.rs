@@ -120,7 +120,7 @@ impl FolderJob {
             job = job.with_workspace(workspace);
         }
         if verify {
-            job = job.with_verification(clatch::verify::VerifyConfig::default());
+            job = job.with_verification(clatch::colmap::FolderJob::default_verification());
         }
         if let Some(pairs) = pairs {
             job = job.with_pairs(pairs);

@@ -289,16 +289,24 @@ impl RowReduction {
     }
 }
 
-/// A basis of the (least-squares) null space of `rows`, the vector that matters most last: for
-/// exactly `9 − K` rows (a minimal sample) the exact [`null_space`]; for more, the `K` right singular
-/// vectors with the smallest singular values, the smallest last.
-pub(crate) fn null_basis<const K: usize>(rows: &[[f64; 9]]) -> Option<[[f64; 9]; K]> {
-    if rows.len() + K == 9 {
-        return null_space::<K>(rows);
+/// A basis of the (least-squares) null space of the `count` rows `row(0), row(1), …` (made in that
+/// order, and stored together only for a minimal sample: no allocation), the vector that matters
+/// most last: for exactly `9 − K` rows (a minimal sample) the exact [`null_space`]; for more, the
+/// `K` right singular vectors with the smallest singular values, the smallest last.
+pub(crate) fn null_basis<const K: usize>(
+    count: usize,
+    mut row: impl FnMut(usize) -> [f64; 9],
+) -> Option<[[f64; 9]; K]> {
+    if count + K == 9 {
+        let mut rows = [[0.0; 9]; 9];
+        for (i, r) in rows[..count].iter_mut().enumerate() {
+            *r = row(i);
+        }
+        return null_space::<K>(&rows[..count]);
     }
     let mut reduction = RowReduction::new();
-    for row in rows {
-        reduction.add_row(*row);
+    for i in 0..count {
+        reduction.add_row(row(i));
     }
     let (vectors, _) = reduction.right_singular_vectors();
     Some(std::array::from_fn(|k| vectors[K - 1 - k]))
@@ -316,45 +324,49 @@ pub(crate) fn null_space<const K: usize>(rows: &[[f64; 9]]) -> Option<[[f64; 9];
     if rows.len() != rank {
         return None;
     }
-    let mut m = rows.to_vec();
+    let mut m = [[0.0; 9]; 9];
+    m[..rank].copy_from_slice(rows);
     let mut pivot_of_row = [0usize; 9];
-    let mut is_pivot = [false; 9];
+    // The columns not yet pivots, ascending. Only they are read again: a pivot's column holds 1 in
+    // its row and 0 in the others, and neither a later pivot nor a null vector reads it, so it is
+    // neither divided nor eliminated (the entries that matter get the same operations).
+    let mut free: [usize; 9] = std::array::from_fn(|c| c);
+    let mut free_count = 9;
     for row in 0..rank {
-        let (mut best_row, mut best_col, mut best) = (row, 0, -1.0);
-        for (r, values) in m.iter().enumerate().skip(row) {
-            for c in 0..9 {
-                if !is_pivot[c] && values[c].abs() > best {
-                    (best_row, best_col, best) = (r, c, values[c].abs());
+        let (mut best_row, mut best_at, mut best) = (row, 0, -1.0);
+        for r in row..rank {
+            for (at, &c) in free[..free_count].iter().enumerate() {
+                let magnitude = m[r][c].abs();
+                if magnitude > best {
+                    (best_row, best_at, best) = (r, at, magnitude);
                 }
             }
         }
-        if best == 0.0 || !best.is_finite() {
+        // `best < 0`: every candidate is NaN (the reference scan would go on with column 0 and a NaN
+        // model, which no solver keeps).
+        if best <= 0.0 || !best.is_finite() {
             return None;
         }
+        let best_col = free[best_at];
+        free.copy_within(best_at + 1..free_count, best_at);
+        free_count -= 1;
+        let columns = &free[..free_count];
         m.swap(row, best_row);
         let pivot = m[row][best_col];
-        for k in 0..9 {
+        for &k in columns {
             m[row][k] /= pivot;
         }
+        let pivot_row = m[row];
         for r in 0..rank {
             if r == row {
                 continue;
             }
             let factor = m[r][best_col];
-            for k in 0..9 {
-                m[r][k] -= factor * m[row][k];
+            for &k in columns {
+                m[r][k] -= factor * pivot_row[k];
             }
         }
         pivot_of_row[row] = best_col;
-        is_pivot[best_col] = true;
-    }
-    let mut free = [0usize; K];
-    let mut count = 0;
-    for (c, pivot) in is_pivot.iter().enumerate() {
-        if !pivot {
-            free[count] = c;
-            count += 1;
-        }
     }
     Some(std::array::from_fn(|j| {
         let mut v = [0.0; 9];
@@ -491,7 +503,7 @@ mod tests {
             }
             rows.push(row);
         }
-        let [v] = null_basis::<1>(&rows).unwrap();
+        let [v] = null_basis::<1>(rows.len(), |i| rows[i]).unwrap();
         let v_norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
         let cosine = v.iter().zip(&truth).map(|(a, b)| a * b).sum::<f64>() / (norm * v_norm);
         assert!((cosine.abs() - 1.0).abs() < 1e-12, "{cosine}");

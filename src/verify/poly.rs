@@ -207,7 +207,14 @@ fn refine(p: &Poly, sturm: &Sturm, mut a: f64, mut b: f64, va: u32) -> f64 {
         } else {
             sturm.variations(mid) < va
         };
+        let (was_a, was_b) = (a.to_bits(), b.to_bits());
         if left { b = mid } else { a = mid }
+        // A step that leaves the bracket as it was (its midpoint one of its ends) repeats itself
+        // forever: the bracket is a function of the bracket alone. The remaining bisections would
+        // change nothing, so they are skipped (a backend may run them all, with the same result).
+        if a.to_bits() == was_a && b.to_bits() == was_b {
+            break;
+        }
     }
     let mut x = 0.5 * (a + b);
     for _ in 0..NEWTON_STEPS {

@@ -327,33 +327,43 @@ pub(crate) fn null_space<const K: usize>(rows: &[[f64; 9]]) -> Option<[[f64; 9];
     let mut m = [[0.0; 9]; 9];
     m[..rank].copy_from_slice(rows);
     let mut pivot_of_row = [0usize; 9];
-    // The columns not yet pivots, ascending. Only they are read again: a pivot's column holds 1 in
-    // its row and 0 in the others, and neither a later pivot nor a null vector reads it, so it is
-    // neither divided nor eliminated (the entries that matter get the same operations).
-    let mut free: [usize; 9] = std::array::from_fn(|c| c);
-    let mut free_count = 9;
+    let mut is_pivot = [false; 9];
     for row in 0..rank {
-        let (mut best_row, mut best_at, mut best) = (row, 0, -1.0);
-        for r in row..rank {
-            for (at, &c) in free[..free_count].iter().enumerate() {
-                let magnitude = m[r][c].abs();
-                if magnitude > best {
-                    (best_row, best_at, best) = (r, at, magnitude);
+        // The scan keeps the first entry larger than all before it: the first (row-major) place of
+        // the largest magnitude. Found in two passes: the largest magnitude, column by column (the
+        // maximum of numbers does not depend on their order; NaN never counts), then its first place.
+        let mut largest = [-1.0f64; 9];
+        for values in &m[row..rank] {
+            for c in 0..9 {
+                let magnitude = if is_pivot[c] { -1.0 } else { values[c].abs() };
+                if magnitude > largest[c] {
+                    largest[c] = magnitude;
                 }
             }
         }
-        // `best < 0`: every candidate is NaN (the reference scan would go on with column 0 and a NaN
-        // model, which no solver keeps).
+        let mut best = -1.0;
+        for value in largest {
+            if value > best {
+                best = value;
+            }
+        }
+        // `best < 0`: every candidate is NaN (the scan would go on with column 0 and a NaN model,
+        // which no solver keeps).
         if best <= 0.0 || !best.is_finite() {
             return None;
         }
-        let best_col = free[best_at];
-        free.copy_within(best_at + 1..free_count, best_at);
-        free_count -= 1;
-        let columns = &free[..free_count];
+        let (mut best_row, mut best_col) = (row, 0);
+        'scan: for r in row..rank {
+            for c in 0..9 {
+                if !is_pivot[c] && m[r][c].abs() == best {
+                    (best_row, best_col) = (r, c);
+                    break 'scan;
+                }
+            }
+        }
         m.swap(row, best_row);
         let pivot = m[row][best_col];
-        for &k in columns {
+        for k in 0..9 {
             m[row][k] /= pivot;
         }
         let pivot_row = m[row];
@@ -362,11 +372,20 @@ pub(crate) fn null_space<const K: usize>(rows: &[[f64; 9]]) -> Option<[[f64; 9];
                 continue;
             }
             let factor = m[r][best_col];
-            for &k in columns {
+            for k in 0..9 {
                 m[r][k] -= factor * pivot_row[k];
             }
         }
         pivot_of_row[row] = best_col;
+        is_pivot[best_col] = true;
+    }
+    let mut free = [0usize; K];
+    let mut count = 0;
+    for (c, pivot) in is_pivot.iter().enumerate() {
+        if !pivot {
+            free[count] = c;
+            count += 1;
+        }
     }
     Some(std::array::from_fn(|j| {
         let mut v = [0.0; 9];

@@ -60,7 +60,12 @@ fn view(p: &Pair, calibrated: bool, key: u64) -> ViewPair<'_> {
 fn line(g: &TwoViewGeometry) -> String {
     let matrices: Vec<String> = [g.f, g.e, g.h]
         .into_iter()
-        .flat_map(|m| m.into_iter().flatten().flatten().map(|v| format!("{:x}", v.to_bits())))
+        .flat_map(|m| {
+            m.into_iter()
+                .flatten()
+                .flatten()
+                .map(|v| format!("{:x}", v.to_bits()))
+        })
         .collect();
     let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
     for &i in &g.inliers {
@@ -100,7 +105,13 @@ fn main() {
             }
             // Larger pairs, as the bench's.
             for seed in 0..6 {
-                let p = pair(5000 + seed, Shape::General, 850, 0.3 + 0.05 * seed as f64, 0.5);
+                let p = pair(
+                    5000 + seed,
+                    Shape::General,
+                    850,
+                    0.3 + 0.05 * seed as f64,
+                    0.5,
+                );
                 for calibrated in [false, true] {
                     let g = view(&p, calibrated, seed).verify(&config).unwrap();
                     println!("big {seed} {calibrated} {}", line(&g));

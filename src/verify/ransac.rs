@@ -411,6 +411,144 @@ pub(crate) fn lo_ransac<E: Estimator>(
     report
 }
 
+/// The support of `model` over all correspondences, and its residuals into `residuals`.
+#[cfg(test)]
+fn evaluate<E: Estimator>(
+    model: &E::Model,
+    a: &[[f64; 2]],
+    b: &[[f64; 2]],
+    max_residual: f64,
+    residuals: &mut [f64],
+) -> Support {
+    let mut support = Support {
+        inliers: 0,
+        score: 0,
+    };
+    for ((pa, pb), r) in a.iter().zip(b).zip(residuals.iter_mut()) {
+        *r = E::residual(model, *pa, *pb);
+        if *r <= max_residual {
+            support.inliers += 1;
+            // In [0, 2^32]: r / max ≤ 1 is one correctly rounded division, the product exact.
+            support.score += ((*r / max_residual) * 4_294_967_296.0) as u64;
+        }
+    }
+    support
+}
+
+/// The straightforward LO-RANSAC, as first written: every model's support over every
+/// correspondence. Kept for the tests: [`lo_ransac`] must give the same report, bit for bit.
+#[cfg(test)]
+pub(crate) fn lo_ransac_reference<E: Estimator>(
+    a: &[[f64; 2]],
+    b: &[[f64; 2]],
+    settings: &RansacSettings,
+    stream: Stream,
+) -> RansacReport<E::Model> {
+    let n = a.len();
+    let mut report = RansacReport {
+        model: None,
+        support: Support::NONE,
+        success: false,
+        inlier_mask: Vec::new(),
+        trials: 0,
+    };
+    if n < E::SAMPLE_SIZE || n > u32::MAX as usize {
+        report.support = Support {
+            inliers: 0,
+            score: 0,
+        };
+        return report;
+    }
+    let sampler = Sampler::new(settings.seed, settings.pair, stream);
+    let max_residual = settings.max_residual;
+    let mut residuals = vec![0.0; n];
+    let mut best_residuals = vec![0.0; n];
+    let mut best: Option<E::Model> = None;
+    let mut best_support = Support::NONE;
+    let mut indices = vec![0u32; E::SAMPLE_SIZE];
+    let (mut sample_a, mut sample_b) = (
+        vec![[0.0; 2]; E::SAMPLE_SIZE],
+        vec![[0.0; 2]; E::SAMPLE_SIZE],
+    );
+    let (mut inliers_a, mut inliers_b) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let (mut models, mut local_models) = (Vec::new(), Vec::new());
+    let mut trials = 0;
+
+    'trials: while trials < settings.max_trials {
+        let trial = trials;
+        trials += 1;
+        sampler.sample(u64::from(trial), n as u32, &mut indices);
+        for (k, &i) in indices.iter().enumerate() {
+            sample_a[k] = a[i as usize];
+            sample_b[k] = b[i as usize];
+        }
+        models.clear();
+        E::minimal(&sample_a, &sample_b, &mut models);
+        for model in &models {
+            let support = evaluate::<E>(model, a, b, max_residual, &mut residuals);
+            if support.beats(&best_support) {
+                best_support = support;
+                best = Some(*model);
+                best_residuals.copy_from_slice(&residuals);
+                if support.inliers > E::SAMPLE_SIZE && support.inliers >= E::LOCAL_MIN_POINTS {
+                    for _ in 0..MAX_LOCAL_ROUNDS {
+                        inliers_a.clear();
+                        inliers_b.clear();
+                        for ((pa, pb), r) in a.iter().zip(b).zip(&best_residuals) {
+                            if *r <= max_residual {
+                                inliers_a.push(*pa);
+                                inliers_b.push(*pb);
+                            }
+                        }
+                        let before = best_support.inliers;
+                        local_models.clear();
+                        E::local(&inliers_a, &inliers_b, &mut local_models);
+                        for local in &local_models {
+                            let local_support =
+                                evaluate::<E>(local, a, b, max_residual, &mut residuals);
+                            if local_support.beats(&best_support) {
+                                best_support = local_support;
+                                best = Some(*local);
+                                best_residuals.copy_from_slice(&residuals);
+                            }
+                        }
+                        if best_support.inliers <= before {
+                            break;
+                        }
+                    }
+                }
+            }
+            if trial >= settings.min_trials
+                && dynamic_bound_reached(
+                    trial,
+                    best_support.inliers,
+                    n,
+                    E::SAMPLE_SIZE,
+                    settings.stop_threshold,
+                )
+            {
+                break 'trials;
+            }
+        }
+    }
+
+    report.trials = trials;
+    report.model = best;
+    report.support = if best.is_some() {
+        best_support
+    } else {
+        Support {
+            inliers: 0,
+            score: 0,
+        }
+    };
+    if best.is_some() {
+        report.inlier_mask = best_residuals.iter().map(|r| *r <= max_residual).collect();
+    }
+    report.success = best.is_some() && best_support.inliers >= E::SAMPLE_SIZE;
+    report
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -299,13 +299,28 @@ fn vector_bits(t: [f64; 2]) -> Vec<u64> {
     t.iter().map(|v| v.to_bits()).collect()
 }
 
+/// [`lo_ransac`] and [`lo_ransac_reference`] agree on every bit of their reports.
+fn same<E: Estimator>(
+    a: &[[f64; 2]],
+    b: &[[f64; 2]],
+    settings: &RansacSettings,
+    stream: Stream,
+    bits: impl Fn(E::Model) -> Vec<u64>,
+    what: &str,
+) {
+    assert_eq!(
+        report_bits(&lo_ransac::<E>(a, b, settings, stream), &bits),
+        report_bits(&lo_ransac_reference::<E>(a, b, settings, stream), &bits),
+        "{stream:?}, {what}"
+    );
+}
+
 /// The fast LO-RANSAC (support counted over columns, stopped once a model cannot reach the best)
 /// against the straightforward one, on many random pairs: the same models, inliers, scores and trial
 /// counts, bit for bit, for every estimator.
 #[test]
 fn fast_lo_ransac_is_the_reference_bit_for_bit() {
     let mut rng = SplitMix64::new(99);
-    let mut cases = 0;
     for k in 0..48u64 {
         let shape = [Shape::General, Shape::Planar, Shape::Rotation][k as usize % 3];
         let n = [9usize, 20, 60, 150, 400][(rng.next_u64() % 5) as usize];
@@ -321,55 +336,14 @@ fn fast_lo_ransac_is_the_reference_bit_for_bit() {
             settings
         };
         let f = with_seed(settings::<FundamentalEstimator>(max_error));
-        assert_eq!(
-            report_bits(
-                &lo_ransac::<FundamentalEstimator>(&s.a, &s.b, &f, Stream::Fundamental),
-                matrix_bits
-            ),
-            report_bits(
-                &lo_ransac_reference::<FundamentalEstimator>(&s.a, &s.b, &f, Stream::Fundamental),
-                matrix_bits
-            ),
-            "F, case {k}"
-        );
         let h = with_seed(settings::<HomographyEstimator>(max_error));
-        assert_eq!(
-            report_bits(
-                &lo_ransac::<HomographyEstimator>(&s.a, &s.b, &h, Stream::Homography),
-                matrix_bits
-            ),
-            report_bits(
-                &lo_ransac_reference::<HomographyEstimator>(&s.a, &s.b, &h, Stream::Homography),
-                matrix_bits
-            ),
-            "H, case {k}"
-        );
-        let (a, b) = normalised(&s);
         let e = with_seed(settings::<EssentialEstimator>(max_error / 950.0));
-        assert_eq!(
-            report_bits(
-                &lo_ransac::<EssentialEstimator>(&a, &b, &e, Stream::Essential),
-                matrix_bits
-            ),
-            report_bits(
-                &lo_ransac_reference::<EssentialEstimator>(&a, &b, &e, Stream::Essential),
-                matrix_bits
-            ),
-            "E, case {k}"
-        );
         let t = with_seed(settings::<TranslationEstimator>(max_error));
-        assert_eq!(
-            report_bits(
-                &lo_ransac::<TranslationEstimator>(&s.a, &s.b, &t, Stream::Translation),
-                vector_bits
-            ),
-            report_bits(
-                &lo_ransac_reference::<TranslationEstimator>(&s.a, &s.b, &t, Stream::Translation),
-                vector_bits
-            ),
-            "translation, case {k}"
-        );
-        cases += 1;
+        let (na, nb) = normalised(&s);
+        let what = format!("case {k}");
+        same::<FundamentalEstimator>(&s.a, &s.b, &f, Stream::Fundamental, matrix_bits, &what);
+        same::<HomographyEstimator>(&s.a, &s.b, &h, Stream::Homography, matrix_bits, &what);
+        same::<EssentialEstimator>(&na, &nb, &e, Stream::Essential, matrix_bits, &what);
+        same::<TranslationEstimator>(&s.a, &s.b, &t, Stream::Translation, vector_bits, &what);
     }
-    assert_eq!(cases, 48);
 }

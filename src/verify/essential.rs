@@ -276,14 +276,9 @@ fn eval<const N: usize>(p: &[f64; N], z: f64) -> f64 {
 /// The up to ten essential matrices of five or more correspondences of camera-normalised points,
 /// appended to `models`.
 pub(crate) fn five_point(a: &[[f64; 2]], b: &[[f64; 2]], models: &mut Vec<Mat3>) {
-    let rows: Vec<[f64; 9]> = a
-        .iter()
-        .zip(b)
-        .map(|(pa, pb)| epipolar_row(*pa, *pb))
-        .collect();
     // W is the vector that matters most (the smallest singular vector, as COLMAP orders them): with
     // more than five exact points it alone is E, at x = y = z = 0.
-    let Some(basis) = null_basis::<4>(&rows) else {
+    let Some(basis) = null_basis::<4>(a.len(), |i| epipolar_row(a[i], b[i])) else {
         return;
     };
     let Some(reduced) = eliminate(&constraints(&basis)) else {

@@ -37,18 +37,15 @@ pub(crate) fn epipolar_row(a: [f64; 2], b: [f64; 2]) -> [f64; 9] {
     [x2 * x1, x2 * y1, x2, y2 * x1, y2 * y1, y2, x1, y1, 1.0]
 }
 
-/// Normalised rows of the epipolar system, and the two normalisations.
-fn normalised_rows(
+/// The null-space basis of the normalised epipolar system (rows in the points' order), and the
+/// two normalisations.
+fn normalised_null_basis<const K: usize>(
     a: &[[f64; 2]],
     b: &[[f64; 2]],
-) -> Option<(Vec<[f64; 9]>, Normalisation, Normalisation)> {
+) -> Option<([[f64; 9]; K], Normalisation, Normalisation)> {
     let (ta, tb) = (Normalisation::of(a)?, Normalisation::of(b)?);
-    let rows = a
-        .iter()
-        .zip(b)
-        .map(|(pa, pb)| epipolar_row(ta.apply(*pa), tb.apply(*pb)))
-        .collect();
-    Some((rows, ta, tb))
+    let basis = null_basis::<K>(a.len(), |i| epipolar_row(ta.apply(a[i]), tb.apply(b[i])))?;
+    Some((basis, ta, tb))
 }
 
 /// `F = Tbᵀ F̂ Ta`: a matrix of the normalised coordinates back in pixels.
@@ -59,10 +56,7 @@ fn denormalise(f: &Mat3, ta: &Normalisation, tb: &Normalisation) -> Mat3 {
 /// The up to three fundamental matrices through seven correspondences, appended to `models` in
 /// ascending order of `α`.
 pub(crate) fn seven_point(a: &[[f64; 2]], b: &[[f64; 2]], models: &mut Vec<Mat3>) {
-    let Some((rows, ta, tb)) = normalised_rows(a, b) else {
-        return;
-    };
-    let Some([v1, v2]) = null_basis::<2>(&rows) else {
+    let Some(([v1, v2], ta, tb)) = normalised_null_basis::<2>(a, b) else {
         return;
     };
     let (f1, f2) = (from_vec9(&v1), from_vec9(&v2));
@@ -88,8 +82,7 @@ pub(crate) fn seven_point(a: &[[f64; 2]], b: &[[f64; 2]], models: &mut Vec<Mat3>
 /// The normalised 8-point fundamental matrix of eight or more correspondences: the least-squares
 /// null vector, its smallest singular value set to zero.
 pub(crate) fn eight_point(a: &[[f64; 2]], b: &[[f64; 2]]) -> Option<Mat3> {
-    let (rows, ta, tb) = normalised_rows(a, b)?;
-    let [v] = null_basis::<1>(&rows)?;
+    let ([v], ta, tb) = normalised_null_basis::<1>(a, b)?;
     let f = denormalise(&enforce_rank2(&from_vec9(&v)), &ta, &tb);
     is_finite3(&f).then_some(f)
 }

@@ -31,13 +31,15 @@ impl Estimator for HomographyEstimator {
 /// back: `H = Tb⁻¹ Ĥ Ta`. `None` for coincident points or a non-finite result.
 pub(crate) fn homography_dlt(a: &[[f64; 2]], b: &[[f64; 2]]) -> Option<Mat3> {
     let (ta, tb) = (Normalisation::of(a)?, Normalisation::of(b)?);
-    let mut rows = Vec::with_capacity(2 * a.len());
-    for (pa, pb) in a.iter().zip(b) {
-        let ([x1, y1], [x2, y2]) = (ta.apply(*pa), tb.apply(*pb));
-        rows.push([-x1, -y1, -1.0, 0.0, 0.0, 0.0, x1 * x2, y1 * x2, x2]);
-        rows.push([0.0, 0.0, 0.0, -x1, -y1, -1.0, x1 * y2, y1 * y2, y2]);
-    }
-    let [v] = null_basis::<1>(&rows)?;
+    // Two rows per point, in the points' order.
+    let [v] = null_basis::<1>(2 * a.len(), |i| {
+        let ([x1, y1], [x2, y2]) = (ta.apply(a[i / 2]), tb.apply(b[i / 2]));
+        if i % 2 == 0 {
+            [-x1, -y1, -1.0, 0.0, 0.0, 0.0, x1 * x2, y1 * x2, x2]
+        } else {
+            [0.0, 0.0, 0.0, -x1, -y1, -1.0, x1 * y2, y1 * y2, y2]
+        }
+    })?;
     let h = mul3(&mul3(&tb.inverse_matrix(), &from_vec9(&v)), &ta.matrix());
     is_finite3(&h).then_some(h)
 }

@@ -289,16 +289,24 @@ impl RowReduction {
     }
 }
 
-/// A basis of the (least-squares) null space of `rows`, the vector that matters most last: for
-/// exactly `9 − K` rows (a minimal sample) the exact [`null_space`]; for more, the `K` right singular
-/// vectors with the smallest singular values, the smallest last.
-pub(crate) fn null_basis<const K: usize>(rows: &[[f64; 9]]) -> Option<[[f64; 9]; K]> {
-    if rows.len() + K == 9 {
-        return null_space::<K>(rows);
+/// A basis of the (least-squares) null space of the `count` rows `row(0), row(1), …` (made in that
+/// order, and stored together only for a minimal sample: no allocation), the vector that matters
+/// most last: for exactly `9 − K` rows (a minimal sample) the exact [`null_space`]; for more, the
+/// `K` right singular vectors with the smallest singular values, the smallest last.
+pub(crate) fn null_basis<const K: usize>(
+    count: usize,
+    mut row: impl FnMut(usize) -> [f64; 9],
+) -> Option<[[f64; 9]; K]> {
+    if count + K == 9 {
+        let mut rows = [[0.0; 9]; 9];
+        for (i, r) in rows[..count].iter_mut().enumerate() {
+            *r = row(i);
+        }
+        return null_space::<K>(&rows[..count]);
     }
     let mut reduction = RowReduction::new();
-    for row in rows {
-        reduction.add_row(*row);
+    for i in 0..count {
+        reduction.add_row(row(i));
     }
     let (vectors, _) = reduction.right_singular_vectors();
     Some(std::array::from_fn(|k| vectors[K - 1 - k]))
@@ -316,33 +324,56 @@ pub(crate) fn null_space<const K: usize>(rows: &[[f64; 9]]) -> Option<[[f64; 9];
     if rows.len() != rank {
         return None;
     }
-    let mut m = rows.to_vec();
+    let mut m = [[0.0; 9]; 9];
+    m[..rank].copy_from_slice(rows);
     let mut pivot_of_row = [0usize; 9];
     let mut is_pivot = [false; 9];
     for row in 0..rank {
-        let (mut best_row, mut best_col, mut best) = (row, 0, -1.0);
-        for (r, values) in m.iter().enumerate().skip(row) {
+        // The scan keeps the first entry larger than all before it: the first (row-major) place of
+        // the largest magnitude. Found in two passes: the largest magnitude, column by column (the
+        // maximum of numbers does not depend on their order; NaN never counts), then its first place.
+        let mut largest = [-1.0f64; 9];
+        for values in &m[row..rank] {
             for c in 0..9 {
-                if !is_pivot[c] && values[c].abs() > best {
-                    (best_row, best_col, best) = (r, c, values[c].abs());
+                let magnitude = if is_pivot[c] { -1.0 } else { values[c].abs() };
+                if magnitude > largest[c] {
+                    largest[c] = magnitude;
                 }
             }
         }
-        if best == 0.0 || !best.is_finite() {
+        let mut best = -1.0;
+        for value in largest {
+            if value > best {
+                best = value;
+            }
+        }
+        // `best < 0`: every candidate is NaN (the scan would go on with column 0 and a NaN model,
+        // which no solver keeps).
+        if best <= 0.0 || !best.is_finite() {
             return None;
+        }
+        let (mut best_row, mut best_col) = (row, 0);
+        'scan: for r in row..rank {
+            for c in 0..9 {
+                if !is_pivot[c] && m[r][c].abs() == best {
+                    (best_row, best_col) = (r, c);
+                    break 'scan;
+                }
+            }
         }
         m.swap(row, best_row);
         let pivot = m[row][best_col];
         for k in 0..9 {
             m[row][k] /= pivot;
         }
+        let pivot_row = m[row];
         for r in 0..rank {
             if r == row {
                 continue;
             }
             let factor = m[r][best_col];
             for k in 0..9 {
-                m[r][k] -= factor * m[row][k];
+                m[r][k] -= factor * pivot_row[k];
             }
         }
         pivot_of_row[row] = best_col;
@@ -491,7 +522,7 @@ mod tests {
             }
             rows.push(row);
         }
-        let [v] = null_basis::<1>(&rows).unwrap();
+        let [v] = null_basis::<1>(rows.len(), |i| rows[i]).unwrap();
         let v_norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
         let cosine = v.iter().zip(&truth).map(|(a, b)| a * b).sum::<f64>() / (norm * v_norm);
         assert!((cosine.abs() - 1.0).abs() < 1e-12, "{cosine}");

@@ -31,6 +31,17 @@ impl Poly {
         value
     }
 
+    /// [`Poly::eval`] at each of `x` (the same operations for each, side by side).
+    fn eval_all<const N: usize>(&self, x: &[f64; N]) -> [f64; N] {
+        let mut value = [self.c[self.degree]; N];
+        for k in (0..self.degree).rev() {
+            for j in 0..N {
+                value[j] = value[j] * x[j] + self.c[k];
+            }
+        }
+        value
+    }
+
     /// The sign at +∞ (`at_plus`) or −∞: the leading coefficient's, flipped at −∞ for odd degree.
     fn sign_at_infinity(&self, at_plus: bool) -> f64 {
         let lead = self.c[self.degree];
@@ -159,56 +170,127 @@ pub(crate) fn real_roots(coeffs: &[f64], roots: &mut [f64; MAX_DEGREE]) -> usize
     }
     let sturm = Sturm::new(&p);
 
-    let mut found = 0;
-    // Intervals (a, b] still to search, with their variations; the left one is popped first, so the
-    // roots come out ascending.
-    let mut stack = [(0.0, 0.0, 0u32, 0u32, 0usize); 2 * BISECTIONS + 2];
-    let mut top = 1;
-    stack[0] = (
+    let mut search = Search {
+        p: &p,
+        sturm: &sturm,
+        roots,
+        found: 0,
+    };
+    search.isolate(
         -bound,
         bound,
         sturm.variations_at_infinity(false),
         sturm.variations_at_infinity(true),
         0,
     );
-    while top > 0 {
-        top -= 1;
-        let (a, b, va, vb, depth) = stack[top];
+    search.found
+}
+
+/// The isolation of the roots of `p`, written to `roots` as they are found.
+struct Search<'s> {
+    p: &'s Poly,
+    sturm: &'s Sturm,
+    roots: &'s mut [f64; MAX_DEGREE],
+    found: usize,
+}
+
+impl Search<'_> {
+    /// The roots in `(a, b]` (variations `va`, `vb` at its ends), ascending: an interval with one
+    /// root (or at depth [`BISECTIONS`]) is refined, one with more is halved, its left half searched
+    /// first (depth first: the roots come out ascending).
+    fn isolate(&mut self, a: f64, b: f64, va: u32, vb: u32, depth: usize) {
         let count = va.saturating_sub(vb);
         if count == 0 {
-            continue;
+            return;
         }
         if count == 1 || depth == BISECTIONS {
-            if found < MAX_DEGREE {
-                roots[found] = refine(&p, &sturm, a, b, va);
-                found += 1;
+            if self.found < MAX_DEGREE {
+                self.roots[self.found] = refine(self.p, self.sturm, a, b, va);
+                self.found += 1;
             }
-            continue;
+            return;
         }
         let mid = 0.5 * (a + b);
-        let vm = sturm.variations(mid);
-        stack[top] = (mid, b, vm, vb, depth + 1);
-        stack[top + 1] = (a, mid, va, vm, depth + 1);
-        top += 2;
+        let vm = self.sturm.variations(mid);
+        self.isolate(a, mid, va, vm, depth + 1);
+        self.isolate(mid, b, vm, vb, depth + 1);
     }
-    found
+}
+
+/// `BISECTIONS` halvings of `(a, b]`, keeping the left half where `left(midpoint)`. A step that
+/// leaves the bracket as it was (its midpoint one of its ends) would repeat itself forever, the
+/// bracket being a function of the bracket alone: the remaining steps change nothing and are
+/// skipped (a backend may run them all, with the same result).
+fn bisect(mut a: f64, mut b: f64, mut left: impl FnMut(f64) -> bool) -> (f64, f64) {
+    for _ in 0..BISECTIONS {
+        let mid = 0.5 * (a + b);
+        if !step(&mut a, &mut b, mid, left(mid)) {
+            break;
+        }
+    }
+    (a, b)
+}
+
+/// One bisection step to the half `left` of `mid`; whether the bracket changed.
+fn step(a: &mut f64, b: &mut f64, mid: f64, left: bool) -> bool {
+    // Selected by masks, not branches (the side is as good as random): the same values.
+    let (was_a, was_b, mid) = (a.to_bits(), b.to_bits(), mid.to_bits());
+    let keep_a = 0u64.wrapping_sub(u64::from(left));
+    let new_a = (was_a & keep_a) | (mid & !keep_a);
+    let new_b = (mid & keep_a) | (was_b & !keep_a);
+    (*a, *b) = (f64::from_bits(new_a), f64::from_bits(new_b));
+    new_a != was_a || new_b != was_b
+}
+
+/// Levels of bisection whose midpoints are evaluated together by [`bisect_on_sign`].
+const LOOKAHEAD: usize = 3;
+/// The midpoints of those levels: a binary tree in heap order.
+const NODES: usize = (1 << LOOKAHEAD) - 1;
+
+/// [`bisect`] on the sign of `p` (`negative_at_a`: `p(a) < 0`): the left half when `p(mid)` is zero
+/// or of the other sign than at `a`. The same steps, faster: the midpoints of the next
+/// [`LOOKAHEAD`] levels, every one the value its step would compute (`0.5 · (a + b)` of the bracket
+/// the path would have there), are evaluated together (independent evaluations, which the processor
+/// overlaps), then the steps take them in order.
+fn bisect_on_sign(p: &Poly, mut a: f64, mut b: f64, negative_at_a: bool) -> (f64, f64) {
+    let goes_left = |value: f64| value == 0.0 || (value < 0.0) != negative_at_a;
+    let mut steps = 0;
+    loop {
+        let (mut lo, mut hi, mut mid) = ([a; NODES], [b; NODES], [0.0; NODES]);
+        mid[0] = 0.5 * (a + b);
+        for node in 0..NODES / 2 {
+            let (l, r) = (2 * node + 1, 2 * node + 2);
+            (lo[l], hi[l]) = (lo[node], mid[node]);
+            (lo[r], hi[r]) = (mid[node], hi[node]);
+            mid[l] = 0.5 * (lo[l] + hi[l]);
+            mid[r] = 0.5 * (lo[r] + hi[r]);
+        }
+        let values = p.eval_all(&mid);
+        let mut node = 0;
+        for _ in 0..LOOKAHEAD {
+            if steps == BISECTIONS {
+                return (a, b);
+            }
+            steps += 1;
+            let left = goes_left(values[node]);
+            if !step(&mut a, &mut b, mid[node], left) {
+                return (a, b);
+            }
+            node = 2 * node + 2 - usize::from(left);
+        }
+    }
 }
 
 /// The one root in `(a, b]`: bisection on the sign of `p` where it changes over the interval, on the
 /// Sturm count otherwise (a root of even multiplicity), then Newton steps that stay in the bracket.
-fn refine(p: &Poly, sturm: &Sturm, mut a: f64, mut b: f64, va: u32) -> f64 {
+fn refine(p: &Poly, sturm: &Sturm, a: f64, b: f64, va: u32) -> f64 {
     let (pa, pb) = (p.eval(a), p.eval(b));
     let sign_change = (pa < 0.0 && pb > 0.0) || (pa > 0.0 && pb < 0.0);
-    for _ in 0..BISECTIONS {
-        let mid = 0.5 * (a + b);
-        let left = if sign_change {
-            let pm = p.eval(mid);
-            pm == 0.0 || (pm < 0.0) != (pa < 0.0)
-        } else {
-            sturm.variations(mid) < va
-        };
-        if left { b = mid } else { a = mid }
-    }
+    let (a, b) = if sign_change {
+        bisect_on_sign(p, a, b, pa < 0.0)
+    } else {
+        bisect(a, b, |mid| sturm.variations(mid) < va)
+    };
     let mut x = 0.5 * (a + b);
     for _ in 0..NEWTON_STEPS {
         let mut value = p.c[p.degree];

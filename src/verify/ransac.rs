@@ -122,27 +122,138 @@ pub(crate) struct RansacReport<M> {
     pub trials: u32,
 }
 
-/// The support of `model` over all correspondences, and its residuals into `residuals`.
-fn evaluate<E: Estimator>(
-    model: &E::Model,
-    a: &[[f64; 2]],
-    b: &[[f64; 2]],
-    max_residual: f64,
-    residuals: &mut [f64],
-) -> Support {
-    let mut support = Support {
-        inliers: 0,
-        score: 0,
-    };
-    for ((pa, pb), r) in a.iter().zip(b).zip(residuals.iter_mut()) {
-        *r = E::residual(model, *pa, *pb);
-        if *r <= max_residual {
-            support.inliers += 1;
-            // In [0, 2^32]: r / max ≤ 1 is one correctly rounded division, the product exact.
-            support.score += ((*r / max_residual) * 4_294_967_296.0) as u64;
+/// Correspondences per block of a support count: after each block the count stops when the model
+/// can no longer reach the best model's inliers.
+const BLOCK: usize = 64;
+
+/// The correspondences as a structure of arrays, for residual loops the compiler vectorises.
+struct Columns {
+    xa: Vec<f64>,
+    ya: Vec<f64>,
+    xb: Vec<f64>,
+    yb: Vec<f64>,
+}
+
+impl Columns {
+    fn new(a: &[[f64; 2]], b: &[[f64; 2]]) -> Self {
+        Self {
+            xa: a.iter().map(|p| p[0]).collect(),
+            ya: a.iter().map(|p| p[1]).collect(),
+            xb: b.iter().map(|p| p[0]).collect(),
+            yb: b.iter().map(|p| p[1]).collect(),
         }
     }
-    support
+}
+
+/// Which instructions the residual loops may use, detected once per estimation. The arithmetic is
+/// the same either way (separate IEEE operations, never contracted into an FMA): only the vector
+/// width changes, and each correspondence's residual is computed on its own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Isa {
+    Portable,
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+}
+
+impl Isa {
+    fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            return Isa::Avx2;
+        }
+        Isa::Portable
+    }
+}
+
+/// The residuals of the correspondences `start..end` into `residuals[start..end]`; how many of them
+/// are inliers.
+#[inline(always)]
+fn count_block<E: Estimator>(
+    model: &E::Model,
+    columns: &Columns,
+    start: usize,
+    end: usize,
+    max_residual: f64,
+    residuals: &mut [f64],
+) -> usize {
+    let out = &mut residuals[start..end];
+    let (xa, ya) = (&columns.xa[start..end], &columns.ya[start..end]);
+    let (xb, yb) = (&columns.xb[start..end], &columns.yb[start..end]);
+    let mut count = 0;
+    for i in 0..out.len() {
+        let r = E::residual(model, [xa[i], ya[i]], [xb[i], yb[i]]);
+        out[i] = r;
+        count += usize::from(r <= max_residual);
+    }
+    count
+}
+
+/// The inliers of `model`, its residuals into `residuals`; `None` as soon as fewer than `at_least`
+/// are possible (the residuals are then partly written).
+#[inline(always)]
+fn count_inliers<E: Estimator>(
+    model: &E::Model,
+    columns: &Columns,
+    max_residual: f64,
+    at_least: usize,
+    residuals: &mut [f64],
+) -> Option<usize> {
+    let n = residuals.len();
+    let mut inliers = 0;
+    let mut start = 0;
+    while start < n {
+        let end = (start + BLOCK).min(n);
+        inliers += count_block::<E>(model, columns, start, end, max_residual, residuals);
+        if inliers + (n - end) < at_least {
+            return None;
+        }
+        start = end;
+    }
+    Some(inliers)
+}
+
+/// [`count_inliers`] compiled for AVX2 (without FMA).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn count_inliers_avx2<E: Estimator>(
+    model: &E::Model,
+    columns: &Columns,
+    max_residual: f64,
+    at_least: usize,
+    residuals: &mut [f64],
+) -> Option<usize> {
+    count_inliers::<E>(model, columns, max_residual, at_least, residuals)
+}
+
+/// The support of `model` when it beats `best`, with its residuals in `residuals`; `None` when it
+/// does not. A model that cannot reach `best`'s inlier count is dropped before all its residuals
+/// are computed: the result is the same as counting them all, since only a better model changes
+/// the search (the best model, its residuals, the trial bound and local optimisation).
+fn better_support<E: Estimator>(
+    isa: Isa,
+    model: &E::Model,
+    columns: &Columns,
+    max_residual: f64,
+    best: &Support,
+    residuals: &mut [f64],
+) -> Option<Support> {
+    let inliers = match isa {
+        Isa::Portable => count_inliers::<E>(model, columns, max_residual, best.inliers, residuals),
+        // SAFETY: `Isa::Avx2` is only detected where the CPU has AVX2.
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2 => unsafe {
+            count_inliers_avx2::<E>(model, columns, max_residual, best.inliers, residuals)
+        },
+    }?;
+    let mut score = 0;
+    for r in residuals.iter() {
+        if *r <= max_residual {
+            // In [0, 2^32]: r / max ≤ 1 is one correctly rounded division, the product exact.
+            score += ((*r / max_residual) * 4_294_967_296.0) as u64;
+        }
+    }
+    let support = Support { inliers, score };
+    support.beats(best).then_some(support)
 }
 
 /// `x^t` by square and multiply over the bits of `t`, lowest first: the same products everywhere.
@@ -177,6 +288,157 @@ fn dynamic_bound_reached(
 
 /// LO-RANSAC over the correspondences `a[i] ↔ b[i]`.
 pub(crate) fn lo_ransac<E: Estimator>(
+    a: &[[f64; 2]],
+    b: &[[f64; 2]],
+    settings: &RansacSettings,
+    stream: Stream,
+) -> RansacReport<E::Model> {
+    let n = a.len();
+    let mut report = RansacReport {
+        model: None,
+        support: Support::NONE,
+        success: false,
+        inlier_mask: Vec::new(),
+        trials: 0,
+    };
+    if n < E::SAMPLE_SIZE || n > u32::MAX as usize {
+        report.support = Support {
+            inliers: 0,
+            score: 0,
+        };
+        return report;
+    }
+    let isa = Isa::detect();
+    let columns = Columns::new(a, b);
+    let sampler = Sampler::new(settings.seed, settings.pair, stream);
+    let max_residual = settings.max_residual;
+    let mut residuals = vec![0.0; n];
+    let mut best_residuals = vec![0.0; n];
+    let mut best: Option<E::Model> = None;
+    let mut best_support = Support::NONE;
+    let mut indices = vec![0u32; E::SAMPLE_SIZE];
+    let (mut sample_a, mut sample_b) = (
+        vec![[0.0; 2]; E::SAMPLE_SIZE],
+        vec![[0.0; 2]; E::SAMPLE_SIZE],
+    );
+    let (mut inliers_a, mut inliers_b) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let (mut models, mut local_models) = (Vec::new(), Vec::new());
+    let mut trials = 0;
+
+    'trials: while trials < settings.max_trials {
+        let trial = trials;
+        trials += 1;
+        sampler.sample(u64::from(trial), n as u32, &mut indices);
+        for (k, &i) in indices.iter().enumerate() {
+            sample_a[k] = a[i as usize];
+            sample_b[k] = b[i as usize];
+        }
+        models.clear();
+        E::minimal(&sample_a, &sample_b, &mut models);
+        for model in &models {
+            if let Some(support) = better_support::<E>(
+                isa,
+                model,
+                &columns,
+                max_residual,
+                &best_support,
+                &mut residuals,
+            ) {
+                best_support = support;
+                best = Some(*model);
+                std::mem::swap(&mut residuals, &mut best_residuals);
+                if support.inliers > E::SAMPLE_SIZE && support.inliers >= E::LOCAL_MIN_POINTS {
+                    for _ in 0..MAX_LOCAL_ROUNDS {
+                        inliers_a.clear();
+                        inliers_b.clear();
+                        for ((pa, pb), r) in a.iter().zip(b).zip(&best_residuals) {
+                            if *r <= max_residual {
+                                inliers_a.push(*pa);
+                                inliers_b.push(*pb);
+                            }
+                        }
+                        let before = best_support.inliers;
+                        local_models.clear();
+                        E::local(&inliers_a, &inliers_b, &mut local_models);
+                        for local in &local_models {
+                            if let Some(local_support) = better_support::<E>(
+                                isa,
+                                local,
+                                &columns,
+                                max_residual,
+                                &best_support,
+                                &mut residuals,
+                            ) {
+                                best_support = local_support;
+                                best = Some(*local);
+                                std::mem::swap(&mut residuals, &mut best_residuals);
+                            }
+                        }
+                        if best_support.inliers <= before {
+                            break;
+                        }
+                    }
+                }
+            }
+            if trial >= settings.min_trials
+                && dynamic_bound_reached(
+                    trial,
+                    best_support.inliers,
+                    n,
+                    E::SAMPLE_SIZE,
+                    settings.stop_threshold,
+                )
+            {
+                break 'trials;
+            }
+        }
+    }
+
+    report.trials = trials;
+    report.model = best;
+    report.support = if best.is_some() {
+        best_support
+    } else {
+        Support {
+            inliers: 0,
+            score: 0,
+        }
+    };
+    if best.is_some() {
+        report.inlier_mask = best_residuals.iter().map(|r| *r <= max_residual).collect();
+    }
+    report.success = best.is_some() && best_support.inliers >= E::SAMPLE_SIZE;
+    report
+}
+
+/// The support of `model` over all correspondences, and its residuals into `residuals`.
+#[cfg(test)]
+fn evaluate<E: Estimator>(
+    model: &E::Model,
+    a: &[[f64; 2]],
+    b: &[[f64; 2]],
+    max_residual: f64,
+    residuals: &mut [f64],
+) -> Support {
+    let mut support = Support {
+        inliers: 0,
+        score: 0,
+    };
+    for ((pa, pb), r) in a.iter().zip(b).zip(residuals.iter_mut()) {
+        *r = E::residual(model, *pa, *pb);
+        if *r <= max_residual {
+            support.inliers += 1;
+            // In [0, 2^32]: r / max ≤ 1 is one correctly rounded division, the product exact.
+            support.score += ((*r / max_residual) * 4_294_967_296.0) as u64;
+        }
+    }
+    support
+}
+
+/// The straightforward LO-RANSAC, as first written: every model's support over every
+/// correspondence. Kept for the tests: [`lo_ransac`] must give the same report, bit for bit.
+#[cfg(test)]
+pub(crate) fn lo_ransac_reference<E: Estimator>(
     a: &[[f64; 2]],
     b: &[[f64; 2]],
     settings: &RansacSettings,

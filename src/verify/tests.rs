@@ -6,8 +6,11 @@ mod scene;
 use super::essential::five_point;
 use super::fundamental::{eight_point, sampson_error_squared, seven_point};
 use super::homography::{homography_dlt, transfer_error_squared};
-use super::ransac::{Estimator, RansacSettings, lo_ransac, prior_max_trials};
+use super::ransac::{
+    Estimator, RansacReport, RansacSettings, lo_ransac, lo_ransac_reference, prior_max_trials,
+};
 use super::sampler::Stream;
+use super::translation::TranslationEstimator;
 use super::{
     essential::EssentialEstimator, fundamental::FundamentalEstimator,
     homography::HomographyEstimator,
@@ -271,4 +274,76 @@ fn too_few_points_is_no_model() {
         Stream::Fundamental,
     );
     assert!(!f.success && f.model.is_none() && f.inlier_mask.is_empty() && f.trials == 0);
+}
+
+/// Every bit of a report: model, support, success, inlier mask, trials.
+fn report_bits<M: Copy>(
+    r: &RansacReport<M>,
+    bits: impl Fn(M) -> Vec<u64>,
+) -> (Option<Vec<u64>>, usize, u64, bool, Vec<bool>, u32) {
+    (
+        r.model.map(bits),
+        r.support.inliers,
+        r.support.score,
+        r.success,
+        r.inlier_mask.clone(),
+        r.trials,
+    )
+}
+
+fn matrix_bits(m: [[f64; 3]; 3]) -> Vec<u64> {
+    m.iter().flatten().map(|v| v.to_bits()).collect()
+}
+
+fn vector_bits(t: [f64; 2]) -> Vec<u64> {
+    t.iter().map(|v| v.to_bits()).collect()
+}
+
+/// [`lo_ransac`] and [`lo_ransac_reference`] agree on every bit of their reports.
+fn same<E: Estimator>(
+    a: &[[f64; 2]],
+    b: &[[f64; 2]],
+    settings: &RansacSettings,
+    stream: Stream,
+    bits: impl Fn(E::Model) -> Vec<u64>,
+    what: &str,
+) {
+    assert_eq!(
+        report_bits(&lo_ransac::<E>(a, b, settings, stream), &bits),
+        report_bits(&lo_ransac_reference::<E>(a, b, settings, stream), &bits),
+        "{stream:?}, {what}"
+    );
+}
+
+/// The fast LO-RANSAC (support counted over columns, stopped once a model cannot reach the best)
+/// against the straightforward one, on many random pairs: the same models, inliers, scores and trial
+/// counts, bit for bit, for every estimator.
+#[test]
+fn fast_lo_ransac_is_the_reference_bit_for_bit() {
+    let mut rng = SplitMix64::new(99);
+    for k in 0..48u64 {
+        let shape = [Shape::General, Shape::Planar, Shape::Rotation][k as usize % 3];
+        let n = [9usize, 20, 60, 150, 400][(rng.next_u64() % 5) as usize];
+        let outliers = [0.0, 0.2, 0.45, 0.7, 0.9][(rng.next_u64() % 5) as usize];
+        let noise = [0.0, 0.5, 2.0][(rng.next_u64() % 3) as usize];
+        let s = scene::scene(500 + k, shape, n, outliers, noise);
+        let max_error = [1.0, 4.0][(k % 2) as usize];
+        let with_seed = |mut settings: RansacSettings| {
+            settings.seed = k;
+            settings.pair = k * 7;
+            settings.min_trials = [0, 100][(k / 2 % 2) as usize];
+            settings.stop_threshold = [1e-9, 1e-3][(k / 4 % 2) as usize];
+            settings
+        };
+        let f = with_seed(settings::<FundamentalEstimator>(max_error));
+        let h = with_seed(settings::<HomographyEstimator>(max_error));
+        let e = with_seed(settings::<EssentialEstimator>(max_error / 950.0));
+        let t = with_seed(settings::<TranslationEstimator>(max_error));
+        let (na, nb) = normalised(&s);
+        let what = format!("case {k}");
+        same::<FundamentalEstimator>(&s.a, &s.b, &f, Stream::Fundamental, matrix_bits, &what);
+        same::<HomographyEstimator>(&s.a, &s.b, &h, Stream::Homography, matrix_bits, &what);
+        same::<EssentialEstimator>(&na, &nb, &e, Stream::Essential, matrix_bits, &what);
+        same::<TranslationEstimator>(&s.a, &s.b, &t, Stream::Translation, vector_bits, &what);
+    }
 }

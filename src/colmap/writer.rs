@@ -15,6 +15,8 @@ use crate::verify::{self, Intrinsics};
 
 /// A camera's key without a shared K: one camera per image size and EXIF focal length.
 type CameraKey = ((u32, u32), Option<u16>);
+/// A photo written: its name, image id and keypoint count.
+type WrittenPhoto = (String, u32, usize);
 
 /// What a [`FolderWriter`] has written so far.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -68,13 +70,11 @@ pub struct FolderCounts {
 pub struct FolderWriter<W: Write> {
     db: Database,
     list: MatchList<W>,
-    /// The given camera's id and size.
-    shared: Option<(u32, (u32, u32))>,
-    cameras: Vec<(CameraKey, u32)>,
-    /// Every camera written, by id.
-    pinholes: Vec<(u32, PinholeCamera)>,
-    /// Name, image id and keypoint count of each photo written.
-    photos: Vec<(String, u32, usize)>,
+    /// The given camera and its id.
+    shared: Option<(u32, PinholeCamera)>,
+    /// The cameras made per size and focal length, with their ids.
+    cameras: Vec<(CameraKey, u32, PinholeCamera)>,
+    photos: Vec<WrittenPhoto>,
     /// Each photo's camera as verification sees it.
     verify_cameras: Vec<verify::Camera>,
     counts: FolderCounts,
@@ -90,19 +90,13 @@ impl<W: Write> FolderWriter<W> {
     ) -> Result<Self, ColmapError> {
         let mut db = Database::create(database)?;
         let shared = camera
-            .map(|c| db.add_camera(c).map(|id| (id, (c.width, c.height))))
+            .map(|c| db.add_camera(c).map(|id| (id, *c)))
             .transpose()?;
-        let pinholes = shared
-            .iter()
-            .zip(camera)
-            .map(|(&(id, _), c)| (id, *c))
-            .collect();
         Ok(Self {
             db,
             list: MatchList::new(match_list),
             shared,
             cameras: Vec::new(),
-            pinholes,
             photos: Vec::new(),
             verify_cameras: Vec::new(),
             counts: FolderCounts::default(),
@@ -113,42 +107,33 @@ impl<W: Write> FolderWriter<W> {
     /// [`FolderWriter::add_matches`] takes (its COLMAP image id is that plus 1).
     pub fn add_photo(&mut self, photo: &Photo) -> Result<usize, ColmapError> {
         let size = (photo.width, photo.height);
-        let camera_id = match self.shared {
-            Some((id, want)) if want == size => id,
-            Some((_, (want_w, want_h))) => {
+        let (camera_id, camera) = match self.shared {
+            Some((id, camera)) if (camera.width, camera.height) == size => (id, camera),
+            Some((_, camera)) => {
                 return Err(ColmapError::ImageSizeMismatch {
                     path: photo.name.clone().into(),
                     got_w: photo.width,
                     got_h: photo.height,
-                    want_w,
-                    want_h,
+                    want_w: camera.width,
+                    want_h: camera.height,
                 });
             }
             None => {
                 let key = (size, photo.focal_35mm);
-                match self.cameras.iter().find(|(k, _)| *k == key) {
-                    Some(&(_, id)) => id,
+                match self.cameras.iter().find(|(k, _, _)| *k == key) {
+                    Some(&(_, id, camera)) => (id, camera),
                     None => {
                         let camera = photo_camera(photo.width, photo.height, photo.focal_35mm)?;
                         let id = self.db.add_camera(&camera)?;
-                        self.cameras.push((key, id));
-                        self.pinholes.push((id, camera));
-                        id
+                        self.cameras.push((key, id, camera));
+                        (id, camera)
                     }
                 }
             }
         };
         let image_id = self.db.add_image(&photo.name, camera_id)?;
         self.db.set_keypoints(image_id, &photo.keypoints)?;
-        // Every camera id here was written with its camera (without one, no intrinsics).
-        let camera = self
-            .pinholes
-            .iter()
-            .find(|(id, _)| *id == camera_id)
-            .map_or(verify::Camera::new(photo.width, photo.height), |(_, c)| {
-                verify_camera(c)
-            });
-        self.verify_cameras.push(camera);
+        self.verify_cameras.push(verify_camera(&camera));
         self.photos
             .push((photo.name.clone(), image_id, photo.keypoints.len()));
         self.counts.photos += 1;
@@ -165,21 +150,7 @@ impl<W: Write> FolderWriter<W> {
         j: usize,
         matches: &[Match],
     ) -> Result<(), ColmapError> {
-        let photos = self.photos.len();
-        let bad = |reason| ColmapError::BadPair {
-            i,
-            j,
-            photos,
-            reason,
-        };
-        if i == j {
-            return Err(bad("a pair needs two different photos"));
-        }
-        let (Some((name_i, id_i, n_i)), Some((name_j, id_j, n_j))) =
-            (self.photos.get(i), self.photos.get(j))
-        else {
-            return Err(bad("an index is not one of the photos written"));
-        };
+        let ((name_i, id_i, n_i), (name_j, id_j, n_j)) = written_pair(&self.photos, i, j)?;
         check_match_indices(*id_i, *id_j, matches, *n_i, *n_j)?;
         if !matches.is_empty() {
             self.list.add_pair(name_i, name_j, matches)?;
@@ -201,16 +172,7 @@ impl<W: Write> FolderWriter<W> {
         matches: &[Match],
         verified: &verify::TwoViewGeometry,
     ) -> Result<(), ColmapError> {
-        let photos = self.photos.len();
-        let (Some((_, id_i, _)), Some((_, id_j, _))) = (self.photos.get(i), self.photos.get(j))
-        else {
-            return Err(ColmapError::BadPair {
-                i,
-                j,
-                photos,
-                reason: "an index is not one of the photos written",
-            });
-        };
+        let ((_, id_i, _), (_, id_j, _)) = written_pair(&self.photos, i, j)?;
         let geometry = TwoViewGeometry::from_verified(*id_i, *id_j, matches, verified)?;
         self.db.add_two_view_geometry(&geometry)?;
         self.counts.pairs_verified += 1;
@@ -258,5 +220,26 @@ fn verify_camera(camera: &PinholeCamera) -> verify::Camera {
         ))
     } else {
         plain
+    }
+}
+
+/// The written photos `i` and `j` of a pair: two different ones.
+fn written_pair(
+    photos: &[WrittenPhoto],
+    i: usize,
+    j: usize,
+) -> Result<(&WrittenPhoto, &WrittenPhoto), ColmapError> {
+    let bad = |reason| ColmapError::BadPair {
+        i,
+        j,
+        photos: photos.len(),
+        reason,
+    };
+    if i == j {
+        return Err(bad("a pair needs two different photos"));
+    }
+    match (photos.get(i), photos.get(j)) {
+        (Some(a), Some(b)) => Ok((a, b)),
+        _ => Err(bad("an index is not one of the photos written")),
     }
 }

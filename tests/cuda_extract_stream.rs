@@ -72,6 +72,9 @@ mod gpu {
             ("grid and sub-pixel", grid),
         ];
         scale::thin(all, 2)
+            .into_iter()
+            .map(|(name, config)| (name, scale::budget(config)))
+            .collect()
     }
 
     /// `image` with every pixel of a few rows changed, so that images of one size still differ.
@@ -99,7 +102,7 @@ mod gpu {
     /// a batch. Counted by the allocation hook, which every allocation site of the crate passes.
     pub fn warm_streams_allocate_nothing() -> Result<(), Failed> {
         let calls = scale::pick(12, 3);
-        let (w, h) = scale::pick((800, 600), (480, 360));
+        let (w, h) = scale::pick((800, 600), (256, 192));
         let sizes = [(w, h), (w - 8, h - 8), (w - 30, h - 17), (w, h)];
         let images: Vec<Gray> = (0..calls)
             .map(|i| {
@@ -278,8 +281,8 @@ mod gpu {
     /// The first error stops the stream: the producer's (after some images), an image too small,
     /// the consumer's. Each comes back as itself, and the extractor works afterwards.
     pub fn stream_errors() -> Result<(), Failed> {
-        let gpu = Extractor::new(GPU, ExtractorConfig::default())?;
-        let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+        let gpu = Extractor::new(GPU, scale::budget(ExtractorConfig::default()))?;
+        let cpu = Extractor::new(Backend::Cpu, scale::budget(ExtractorConfig::default()))?;
         let images = |fail_at: usize| {
             (0..12).map(move |i| {
                 if i == fail_at {
@@ -494,8 +497,8 @@ mod gpu {
     pub fn threads_sharing_one_stream() -> Result<(), Failed> {
         let (threads, rounds) = scale::pick((8, 4), (3, 1));
         let stream = GpuStream::new(0)?;
-        let gpu = Extractor::new(GPU, ExtractorConfig::default())?;
-        let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+        let gpu = Extractor::new(GPU, scale::budget(ExtractorConfig::default()))?;
+        let cpu = Extractor::new(Backend::Cpu, scale::budget(ExtractorConfig::default()))?;
         let total = on_threads(threads, |t| {
             let mut compared = 0;
             for round in 0..rounds {
@@ -543,8 +546,8 @@ mod gpu {
     /// extractor gives the CPU's results afterwards.
     pub fn panics_wait_for_the_copies() -> Result<(), Failed> {
         let (w, h) = scale::pick((1920, 1080), (480, 320));
-        let gpu = Extractor::new(GPU, ExtractorConfig::default())?;
-        let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+        let gpu = Extractor::new(GPU, scale::budget(ExtractorConfig::default()))?;
+        let cpu = Extractor::new(Backend::Cpu, scale::budget(ExtractorConfig::default()))?;
         let sources: Vec<Gray> = (0..6)
             .map(|i| varied(&rectangles(w, h, 700 + i as u64), i))
             .collect();
@@ -635,8 +638,8 @@ mod gpu {
     /// every such call allocates on the device.
     pub fn release_cached_memory() -> Result<(), Failed> {
         let (w, h) = scale::pick((1280, 720), (480, 320));
-        let gpu = Extractor::new(GPU, ExtractorConfig::default())?;
-        let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+        let gpu = Extractor::new(GPU, scale::budget(ExtractorConfig::default()))?;
+        let cpu = Extractor::new(Backend::Cpu, scale::budget(ExtractorConfig::default()))?;
         let image = rectangles(w, h, 900);
         let expected = cpu.detect_and_describe(&image.view())?;
         let stream = GpuStream::new(0)?;

@@ -184,7 +184,7 @@ mod gpu {
     /// site kind (level 0 and a downscaled level) while the trial's quadratic number of partial calls
     /// (every site failed in turn) shrinks enough for racecheck to finish the binary.
     fn site_config() -> ExtractorConfig {
-        let default = ExtractorConfig::default();
+        let default = scale::budget(ExtractorConfig::default());
         if !scale::sanitizer() {
             return default;
         }
@@ -445,9 +445,9 @@ mod gpu {
         // Larger than one 4 MiB upload band: the copy stream and its band events are in the growth.
         let (w, h) = scale::pick((2400, 1800), (2100, 2100));
         let large = rectangles(w, h, 4);
-        let single = ExtractorConfig::single_scale();
+        let single = scale::budget(ExtractorConfig::single_scale());
         for (name, config) in [
-            ("pyramid", ExtractorConfig::default()),
+            ("pyramid", scale::budget(ExtractorConfig::default())),
             ("single scale", single),
         ] {
             let gpu = Extractor::new(GPU, config.clone())?;

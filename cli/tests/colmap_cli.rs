@@ -50,6 +50,7 @@ fn writes_database_and_match_list() {
         "--backend",
         "cpu",
         "--no-colmap",
+        "--match-list",
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let sql = Connection::open(&db).unwrap();
@@ -96,6 +97,17 @@ fn writes_database_and_match_list() {
         pairs += 1;
     }
     assert_eq!(pairs, 3);
+    // Verified by default: the database holds every pair's matches, as many as the list's.
+    let (stored, rows): (i64, i64) = sql
+        .query_row("SELECT COUNT(*), SUM(rows) FROM matches", [], |r| {
+            Ok((r.get(0)?, r.get(1)?))
+        })
+        .unwrap();
+    let listed = list
+        .lines()
+        .filter(|l| l.split(' ').all(|w| w.parse::<u32>().is_ok()))
+        .count();
+    assert_eq!((stored, rows as usize), (3, listed));
     // The database is never overwritten without --force.
     let again = clatch(&[
         "--images",

@@ -264,7 +264,8 @@ class _FolderJob:
         subpixel_radius: int = 3,
         max_pixels: int = 100_000_000,
         force: bool = False,
-        verify: bool = False,
+        verify: bool = True,
+        match_list: bool = False,
     ) -> _FolderJob: ...
     def run(self, progress: Optional[Callable[[str, int, int], None]] = None) -> dict[str, Any]: ...
     def plan(self) -> _FolderPlan: ...

@@ -4,7 +4,9 @@
 use clatch::verify::{self, Camera, GeometryConfig, Intrinsics, VerifyConfig, ViewPair};
 use clatch::{KeyPoint, Match};
 use numpy::ndarray::Ix2;
-use numpy::{IntoPyArray, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
+use numpy::{
+    Element, IntoPyArray, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 
@@ -156,17 +158,18 @@ fn matches_arg(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<Match>> {
             )
         })
     };
+    let shape_error = |e: numpy::ndarray::ShapeError| invalid_input(py, "WrongShape", e.to_string());
     let rows: Vec<(i128, i128)> = if wide == "uint64" {
         let typed = converted.cast::<PyArrayDyn<u64>>()?.readonly();
-        let view = typed.as_array();
-        (0..shape[0])
-            .map(|r| (i128::from(view[[r, 0]]), i128::from(view[[r, 1]])))
+        let view = typed.as_array().into_dimensionality::<Ix2>().map_err(shape_error)?;
+        view.outer_iter()
+            .map(|r| (i128::from(r[0]), i128::from(r[1])))
             .collect()
     } else {
         let typed = converted.cast::<PyArrayDyn<i64>>()?.readonly();
-        let view = typed.as_array();
-        (0..shape[0])
-            .map(|r| (i128::from(view[[r, 0]]), i128::from(view[[r, 1]])))
+        let view = typed.as_array().into_dimensionality::<Ix2>().map_err(shape_error)?;
+        view.outer_iter()
+            .map(|r| (i128::from(r[0]), i128::from(r[1])))
             .collect()
     };
     rows.into_iter()
@@ -216,6 +219,11 @@ fn camera_arg(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Option<Camera>> {
     Ok(Some(camera.with_intrinsics(Intrinsics::new(
         k[0][0], k[1][1], k[0][2], k[1][2],
     ))))
+}
+
+/// `key=`: a pair's sampler key.
+fn sampler_key(obj: &Bound<'_, PyAny>) -> PyResult<u64> {
+    typed(obj, "key", "an int >= 0")
 }
 
 /// One pair's inputs, copied out of the arrays.
@@ -400,6 +408,7 @@ impl TwoViewGeometry {
 /// bad camera; ``ArgumentTypeError`` for an option of the wrong type.
 #[pyfunction]
 #[pyo3(signature = (keypoints_a, keypoints_b, matches, camera_a = None, camera_b = None, *, key = 0, **options))]
+#[allow(clippy::too_many_arguments)]
 pub fn verify_pair(
     py: Python<'_>,
     keypoints_a: &Bound<'_, PyAny>,
@@ -407,11 +416,10 @@ pub fn verify_pair(
     matches: &Bound<'_, PyAny>,
     camera_a: Option<&Bound<'_, PyAny>>,
     camera_b: Option<&Bound<'_, PyAny>>,
-    key: &Bound<'_, PyAny>,
+    #[pyo3(from_py_with = sampler_key)] key: u64,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<TwoViewGeometry> {
     let config = config_of(options)?;
-    let key: u64 = typed(key, "key", "an int >= 0")?;
     let pair = PairInput::new(
         keypoints_a,
         keypoints_b,

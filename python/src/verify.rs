@@ -158,16 +158,23 @@ fn matches_arg(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<Match>> {
             )
         })
     };
-    let shape_error = |e: numpy::ndarray::ShapeError| invalid_input(py, "WrongShape", e.to_string());
+    let shape_error =
+        |e: numpy::ndarray::ShapeError| invalid_input(py, "WrongShape", e.to_string());
     let rows: Vec<(i128, i128)> = if wide == "uint64" {
         let typed = converted.cast::<PyArrayDyn<u64>>()?.readonly();
-        let view = typed.as_array().into_dimensionality::<Ix2>().map_err(shape_error)?;
+        let view = typed
+            .as_array()
+            .into_dimensionality::<Ix2>()
+            .map_err(shape_error)?;
         view.outer_iter()
             .map(|r| (i128::from(r[0]), i128::from(r[1])))
             .collect()
     } else {
         let typed = converted.cast::<PyArrayDyn<i64>>()?.readonly();
-        let view = typed.as_array().into_dimensionality::<Ix2>().map_err(shape_error)?;
+        let view = typed
+            .as_array()
+            .into_dimensionality::<Ix2>()
+            .map_err(shape_error)?;
         view.outer_iter()
             .map(|r| (i128::from(r[0]), i128::from(r[1])))
             .collect()

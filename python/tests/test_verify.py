@@ -72,23 +72,33 @@ def test_a_translated_plane_is_a_homography():
     assert "planar_or_panoramic" in repr(g)
 
 
+def sampson_distances(f: np.ndarray, a: np.ndarray, b: np.ndarray, matches: np.ndarray, inliers: np.ndarray) -> np.ndarray:
+    """Each inlier's Sampson distance under ``f`` (px), the error COLMAP's threshold bounds."""
+    ha = np.c_[a[matches[inliers, 0]], np.ones(len(inliers))]
+    hb = np.c_[b[matches[inliers, 1]], np.ones(len(inliers))]
+    fa, fb = ha @ f.T, hb @ f
+    return np.abs(np.sum(hb * fa, axis=1)) / np.sqrt(fa[:, 0] ** 2 + fa[:, 1] ** 2 + fb[:, 0] ** 2 + fb[:, 1] ** 2)
+
+
 def test_a_general_scene_is_calibrated_with_k_and_uncalibrated_without():
     a, b, matches = scene()
     camera = (WIDTH, HEIGHT, K)
     calibrated = clatch.verify_pair(a, b, matches, camera, camera)
-    assert calibrated.config == "calibrated" and calibrated.E is not None
-    # The true matches, and none of the wrong ones.
-    assert set(calibrated.inliers.tolist()) == set(range(160))
+    assert calibrated.config == "calibrated" and calibrated.E is not None and calibrated.F is not None
+    # Every true match; a wrong one only where it happens to lie on its epipolar line.
+    inliers = set(calibrated.inliers.tolist())
+    assert set(range(160)) <= inliers and len(inliers - set(range(160))) <= 8, sorted(inliers - set(range(160)))
+    # E acts on camera coordinates: the true matches satisfy it.
+    kinv = np.linalg.inv(K)
+    na = np.c_[a[:160], np.ones(160)] @ kinv.T
+    nb = np.c_[b[:160], np.ones(160)] @ kinv.T
+    residual = np.abs(np.sum(nb * (na @ calibrated.E.T), axis=1)) / np.linalg.norm(calibrated.E)
+    assert residual.max() < 1e-3, residual.max()
     plain = clatch.verify_pair(a, b, matches)
     assert plain.config == "uncalibrated" and plain.E is None and plain.F is not None
-    assert set(plain.inliers.tolist()) <= set(range(160)) and plain.num_inliers >= 150
-    # Every inlier lies on its epipolar line.
-    f = plain.F
-    ha = np.c_[a[matches[plain.inliers, 0]], np.ones(plain.num_inliers)]
-    hb = np.c_[b[matches[plain.inliers, 1]], np.ones(plain.num_inliers)]
-    lines = ha @ f.T
-    distance = np.abs(np.sum(hb * lines, axis=1)) / np.hypot(lines[:, 0], lines[:, 1])
-    assert distance.max() < 1.0, distance.max()
+    assert plain.num_inliers >= 150 and len(set(plain.inliers.tolist()) - set(range(160))) <= 8
+    assert plain.inlier_counts["F"] >= plain.num_inliers and plain.inlier_counts["E"] == 0
+    assert sampson_distances(plain.F, a, b, matches, plain.inliers).max() <= 4.0
 
 
 def test_every_input_form_gives_the_same_geometry():
@@ -120,7 +130,7 @@ def test_options_reach_the_verification():
     strict = clatch.verify_pair(a, b, matches, max_error=0.001)
     assert strict.num_inliers < clatch.verify_pair(a, b, matches).num_inliers
     filtered = clatch.verify_pair(a, b, matches, neighbour_consistency=True)
-    assert set(filtered.inliers.tolist()) <= set(range(160))
+    assert filtered.num_inliers >= 100 and not same(filtered, clatch.verify_pair(a, b, matches))
 
 
 def expect(kind: str, call, *args, **kwargs) -> str:

@@ -215,7 +215,7 @@ def test_outputs_are_readable_by_other_users(backend, folder, tmp_path):
     # usual umask 022, not a temporary file's 0600.
     old = os.umask(0o022)
     try:
-        clatch.colmap.match_folder(folder, tmp_path / "out.db", backend=backend)
+        clatch.colmap.match_folder(folder, tmp_path / "out.db", backend=backend, match_list=True)
     finally:
         os.umask(old)
     for path in [tmp_path / "out.db", tmp_path / "out-colmap" / "matches.txt"]:

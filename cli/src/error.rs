@@ -207,6 +207,18 @@ impl CliError {
     }
 }
 
+/// "the database X (and the match list Y) are kept".
+fn kept_files(database: &std::path::Path, match_list: Option<&std::path::Path>) -> String {
+    match match_list {
+        Some(list) => format!(
+            "the database {} and the match list {} are kept",
+            database.display(),
+            list.display()
+        ),
+        None => format!("the database {} is kept", database.display()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -226,17 +238,5 @@ mod tests {
             source: std::io::Error::from(std::io::ErrorKind::NotFound),
         };
         assert!(e.to_string().contains("missing.png"));
-    }
-}
-
-/// "the database X (and the match list Y) are kept".
-fn kept_files(database: &std::path::Path, match_list: Option<&std::path::Path>) -> String {
-    match match_list {
-        Some(list) => format!(
-            "the database {} and the match list {} are kept",
-            database.display(),
-            list.display()
-        ),
-        None => format!("the database {} is kept", database.display()),
     }
 }

@@ -168,9 +168,18 @@ fn failures_are_reported_with_their_cause() {
     {
         use std::os::unix::fs::PermissionsExt;
         std::fs::set_permissions(&fake, std::fs::Permissions::from_mode(0o755)).unwrap();
+        // Verified by clatch, the mapper is COLMAP's first step; with --no-verify, matches_importer.
         let e = run(&dir.join("images"), &["--colmap", fake.to_str().unwrap()]);
+        assert!(e.contains("colmap mapper failed"), "{e}");
+        assert!(e.contains("fake colmap: mapper broke"), "{e}");
+        assert!(e.contains("the database") && e.contains("is kept"), "{e}");
+        let e = run(
+            &dir.join("images"),
+            &["--colmap", fake.to_str().unwrap(), "--no-verify", "--force"],
+        );
         assert!(e.contains("colmap matches_importer failed"), "{e}");
         assert!(e.contains("fake colmap: matches_importer broke"), "{e}");
+        assert!(e.contains("and the match list"), "{e}");
     }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -45,6 +45,7 @@ mod consistency;
 mod essential;
 mod fundamental;
 mod geometry;
+mod guided;
 mod homography;
 mod linalg;
 mod poly;
@@ -60,6 +61,7 @@ pub use camera::{Camera, Intrinsics};
 pub use config::VerifyConfig;
 pub use consistency::NeighbourConsistency;
 pub use geometry::{GeometryConfig, InlierCounts, TwoViewGeometry};
+pub use guided::{GuidedMatches, GuidedMatching, guided_matches};
 
 use crate::error::{Error, Result};
 use crate::keypoint::KeyPoint;

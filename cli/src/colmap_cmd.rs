@@ -92,6 +92,7 @@ fn folder_job(args: &ColmapArgs) -> Result<FolderJob, CliError> {
             config.neighbour_consistency = None;
         }
         job.with_verification(config)
+            .with_guided_matching(args.guided_matching)
     } else {
         job
     };
@@ -599,6 +600,27 @@ mod tests {
             parsed.is_err(),
             "--no-neighbour-consistency without --verify"
         );
+    }
+
+    #[test]
+    fn guided_matching_is_asked_for_with_verify() {
+        let guided = |extra: &[&str]| folder_job(&colmap_args(extra)).unwrap().guided_config();
+        assert_eq!(guided(&["--verify"]), None);
+        let on = guided(&["--verify", "--guided-matching"]).unwrap();
+        assert_eq!(
+            on.max_error,
+            clatch::verify::VerifyConfig::default().max_error
+        );
+        let parsed = crate::Cli::try_parse_from([
+            "clatch",
+            "colmap",
+            "--images",
+            "d",
+            "--database",
+            "d.db",
+            "--guided-matching",
+        ]);
+        assert!(parsed.is_err(), "--guided-matching without --verify");
     }
 
     #[test]

@@ -226,6 +226,7 @@ def match_folder(
     max_pixels: int = 100_000_000,
     force: bool = False,
     verify: bool = False,
+    guided_matching: bool = False,
     progress: Optional[Progress] = None,
 ) -> MatchFolderResult:
     """Features and matches of a folder of photos into a new COLMAP 3.8 database and match list.
@@ -246,6 +247,9 @@ def match_folder(
     - ``verify``: verify every pair in clatch (``clatch::verify``, on the CPU) and write the two-view
       geometries into the database, as ``colmap matches_importer`` would: ``colmap mapper`` then runs
       straight on it (``clatch colmap --verify``).
+    - ``guided_matching``: with ``verify``, match each verified pair's descriptors again under its
+      geometry, with the same ratio test and cross-check, and write those matches as its inliers
+      (``clatch::verify::guided_matches``, ``clatch colmap --guided-matching``).
     - ``progress(stage, done, total)``: called as each stage starts (``done = 0``), as photos are
       extracted and as pairs are matched; an exception it raises stops the run.
 
@@ -270,5 +274,6 @@ def match_folder(
         max_pixels=max_pixels,
         force=force,
         verify=verify,
+        guided_matching=guided_matching,
     )
     return _result(job.run(progress))

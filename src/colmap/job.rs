@@ -140,6 +140,11 @@ pub struct FolderJob {
     /// geometries written into the database, as COLMAP's `matches_importer` would, so that COLMAP's
     /// mapper runs straight on it (default `None`: the match list alone, for COLMAP to verify).
     pub verification: Option<VerifyConfig>,
+    /// With [`FolderJob::verification`]: whether each verified pair's descriptors are matched again
+    /// under its geometry ([`crate::verify::guided_matches`], with [`FolderJob::matching`]'s rules
+    /// and the verification's threshold), the guided matches written as the pair's inliers (the
+    /// putative matches stay the match list's). Default `false`.
+    pub guided_matching: bool,
 }
 
 impl FolderJob {
@@ -162,6 +167,7 @@ impl FolderJob {
             limits: DecodeLimits::default(),
             overwrite: Overwrite::default(),
             verification: None,
+            guided_matching: false,
         }
     }
 
@@ -256,6 +262,26 @@ impl FolderJob {
     pub fn with_verification(mut self, config: VerifyConfig) -> Self {
         self.verification = Some(config);
         self
+    }
+
+    /// Matches each verified pair again under its geometry ([`FolderJob::guided_matching`]).
+    pub fn with_guided_matching(mut self, guided: bool) -> Self {
+        self.guided_matching = guided;
+        self
+    }
+
+    /// The guided matching the run does: with verification and [`FolderJob::guided_matching`],
+    /// [`FolderJob::matching`]'s rules under the verification's threshold; else `None`.
+    pub fn guided_config(&self) -> Option<crate::verify::GuidedMatching> {
+        let verification = self
+            .verification
+            .as_ref()
+            .filter(|_| self.guided_matching)?;
+        Some(
+            crate::verify::GuidedMatching::default()
+                .with_rules(self.matching.clone())
+                .with_max_error(verification.max_error),
+        )
     }
 
     /// The extractor settings the run uses: [`FolderJob::extractor`] with the detector's sub-pixel

@@ -5,7 +5,7 @@
 //! because the second-nearest descriptor was a look-alike elsewhere in the image (one window over
 //! on a facade), which the geometry puts out of reach.
 //!
-//! The rule, the specification every backend follows (section "Verification" of
+//! The rule, the specification every backend follows (section 7.8 ("Guided matching") of
 //! [`crate::numerics`]):
 //! - the **constraint** is the residual verification counts inliers by, under its threshold `t`
 //!   (`r ≤ t · t`): for [`GeometryConfig::Calibrated`] and [`GeometryConfig::Uncalibrated`] the

@@ -87,6 +87,7 @@ impl FolderJob {
         max_pixels = 100_000_000,
         force = false,
         verify = false,
+        guided_matching = false,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -104,6 +105,7 @@ impl FolderJob {
         max_pixels: u64,
         force: bool,
         verify: bool,
+        guided_matching: bool,
     ) -> PyResult<Self> {
         let mut job = clatch::colmap::FolderJob::new(images, database)
             .with_backend(extractor.inner.backend())
@@ -120,7 +122,9 @@ impl FolderJob {
             job = job.with_workspace(workspace);
         }
         if verify {
-            job = job.with_verification(clatch::colmap::FolderJob::default_verification());
+            job = job
+                .with_verification(clatch::colmap::FolderJob::default_verification())
+                .with_guided_matching(guided_matching);
         }
         if let Some(pairs) = pairs {
             job = job.with_pairs(pairs);

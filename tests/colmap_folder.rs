@@ -369,6 +369,7 @@ fn verification_writes_every_pair_s_geometry_and_only_true_inliers() {
     let run = |db: &str| {
         FolderJob::new(dir.join("images"), dir.join(db))
             .with_verification(clatch::verify::VerifyConfig::default())
+            .with_guided_matching(false)
             .run(None)
             .unwrap()
     };
@@ -491,8 +492,12 @@ fn guided_matching_adds_true_inliers_and_its_stages_apart_write_the_same_bytes()
             .with_workspace(dir.join(format!("{db}-colmap")))
             .with_verification(FolderJob::default_verification())
     };
-    let verified = job("verified.db").run(None).unwrap();
-    let guided_job = job("guided.db").with_guided_matching(true);
+    let verified = job("verified.db")
+        .with_guided_matching(false)
+        .run(None)
+        .unwrap();
+    let guided_job = job("guided.db");
+    assert!(guided_job.guided_matching, "on by default");
     let guided = guided_job.run(None).unwrap();
     assert_eq!(guided.counts.matches, verified.counts.matches);
     assert_eq!(bytes(&guided.match_list), bytes(&verified.match_list));
@@ -512,7 +517,7 @@ fn guided_matching_adds_true_inliers_and_its_stages_apart_write_the_same_bytes()
     );
 
     for described in [true, false] {
-        let job = job(if described { "apart.db" } else { "bare.db" }).with_guided_matching(true);
+        let job = job(if described { "apart.db" } else { "bare.db" });
         let plan = job.plan().unwrap();
         let mut output = plan.open_output().unwrap();
         let extractor = Extractor::new(job.backend, job.extractor_config()).unwrap();

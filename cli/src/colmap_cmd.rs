@@ -92,7 +92,7 @@ fn folder_job(args: &ColmapArgs) -> Result<FolderJob, CliError> {
             config.neighbour_consistency = None;
         }
         job.with_verification(config)
-            .with_guided_matching(args.guided_matching)
+            .with_guided_matching(!args.no_guided_matching)
     } else {
         job
     };
@@ -603,14 +603,18 @@ mod tests {
     }
 
     #[test]
-    fn guided_matching_is_asked_for_with_verify() {
+    fn verify_matches_again_under_the_geometry_unless_told_not_to() {
         let guided = |extra: &[&str]| folder_job(&colmap_args(extra)).unwrap().guided_config();
-        assert_eq!(guided(&["--verify"]), None);
-        let on = guided(&["--verify", "--guided-matching"]).unwrap();
+        assert_eq!(guided(&[]), None);
+        assert_eq!(guided(&["--verify", "--no-guided-matching"]), None);
+        let on = guided(&["--verify"]).unwrap();
         assert_eq!(
             on.max_error,
             clatch::verify::VerifyConfig::default().max_error
         );
+        assert!(on.neighbour_consistency.is_some());
+        let alone = guided(&["--verify", "--no-neighbour-consistency"]).unwrap();
+        assert!(alone.neighbour_consistency.is_none());
         let parsed = crate::Cli::try_parse_from([
             "clatch",
             "colmap",
@@ -618,9 +622,9 @@ mod tests {
             "d",
             "--database",
             "d.db",
-            "--guided-matching",
+            "--no-guided-matching",
         ]);
-        assert!(parsed.is_err(), "--guided-matching without --verify");
+        assert!(parsed.is_err(), "--no-guided-matching without --verify");
     }
 
     #[test]

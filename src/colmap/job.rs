@@ -143,7 +143,11 @@ pub struct FolderJob {
     /// With [`FolderJob::verification`]: whether each verified pair's descriptors are matched again
     /// under its geometry ([`crate::verify::guided_matches`], with [`FolderJob::matching`]'s rules
     /// and the verification's threshold), the guided matches written as the pair's inliers (the
-    /// putative matches stay the match list's). Default `false`.
+    /// putative matches stay the match list's), the guided matches passing the verification's
+    /// neighbour rule too. Default `true`: on the generated facades it multiplied the correct
+    /// inliers by 3.8 to 6.7 at 95.7 to 98.9 % within 4 px of the truth, and raised them by 23 % on
+    /// Herz-Jesu at 97.2 % within 4 px of the true epipolar lines, for about twice the run's CPU
+    /// time (EVALUATION.md, "guided matching").
     pub guided_matching: bool,
 }
 
@@ -167,7 +171,7 @@ impl FolderJob {
             limits: DecodeLimits::default(),
             overwrite: Overwrite::default(),
             verification: None,
-            guided_matching: false,
+            guided_matching: true,
         }
     }
 
@@ -264,14 +268,16 @@ impl FolderJob {
         self
     }
 
-    /// Matches each verified pair again under its geometry ([`FolderJob::guided_matching`]).
+    /// Whether each verified pair is matched again under its geometry
+    /// ([`FolderJob::guided_matching`]; on by default).
     pub fn with_guided_matching(mut self, guided: bool) -> Self {
         self.guided_matching = guided;
         self
     }
 
     /// The guided matching the run does: with verification and [`FolderJob::guided_matching`],
-    /// [`FolderJob::matching`]'s rules under the verification's threshold; else `None`.
+    /// [`FolderJob::matching`]'s rules under the verification's threshold and with its neighbour
+    /// rule; else `None`.
     pub fn guided_config(&self) -> Option<crate::verify::GuidedMatching> {
         let verification = self
             .verification
@@ -280,7 +286,8 @@ impl FolderJob {
         Some(
             crate::verify::GuidedMatching::default()
                 .with_rules(self.matching.clone())
-                .with_max_error(verification.max_error),
+                .with_max_error(verification.max_error)
+                .with_neighbour_consistency(verification.neighbour_consistency),
         )
     }
 

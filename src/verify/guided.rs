@@ -61,6 +61,11 @@ pub struct GuidedMatching {
     /// H; verification's threshold ([`super::VerifyConfig::max_error`]) is the natural choice.
     /// Default 4.
     pub max_error: f64,
+    /// The neighbour rule the guided matches pass too ([`super::NeighbourConsistency`], as the
+    /// putative matches do before RANSAC with [`super::VerifyConfig::neighbour_consistency`]): a
+    /// band along an epipolar line holds the twins of a repeated structure, one period off, that
+    /// only the neighbours tell apart. Default `None`.
+    pub neighbour_consistency: Option<super::NeighbourConsistency>,
 }
 
 impl Default for GuidedMatching {
@@ -68,6 +73,7 @@ impl Default for GuidedMatching {
         Self {
             rules: MatchConfig::default(),
             max_error: 4.0,
+            neighbour_consistency: None,
         }
     }
 }
@@ -78,6 +84,8 @@ impl GuidedMatching {
         with_rules => rules: MatchConfig;
         /// The same settings with this threshold ([`GuidedMatching::max_error`], pixels).
         with_max_error => max_error: f64;
+        /// The same settings with this neighbour rule ([`GuidedMatching::neighbour_consistency`]).
+        with_neighbour_consistency => neighbour_consistency: Option<super::NeighbourConsistency>;
     }
 
     /// `Error::InvalidConfig` for a setting out of its range.
@@ -263,7 +271,11 @@ pub fn guided_matches(
     let Some(constraint) = Constraint::of(geometry, &a, &b) else {
         return Ok(None);
     };
-    let matches = match_under(&constraint, &b, descriptors_a, descriptors_b, config);
+    let mut matches = match_under(&constraint, &b, descriptors_a, descriptors_b, config);
+    if let Some(rule) = &config.neighbour_consistency {
+        let kept = rule.kept(keypoints_a, keypoints_b, &matches);
+        matches = kept.iter().map(|&i| matches[i as usize]).collect();
+    }
     let inliers = (0..matches.len() as u32).collect();
     Ok(Some(GuidedMatches {
         matches,
@@ -442,6 +454,40 @@ mod tests {
             .unwrap()
             .unwrap();
         assert!(guided.matches.is_empty());
+    }
+
+    #[test]
+    fn the_neighbour_rule_drops_a_guided_match_its_neighbours_do_not_follow() {
+        // Six keypoints along a row move 20 px left; query 5's look-alike sits 600 px further along
+        // the same epipolar line, nearer in Hamming distance than its true match.
+        let a: Vec<KeyPoint> = (0..6)
+            .map(|i| KeyPoint::new(100.0 + 40.0 * i as f32, 50.0))
+            .collect();
+        let mut b: Vec<KeyPoint> = a.iter().map(|k| KeyPoint::new(k.x - 20.0, k.y)).collect();
+        b.push(KeyPoint::new(900.0, 50.0));
+        let words: Vec<u64> = (0..6).map(|i| 0xFFu64 << (8 * i)).collect();
+        let mut train = words.clone();
+        train[5] ^= 0xFF;
+        train.push(words[5]);
+        let (da, db) = (set(&words), set(&train));
+        let g = geometry(GeometryConfig::Uncalibrated, Some(SIDEWAYS), None);
+        let plain = guided_matches(&a, &b, &da, &db, &g, &GuidedMatching::default())
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            pairs(&plain.matches),
+            [(0, 0), (1, 1), (2, 2), (3, 3), (4, 4), (5, 6)]
+        );
+        let ruled = GuidedMatching::default()
+            .with_neighbour_consistency(Some(crate::verify::NeighbourConsistency::default()));
+        let guided = guided_matches(&a, &b, &da, &db, &g, &ruled)
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            pairs(&guided.matches),
+            [(0, 0), (1, 1), (2, 2), (3, 3), (4, 4)]
+        );
+        assert_eq!(guided.geometry.inliers, [0, 1, 2, 3, 4]);
     }
 
     #[test]

@@ -7,7 +7,8 @@
 //! ([`VerifyConfig::planar_keeps_homography_inliers`]; off, COLMAP's rule). One more can be turned
 //! on, and is in the folder run: RANSAC sees only the matches whose neighbours move with them
 //! ([`NeighbourConsistency`], [`VerifyConfig::neighbour_consistency`]), which drops matches one
-//! period off on repeated structure.
+//! period off on repeated structure. After verification, [`guided_matches`] matches a pair's
+//! descriptors again under its geometry (COLMAP's guided matching; on in the folder run).
 //!
 //! This is the CPU reference, written as the specification a CUDA twin reproduces bit for bit:
 //! every solver uses `+ − × ÷` and `sqrt` in `f64` in a written order, roots come from Sturm

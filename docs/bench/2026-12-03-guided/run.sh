@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# EVALUATION.md's "guided matching" (2026-12-03): `clatch colmap --verify` without and with
-# `--guided-matching` on the three generated repeated-structure scenes and Herz-Jesu, each database and
+# EVALUATION.md's "guided matching" (2026-12-03): `clatch colmap --verify` without (`--no-guided-matching`)
+# and with guided matching (the default) on the three generated repeated-structure scenes and Herz-Jesu, each database and
 # model judged by clatch-eval geometry. Run from the repository root:
 #   docs/bench/2026-12-03-guided/run.sh DATA OUT
 #   DATA: the folder holding strecha_herzjesu_p8 and sceaux_castle (data/README.md); OUT: a work folder.
@@ -20,7 +20,7 @@ run() { # run NAME IMAGES K SCENE: both modes one after the other
     local name=$1 images=$2 k=$3 scene=$4
     for mode in verify guided; do
         local flags=(--verify)
-        [ $mode = guided ] && flags+=(--guided-matching)
+        [ $mode = verify ] && flags+=(--no-guided-matching)
         /usr/bin/time -f "%e %U %S" -o $mode-$name.time $clatch colmap --images "$images" --camera-k "$k" \
             --database $mode-$name.db --backend cpu --force "${flags[@]}" > $mode-$name.out
         $eval geometry --scene "$scene" --database $mode-$name.db --model $mode-$name-colmap/sparse/0 --pairs \

@@ -90,7 +90,7 @@ def colmap(args: argparse.Namespace) -> int:
         max_pixels=args.max_pixels,
         force=args.force,
         verify=args.verify,
-        guided_matching=args.guided_matching,
+        guided_matching=not args.no_guided_matching,
     )
     verified = f", {result.inliers} verified in {result.pairs_with_inliers} pairs" if args.verify else ""
     print(
@@ -125,9 +125,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="replace an existing database")
     p.add_argument("--verify", action="store_true", help="verify every pair and write the geometries (clatch colmap --verify)")
     p.add_argument(
-        "--guided-matching",
+        "--no-guided-matching",
         action="store_true",
-        help="with --verify: match each verified pair again under its geometry (clatch colmap --guided-matching)",
+        help="with --verify: keep the verified inliers, no guided matching (clatch colmap --no-guided-matching)",
     )
     p.add_argument("--ratio", type=float, default=0.8)
     _extractor_options(p)

@@ -226,7 +226,7 @@ def match_folder(
     max_pixels: int = 100_000_000,
     force: bool = False,
     verify: bool = False,
-    guided_matching: bool = False,
+    guided_matching: bool = True,
     progress: Optional[Progress] = None,
 ) -> MatchFolderResult:
     """Features and matches of a folder of photos into a new COLMAP 3.8 database and match list.
@@ -247,9 +247,10 @@ def match_folder(
     - ``verify``: verify every pair in clatch (``clatch::verify``, on the CPU) and write the two-view
       geometries into the database, as ``colmap matches_importer`` would: ``colmap mapper`` then runs
       straight on it (``clatch colmap --verify``).
-    - ``guided_matching``: with ``verify``, match each verified pair's descriptors again under its
-      geometry, with the same ratio test and cross-check, and write those matches as its inliers
-      (``clatch::verify::guided_matches``, ``clatch colmap --guided-matching``).
+    - ``guided_matching``: with ``verify`` (default ``True``), match each verified pair's descriptors
+      again under its geometry, with the same ratio test and cross-check, and write those matches as
+      its inliers (``clatch::verify::guided_matches``; ``False``: ``clatch colmap --verify
+      --no-guided-matching``).
     - ``progress(stage, done, total)``: called as each stage starts (``done = 0``), as photos are
       extracted and as pairs are matched; an exception it raises stops the run.
 

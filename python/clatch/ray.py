@@ -344,6 +344,7 @@ def match_folder(
     max_pixels: int = 100_000_000,
     force: bool = False,
     verify: bool = False,
+    guided_matching: bool = True,
     progress: Optional[Progress] = None,
     num_actors: Optional[int] = None,
     actor_options: Optional[Mapping[str, Any]] = None,
@@ -374,7 +375,8 @@ def match_folder(
       is made (``ray.cluster_resources()``).
 
     With ``verify=True`` the driver verifies each pair as it writes its matches (on its CPU), as
-    ``clatch.colmap.match_folder(verify=True)`` does.
+    ``clatch.colmap.match_folder(verify=True)`` does; with ``guided_matching`` (the default) it
+    fetches every photo's descriptors too, to match each verified pair again under its geometry.
 
     The result's ``blocks``, ``blocks_rerun`` (blocks and extraction tasks run again because their
     actor died), ``actors_lost`` and ``descriptor_fetches`` say how the run went. The two
@@ -400,8 +402,17 @@ def match_folder(
     # Every check before any work, here, where the errors are plain clatch errors; the driver only
     # writes, so its job runs on the CPU.
     job = _job(
-        backend="cpu", workspace=workspace, pairs=pairs, camera_k=camera_k, force=force, verify=verify, **settings
+        backend="cpu",
+        workspace=workspace,
+        pairs=pairs,
+        camera_k=camera_k,
+        force=force,
+        verify=verify,
+        guided_matching=guided_matching,
+        **settings,
     )
+    # Guided matching needs every photo's descriptors where the pairs are written.
+    guided = verify and guided_matching
     plan = job.plan()
     pair_list = plan.pairs
     blocks = _blocks(pair_list, block_size)
@@ -458,7 +469,7 @@ def match_folder(
             while next_task in waiting:
                 meta, refs = waiting.pop(next_task)
                 for image, (photo, ref) in zip(tasks[next_task], zip(meta, refs)):
-                    writer.add_photo(*photo)
+                    writer.add_photo(*photo, descriptors=ray.get(ref) if guided else None)
                     descriptor_refs[image] = ref
                 next_task += 1
                 if progress is not None:

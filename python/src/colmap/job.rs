@@ -87,7 +87,7 @@ impl FolderJob {
         max_pixels = 100_000_000,
         force = false,
         verify = false,
-        guided_matching = false,
+        guided_matching = true,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -122,10 +122,9 @@ impl FolderJob {
             job = job.with_workspace(workspace);
         }
         if verify {
-            job = job
-                .with_verification(clatch::colmap::FolderJob::default_verification())
-                .with_guided_matching(guided_matching);
+            job = job.with_verification(clatch::colmap::FolderJob::default_verification());
         }
+        job = job.with_guided_matching(guided_matching);
         if let Some(pairs) = pairs {
             job = job.with_pairs(pairs);
         }

@@ -146,8 +146,8 @@ pub struct FolderJob {
     /// putative matches stay the match list's), the guided matches passing the verification's
     /// neighbour rule too. Default `true`: on the generated facades it multiplied the correct
     /// inliers by 3.8 to 6.7 at 95.7 to 98.9 % within 4 px of the truth, and raised them by 23 % on
-    /// Herz-Jesu at 97.2 % within 4 px of the true epipolar lines, for about twice the run's CPU
-    /// time (EVALUATION.md, "guided matching").
+    /// Herz-Jesu at 97.2 % within 4 px of the true epipolar lines (cameras there slightly further
+    /// off), for 1.7 to 3.4 times the run's CPU time (EVALUATION.md, "guided matching").
     pub guided_matching: bool,
 }
 

@@ -305,8 +305,9 @@ fn match_under(
     for (q, qd) in descriptors_a.rows().enumerate() {
         let mut best = Vec::with_capacity(k + 1);
         for (t, td) in rows_b.iter().enumerate() {
-            // `!(r <= t²)`: a NaN residual is never a candidate.
-            if !(constraint.residual(q, t, b[t]) <= max_residual) {
+            // `r <= t²` is false for a NaN residual: never a candidate.
+            let candidate = constraint.residual(q, t, b[t]) <= max_residual;
+            if !candidate {
                 continue;
             }
             let distance = hamming(qd, td);

@@ -6,8 +6,8 @@ use std::io::BufWriter;
 use std::path::PathBuf;
 use std::sync::Mutex;
 
-use clatch::{DescriptorSet, Match};
 use clatch::colmap::{ColmapError, FolderCounts, FolderOutput, FolderWriter as Writer, Photo};
+use clatch::{DescriptorSet, Match};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 

@@ -309,7 +309,7 @@ pub(crate) fn passes(
     if nearest_query.is_some_and(|nearest| nearest != best.query) {
         return false;
     }
-    !config.max_distance.is_some_and(|max| best.distance > max)
+    config.max_distance.is_none_or(|max| best.distance <= max)
 }
 
 #[cfg(test)]

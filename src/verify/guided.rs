@@ -24,7 +24,10 @@
 //!   rival: the ratio test compares with the descriptor's width in bits, the largest distance there
 //!   is (COLMAP's guided matcher gives every excluded descriptor the largest distance too);
 //! - the guided matches, in query order, are the new inliers: each satisfies the geometry by
-//!   construction. The geometry's configuration, models and RANSAC counts stay.
+//!   construction. With [`GuidedMatching::neighbour_consistency`] they pass that neighbour rule
+//!   first ([`super::NeighbourConsistency`], integers): a band along an epipolar line can hold a
+//!   repeated structure's twin one period off, which only the neighbours tell apart. The geometry's
+//!   configuration, models and RANSAC counts stay.
 //!
 //! On a GPU this is one thread (or warp) per query scanning the second image's keypoints in index
 //! order, with the reverse nearest as the `(distance << 32 | query)` minimum per train keypoint, as

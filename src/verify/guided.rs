@@ -151,23 +151,63 @@ impl Constraint {
     }
 
     /// The squared residual of keypoint `i` of the first image against keypoint `j` (at `b`) of the
-    /// second: bit for bit [`sampson_error_squared`] or
+    /// second: bit for bit [`super::fundamental::sampson_error_squared`] or
     /// [`super::homography::transfer_error_squared`], whose per-keypoint parts are computed once.
-    #[inline]
+    #[cfg(test)]
     fn residual(&self, i: usize, j: usize, b: [f64; 2]) -> f64 {
         match self {
+            Self::Epipolar { lines_a, lines_b } => sampson(lines_a[i], lines_b[j], b),
+            Self::Transfer { mapped } => transfer(mapped[i], b),
+        }
+    }
+
+    /// Appends to `out`, in increasing order, the second-image keypoints (at `b`) whose residual
+    /// against keypoint `i` of the first image is at most `max_residual` (a NaN residual never
+    /// is): [`Constraint::residual`] of each, first all of them into `residuals` (a loop that
+    /// vectorises), then the comparisons.
+    fn candidates(
+        &self,
+        i: usize,
+        b: &[[f64; 2]],
+        max_residual: f64,
+        residuals: &mut Vec<f64>,
+        out: &mut Vec<u32>,
+    ) {
+        residuals.clear();
+        match self {
             Self::Epipolar { lines_a, lines_b } => {
-                let (fa, ftb) = (lines_a[i], lines_b[j]);
-                let btfa = b[0] * fa[0] + b[1] * fa[1] + fa[2];
-                btfa * btfa / (fa[0] * fa[0] + fa[1] * fa[1] + ftb[0] * ftb[0] + ftb[1] * ftb[1])
+                let fa = lines_a[i];
+                residuals.extend(b.iter().zip(lines_b).map(|(p, ftb)| sampson(fa, *ftb, *p)));
             }
             Self::Transfer { mapped } => {
-                let dx = b[0] - mapped[i][0];
-                let dy = b[1] - mapped[i][1];
-                dx * dx + dy * dy
+                let m = mapped[i];
+                residuals.extend(b.iter().map(|p| transfer(m, *p)));
+            }
+        }
+        out.clear();
+        for (t, &r) in residuals.iter().enumerate() {
+            if r <= max_residual {
+                out.push(t as u32);
             }
         }
     }
+}
+
+/// The squared Sampson error of `b` under `F` from `F a` and `Fᵀ b`, in
+/// [`super::fundamental::sampson_error_squared`]'s order.
+#[inline(always)]
+fn sampson(fa: [f64; 3], ftb: [f64; 3], b: [f64; 2]) -> f64 {
+    let btfa = b[0] * fa[0] + b[1] * fa[1] + fa[2];
+    btfa * btfa / (fa[0] * fa[0] + fa[1] * fa[1] + ftb[0] * ftb[0] + ftb[1] * ftb[1])
+}
+
+/// The squared transfer error of `b` from `π(H a)`, in
+/// [`super::homography::transfer_error_squared`]'s order.
+#[inline(always)]
+fn transfer(mapped: [f64; 2], b: [f64; 2]) -> f64 {
+    let dx = b[0] - mapped[0];
+    let dy = b[1] - mapped[1];
+    dx * dx + dy * dy
 }
 
 /// `π(H a)` as [`super::homography::transfer_error_squared`] computes it: `(u · (1/w), v · (1/w))`.
@@ -305,15 +345,13 @@ fn match_under(
     // (distance << 32 | query): the smallest is the nearest query, then the lowest index.
     let mut nearest = vec![u64::MAX; rows_b.len()];
     let mut lists = Vec::with_capacity(descriptors_a.len());
+    let (mut residuals, mut candidates) = (Vec::with_capacity(b.len()), Vec::new());
     for (q, qd) in descriptors_a.rows().enumerate() {
         let mut best = Vec::with_capacity(k + 1);
-        for (t, td) in rows_b.iter().enumerate() {
-            // `r <= t²` is false for a NaN residual: never a candidate.
-            let candidate = constraint.residual(q, t, b[t]) <= max_residual;
-            if !candidate {
-                continue;
-            }
-            let distance = hamming(qd, td);
+        constraint.candidates(q, b, max_residual, &mut residuals, &mut candidates);
+        for &t in &candidates {
+            let t = t as usize;
+            let distance = hamming(qd, rows_b[t]);
             nearest[t] = nearest[t].min(u64::from(distance) << 32 | q as u64);
             let candidate = Match {
                 query: q as u32,

@@ -147,7 +147,7 @@ pub struct FolderJob {
     /// neighbour rule too. Default `true`: on the generated facades it multiplied the correct
     /// inliers by 3.8 to 6.7 at 95.7 to 98.9 % within 4 px of the truth, and raised them by 23 % on
     /// Herz-Jesu at 97.2 % within 4 px of the true epipolar lines (cameras there slightly further
-    /// off), for 1.7 to 3.4 times the run's CPU time (EVALUATION.md, "guided matching").
+    /// off), for 1.6 to 2.6 times the run's CPU time (EVALUATION.md, "guided matching").
     pub guided_matching: bool,
 }
 

@@ -1,4 +1,4 @@
-scene corner1, database corner1.db
+scene corner1, database guided-corner1.db
 distance: symmetric epipolar distance: the larger of the two point-to-epipolar-line distances, px
 
 | pair | config | inliers | ≤ 1 px | ≤ 2 px | ≤ 4 px | median px | on surface | true ≤ 1 px | true ≤ 2 px | true ≤ 4 px |

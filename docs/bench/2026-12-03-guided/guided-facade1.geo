@@ -1,4 +1,4 @@
-scene facade1, database facade1.db
+scene facade1, database guided-facade1.db
 distance: symmetric epipolar distance: the larger of the two point-to-epipolar-line distances, px
 
 | pair | config | inliers | ≤ 1 px | ≤ 2 px | ≤ 4 px | median px | on surface | true ≤ 1 px | true ≤ 2 px | true ≤ 4 px |

@@ -1,4 +1,4 @@
-scene DATA/strecha_herzjesu_p8, database herz.db
+scene DATA/strecha_herzjesu_p8, database guided-herz.db
 distance: symmetric epipolar distance: the larger of the two point-to-epipolar-line distances, px
 
 | pair | config | inliers | ≤ 1 px | ≤ 2 px | ≤ 4 px | median px |

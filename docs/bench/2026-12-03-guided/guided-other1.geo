@@ -1,4 +1,4 @@
-scene other1, database other1.db
+scene other1, database guided-other1.db
 distance: symmetric epipolar distance: the larger of the two point-to-epipolar-line distances, px
 
 | pair | config | inliers | ≤ 1 px | ≤ 2 px | ≤ 4 px | median px | on surface | true ≤ 1 px | true ≤ 2 px | true ≤ 4 px |

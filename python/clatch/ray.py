@@ -469,7 +469,9 @@ def match_folder(
             while next_task in waiting:
                 meta, refs = waiting.pop(next_task)
                 for image, (photo, ref) in zip(tasks[next_task], zip(meta, refs)):
-                    writer.add_photo(*photo, descriptors=ray.get(ref) if guided else None)
+                    name, width, height, focal_35mm, keypoints = photo
+                    descriptors = ray.get(ref) if guided else None
+                    writer.add_photo(name, width, height, focal_35mm, keypoints, descriptors)
                     descriptor_refs[image] = ref
                 next_task += 1
                 if progress is not None:

@@ -35,15 +35,7 @@ pub struct Matcher {
 impl Matcher {
     /// Validates the configuration and the backend.
     pub fn new(backend: Backend, config: MatchConfig) -> Result<Self> {
-        if let Some(ratio) = config.ratio
-            && !(ratio.is_finite() && ratio > 0.0 && ratio <= 1.0)
-        {
-            return Err(Error::InvalidConfig {
-                field: "ratio",
-                value: ratio.to_string(),
-                reason: "must be finite and in (0, 1]",
-            });
-        }
+        config.check()?;
         backend.ensure_available()?;
         Ok(Self { backend, config })
     }

@@ -133,7 +133,8 @@ fn the_stages_run_apart_write_the_single_run_s_bytes() {
         )
         .unwrap();
         for (photo, set) in photos {
-            output.add_photo(&photo).unwrap();
+            // The default run matches verified pairs again under their geometry: it needs them.
+            output.add_described_photo(&photo, &set).unwrap();
             descriptors.push(set);
         }
     }
@@ -408,6 +409,7 @@ fn verification_writes_every_pair_s_geometry_and_only_true_inliers() {
     let run = |db: &str| {
         FolderJob::new(dir.join("images"), dir.join(db))
             .with_verification(clatch::verify::VerifyConfig::default())
+            .with_guided_matching(false)
             .run(None)
             .unwrap()
     };
@@ -501,5 +503,127 @@ fn verification_writes_every_pair_s_geometry_and_only_true_inliers() {
     assert_eq!((stored("two_view_geometries"), stored("matches")), (0, 0));
     assert_eq!(plain.counts.pairs_verified, 0);
     assert!(bytes(plain.match_list.as_ref().unwrap()).len() > 100);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// How far each verified inlier of the database lies from where its pair's translation puts it,
+/// pixels.
+fn inlier_offsets(database: &Path) -> Vec<f32> {
+    let db = rusqlite::Connection::open(database).unwrap();
+    let keypoints = keypoints_of(&db);
+    let mut query = db
+        .prepare("SELECT pair_id, data FROM two_view_geometries WHERE rows > 0")
+        .unwrap();
+    let rows: Vec<(i64, Vec<u8>)> = query
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    let mut errors = Vec::new();
+    for (pair, data) in rows {
+        let (a, b) = clatch::colmap::image_ids_of_pair(pair as u64);
+        let shift = (b - a) as f32;
+        for index in data.chunks_exact(8) {
+            let ka = u32::from_le_bytes(index[..4].try_into().unwrap()) as usize;
+            let kb = u32::from_le_bytes(index[4..].try_into().unwrap()) as usize;
+            let (pa, pb) = (keypoints[&a][ka], keypoints[&b][kb]);
+            let (dx, dy) = (
+                pb[0] - (pa[0] - 40.0 * shift),
+                pb[1] - (pa[1] - 25.0 * shift),
+            );
+            errors.push((dx * dx + dy * dy).sqrt());
+        }
+    }
+    errors
+}
+
+/// Guided matching: every verified pair matched again under its homography (the crops differ by a
+/// translation) finds more inliers than verification kept, nearly all where the translation puts
+/// them; the stages run apart, each photo added with its descriptors, write the single run's bytes;
+/// a photo added without them is refused when its pair is written.
+#[test]
+fn guided_matching_adds_true_inliers_and_its_stages_apart_write_the_same_bytes() {
+    let dir = workdir("guided");
+    let job = |db: &str| {
+        FolderJob::new(dir.join("images"), dir.join(db))
+            .with_workspace(dir.join(format!("{db}-colmap")))
+            .with_verification(FolderJob::default_verification())
+    };
+    let verified = job("verified.db")
+        .with_guided_matching(false)
+        .run(None)
+        .unwrap();
+    let guided_job = job("guided.db");
+    assert!(guided_job.guided_matching, "on by default");
+    let guided = guided_job.run(None).unwrap();
+    assert_eq!(guided.counts.matches, verified.counts.matches);
+    // Verified runs write no match list unless asked; the putative matches are the same.
+    assert_eq!((&guided.match_list, &verified.match_list), (&None, &None));
+    assert!(
+        guided.counts.inliers > verified.counts.inliers,
+        "{:?} against {:?}",
+        guided.counts,
+        verified.counts
+    );
+    let errors = inlier_offsets(&guided.database);
+    assert_eq!(errors.len(), guided.counts.inliers);
+    let close = errors.iter().filter(|&&e| e <= 2.0).count();
+    assert!(
+        close as f64 >= 0.97 * errors.len() as f64,
+        "{close} of {}",
+        errors.len()
+    );
+
+    for described in [true, false] {
+        let job = job(if described { "apart.db" } else { "bare.db" });
+        let plan = job.plan().unwrap();
+        let mut output = plan.open_output().unwrap();
+        let extractor = Extractor::new(job.backend, job.extractor_config()).unwrap();
+        let folder = plan.folder();
+        let mut descriptors = Vec::new();
+        for group in [0..1, 1..PHOTOS] {
+            let (photos, _) = extract_photos(
+                &extractor,
+                (&folder.paths[group.clone()], &folder.names[group]),
+                &job.limits,
+                job.refinement,
+                &|_| {},
+            )
+            .unwrap();
+            for (photo, set) in photos {
+                if described {
+                    output.add_described_photo(&photo, &set).unwrap();
+                } else {
+                    output.add_photo(&photo).unwrap();
+                }
+                descriptors.push(set);
+            }
+        }
+        let matcher = Matcher::new(Backend::Cpu, job.matching.clone()).unwrap();
+        let pairs = plan.pairs().to_vec();
+        let found = match_photo_pairs(&matcher, |i| descriptors.get(i), &pairs).unwrap();
+        let written: Vec<&[clatch::Match]> = found.iter().map(Vec::as_slice).collect();
+        if !described {
+            let error = output.add_pairs(&pairs, &written).unwrap_err();
+            assert!(
+                matches!(
+                    error,
+                    ColmapError::MissingDescriptors {
+                        position: 0,
+                        image: 0
+                    }
+                ),
+                "{error}"
+            );
+            continue;
+        }
+        // One pair at a time (the single run writes them in groups).
+        for (&(i, j), matches) in pairs.iter().zip(&written) {
+            output.add_matches(i, j, matches).unwrap();
+        }
+        let apart = output.finish().unwrap().commit().unwrap();
+        assert_eq!(apart.counts, guided.counts);
+        assert_eq!(bytes(&apart.database), bytes(&guided.database));
+    }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -94,6 +94,7 @@ fn folder_job(args: &ColmapArgs) -> Result<FolderJob, CliError> {
             config.neighbour_consistency = None;
         }
         job.with_verification(config)
+            .with_guided_matching(!args.no_guided_matching)
     };
     Ok(job
         .with_workspace(workspace_path(args))
@@ -509,7 +510,7 @@ fn print_extraction_report(
             "  verify      {:.2} s ({}): {}",
             times.verification.as_secs_f64(),
             report::per_second(counts.pairs_verified, times.verification, "pairs"),
-            kept_share(counts)
+            kept_share(counts, !args.no_guided_matching)
         );
     }
     println!("  write       {:.2} s", times.writing.as_secs_f64());
@@ -517,18 +518,30 @@ fn print_extraction_report(
 }
 
 /// The share of pairs and of matches that verification kept: "P of Q pairs kept (x %), M of N
-/// matches (y %)".
-fn kept_share(counts: &clatch::colmap::FolderCounts) -> String {
+/// matches (y %)". After guided matching a pair's inliers are its guided matches, which may outnumber
+/// its putative ones: "P of Q pairs kept (x %), M inliers after guided matching from N putative
+/// matches".
+fn kept_share(counts: &clatch::colmap::FolderCounts, guided: bool) -> String {
     let percent = |part: usize, whole: usize| 100.0 * part as f64 / whole.max(1) as f64;
-    format!(
-        "{} of {} pairs kept ({:.1} %), {} of {} matches ({:.1} %)",
+    let pairs = format!(
+        "{} of {} pairs kept ({:.1} %)",
         counts.pairs_with_inliers,
         counts.pairs_verified,
         percent(counts.pairs_with_inliers, counts.pairs_verified),
-        counts.inliers,
-        counts.matches,
-        percent(counts.inliers, counts.matches)
-    )
+    );
+    if guided {
+        format!(
+            "{pairs}, {} inliers after guided matching from {} putative matches",
+            counts.inliers, counts.matches
+        )
+    } else {
+        format!(
+            "{pairs}, {} of {} matches ({:.1} %)",
+            counts.inliers,
+            counts.matches,
+            percent(counts.inliers, counts.matches)
+        )
+    }
 }
 
 fn print_colmap_report(
@@ -646,9 +659,41 @@ mod tests {
         (counts.pairs_verified, counts.pairs_with_inliers) = (8, 6);
         (counts.matches, counts.inliers) = (1000, 250);
         assert_eq!(
-            kept_share(&counts),
+            kept_share(&counts, false),
             "6 of 8 pairs kept (75.0 %), 250 of 1000 matches (25.0 %)"
         );
+        counts.inliers = 2500;
+        assert_eq!(
+            kept_share(&counts, true),
+            "6 of 8 pairs kept (75.0 %), 2500 inliers after guided matching from 1000 putative matches"
+        );
+    }
+
+    #[test]
+    fn verify_matches_again_under_the_geometry_unless_told_not_to() {
+        let guided = |extra: &[&str]| folder_job(&colmap_args(extra)).unwrap().guided_config();
+        assert_eq!(guided(&["--no-verify"]), None);
+        assert_eq!(guided(&["--no-guided-matching"]), None);
+        for on in [guided(&[]).unwrap(), guided(&["--verify"]).unwrap()] {
+            assert_eq!(
+                on.max_error,
+                clatch::verify::VerifyConfig::default().max_error
+            );
+            assert!(on.neighbour_consistency.is_some());
+        }
+        let alone = guided(&["--no-neighbour-consistency"]).unwrap();
+        assert!(alone.neighbour_consistency.is_none());
+        let parsed = crate::Cli::try_parse_from([
+            "clatch",
+            "colmap",
+            "--images",
+            "d",
+            "--database",
+            "d.db",
+            "--no-verify",
+            "--no-guided-matching",
+        ]);
+        assert!(parsed.is_err(), "--no-guided-matching with --no-verify");
     }
 
     fn mapper_args(extra: &[&str]) -> Vec<String> {

@@ -91,6 +91,7 @@ def colmap(args: argparse.Namespace) -> int:
         force=args.force,
         verify=not args.no_verify,
         match_list=args.match_list,
+        guided_matching=not args.no_guided_matching,
     )
     verified = "" if args.no_verify else f", {result.inliers} verified in {result.pairs_with_inliers} pairs"
     outputs = ", ".join(str(p) for p in (result.database, result.match_list) if p is not None)
@@ -132,6 +133,11 @@ def parser() -> argparse.ArgumentParser:
         help="write the match list for colmap matches_importer instead of verifying (clatch colmap --no-verify)",
     )
     p.add_argument("--match-list", action="store_true", help="write the match list too when verifying (clatch colmap --match-list)")
+    p.add_argument(
+        "--no-guided-matching",
+        action="store_true",
+        help="keep the verified inliers, no guided matching (clatch colmap --no-guided-matching)",
+    )
     p.add_argument("--ratio", type=float, default=0.8)
     _extractor_options(p)
     p.set_defaults(run=colmap)

@@ -313,6 +313,7 @@ class _FolderJob:
         force: bool = False,
         verify: bool = True,
         match_list: bool = False,
+            guided_matching: bool = True,
     ) -> _FolderJob: ...
     def run(self, progress: Optional[Callable[[str, int, int], None]] = None) -> dict[str, Any]: ...
     def plan(self) -> _FolderPlan: ...
@@ -343,7 +344,13 @@ class _FolderWriter:
         camera: Optional[PinholeCamera] = None,
     ) -> _FolderWriter: ...
     def add_photo(
-        self, name: str, width: int, height: int, focal_35mm: Optional[int], keypoints: _KeyPoints
+        self,
+        name: str,
+        width: int,
+        height: int,
+        focal_35mm: Optional[int],
+        keypoints: _KeyPoints,
+        descriptors: Optional[_Descriptors] = None,
     ) -> int: ...
     def add_matches(self, i: int, j: int, matches: _Matches) -> None: ...
     @property

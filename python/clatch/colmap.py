@@ -234,6 +234,7 @@ def match_folder(
     force: bool = False,
     verify: bool = True,
     match_list: bool = False,
+    guided_matching: bool = True,
     progress: Optional[Progress] = None,
 ) -> MatchFolderResult:
     """Features, matches and verified geometries of a folder of photos into a new COLMAP 3.8 database.
@@ -258,6 +259,10 @@ def match_folder(
       (``clatch colmap --no-verify``).
     - ``match_list``: write the match list even though the pairs are verified
       (``clatch colmap --match-list``); it is always written with ``verify=False``.
+    - ``guided_matching``: with ``verify`` (default ``True``), match each verified pair's descriptors
+      again under its geometry, with the same ratio test and cross-check, and write those matches as
+      its inliers (``clatch::verify::guided_matches``; ``False``: ``clatch colmap
+      --no-guided-matching``).
     - ``progress(stage, done, total)``: called as each stage starts (``done = 0``), as photos are
       extracted and as pairs are matched; an exception it raises stops the run.
 
@@ -283,5 +288,6 @@ def match_folder(
         force=force,
         verify=verify,
         match_list=match_list,
+        guided_matching=guided_matching,
     )
     return _result(job.run(progress))

@@ -345,6 +345,7 @@ def match_folder(
     force: bool = False,
     verify: bool = True,
     match_list: bool = False,
+    guided_matching: bool = True,
     progress: Optional[Progress] = None,
     num_actors: Optional[int] = None,
     actor_options: Optional[Mapping[str, Any]] = None,
@@ -375,7 +376,9 @@ def match_folder(
       is made (``ray.cluster_resources()``).
 
     The driver verifies each pair as it writes its matches (on its CPU), as
-    ``clatch.colmap.match_folder`` does (``verify=False``: the match list alone).
+    ``clatch.colmap.match_folder`` does (``verify=False``: the match list alone); with
+    ``guided_matching`` (the default) it fetches every photo's descriptors too, to match each
+    verified pair again under its geometry.
 
     The result's ``blocks``, ``blocks_rerun`` (blocks and extraction tasks run again because their
     actor died), ``actors_lost`` and ``descriptor_fetches`` say how the run went. The two
@@ -408,8 +411,11 @@ def match_folder(
         force=force,
         verify=verify,
         match_list=match_list,
+        guided_matching=guided_matching,
         **settings,
     )
+    # Guided matching needs every photo's descriptors where the pairs are written.
+    guided = verify and guided_matching
     plan = job.plan()
     pair_list = plan.pairs
     blocks = _blocks(pair_list, block_size)
@@ -466,7 +472,9 @@ def match_folder(
             while next_task in waiting:
                 meta, refs = waiting.pop(next_task)
                 for image, (photo, ref) in zip(tasks[next_task], zip(meta, refs)):
-                    writer.add_photo(*photo)
+                    name, width, height, focal_35mm, keypoints = photo
+                    descriptors = ray.get(ref) if guided else None
+                    writer.add_photo(name, width, height, focal_35mm, keypoints, descriptors)
                     descriptor_refs[image] = ref
                 next_task += 1
                 if progress is not None:

@@ -13,10 +13,12 @@ use crate::colmap::folder::Photo;
 use crate::colmap::pair_id;
 use crate::colmap::report::{FolderReport, FolderTimes};
 use crate::colmap::writer::{FolderCounts, FolderWriter};
+use crate::descriptor::DescriptorSet;
 use crate::keypoint::KeyPoint;
 use crate::matching::Match;
 use crate::output::{OutputError, OutputLock, Staged};
-use crate::verify::{self, VerifyConfig, ViewPair, verify_pairs};
+use crate::parallel::*;
+use crate::verify::{self, GuidedMatches, GuidedMatching, VerifyConfig, ViewPair, verify_pairs};
 
 /// The file in a match list's folder naming the database the list belongs to.
 pub const OWNER_NAME: &str = ".clatch-database";
@@ -69,6 +71,8 @@ pub struct FolderOutput {
     writing: Duration,
     /// The pairs' verification, when the job asks for it.
     verification: Option<Verification>,
+    /// The verified pairs' guided matching, when the job asks for it.
+    guided: Option<Guided>,
     /// Declared last: removed (if still empty) after the temporary files.
     made: MadeFolders,
 }
@@ -80,6 +84,14 @@ struct Verification {
     config: VerifyConfig,
     keypoints: Vec<Vec<KeyPoint>>,
     time: Duration,
+}
+
+/// What matching the verified pairs again under their geometry needs: the settings and every
+/// photo's descriptors (`None` for a photo added without them).
+#[derive(Debug)]
+struct Guided {
+    config: GuidedMatching,
+    descriptors: Vec<Option<DescriptorSet>>,
 }
 
 /// The folders a run created for its outputs, innermost first: removed again, each only while empty,
@@ -158,6 +170,7 @@ impl FolderOutput {
             outputs: (database.to_path_buf(), final_list),
             writing: began.elapsed(),
             verification: None,
+            guided: None,
             made,
         })
     }
@@ -174,6 +187,18 @@ impl FolderOutput {
         self
     }
 
+    /// The same output matching every verified pair again under its geometry with `config`
+    /// ([`crate::verify::guided_matches`]) and writing the guided matches as its inliers; `None`:
+    /// the verified inliers. Needs verification and every photo added with its descriptors
+    /// ([`FolderOutput::add_described_photo`]).
+    pub(crate) fn with_guided_matching(mut self, config: Option<GuidedMatching>) -> Self {
+        self.guided = config.map(|config| Guided {
+            config,
+            descriptors: Vec::new(),
+        });
+        self
+    }
+
     /// The same output holding `lock` too (the plan's lock on the database) until it is committed.
     pub(crate) fn holding(mut self, lock: OutputLock) -> Self {
         self.locks.push(lock);
@@ -183,9 +208,31 @@ impl FolderOutput {
     /// Adds the next photo: [`FolderWriter::add_photo`] (and keeps its keypoints when the pairs are
     /// verified).
     pub fn add_photo(&mut self, photo: &Photo) -> Result<usize, ColmapError> {
+        self.add_photo_and(photo, None)
+    }
+
+    /// [`FolderOutput::add_photo`] with the photo's descriptors (row `i` describes keypoint `i`),
+    /// which a job with guided matching ([`super::FolderJob::guided_matching`]) needs for every
+    /// photo of a pair; kept only then.
+    pub fn add_described_photo(
+        &mut self,
+        photo: &Photo,
+        descriptors: &DescriptorSet,
+    ) -> Result<usize, ColmapError> {
+        self.add_photo_and(photo, Some(descriptors))
+    }
+
+    fn add_photo_and(
+        &mut self,
+        photo: &Photo,
+        descriptors: Option<&DescriptorSet>,
+    ) -> Result<usize, ColmapError> {
         let index = self.timed(|w| w.add_photo(photo))?;
         if let Some(verification) = &mut self.verification {
             verification.keypoints.push(photo.keypoints.clone());
+        }
+        if let Some(guided) = &mut self.guided {
+            guided.descriptors.push(descriptors.cloned());
         }
         Ok(index)
     }
@@ -217,13 +264,56 @@ impl FolderOutput {
         };
         let began = Instant::now();
         let geometries = self.geometries(verification, pairs, matches)?;
+        let guided = match &self.guided {
+            Some(guided) => self.guided(verification, guided, pairs, &geometries)?,
+            None => vec![None; pairs.len()],
+        };
         if let Some(verification) = &mut self.verification {
             verification.time += began.elapsed();
         }
-        for ((&(i, j), found), geometry) in pairs.iter().zip(matches).zip(&geometries) {
-            self.timed(|w| w.add_geometry(i, j, found, geometry))?;
+        for (((&(i, j), found), geometry), guided) in
+            pairs.iter().zip(matches).zip(&geometries).zip(&guided)
+        {
+            match guided {
+                Some(g) => self.timed(|w| w.add_guided_geometry(i, j, found, g))?,
+                None => self.timed(|w| w.add_geometry(i, j, found, geometry))?,
+            }
         }
         Ok(())
+    }
+
+    /// The guided matches of `pairs` under their verified `geometries` (`None` for a pair whose
+    /// geometry has no constraint), the pairs side by side (rayon).
+    fn guided(
+        &self,
+        verification: &Verification,
+        guided: &Guided,
+        pairs: &[(usize, usize)],
+        geometries: &[verify::TwoViewGeometry],
+    ) -> Result<Vec<Option<GuidedMatches>>, ColmapError> {
+        let described = |position: usize, image: usize| {
+            guided
+                .descriptors
+                .get(image)
+                .and_then(Option::as_ref)
+                .ok_or(ColmapError::MissingDescriptors { position, image })
+        };
+        let inputs = pairs
+            .iter()
+            .enumerate()
+            .map(|(position, &(i, j))| Ok((described(position, i)?, described(position, j)?)))
+            .collect::<Result<Vec<_>, ColmapError>>()?;
+        let found: Vec<crate::Result<Option<GuidedMatches>>> = pairs
+            .par_iter()
+            .enumerate()
+            .map(|(position, &(i, j))| {
+                // Indices checked by `geometries` (which found a photo's keypoints for each).
+                let (a, b) = (&verification.keypoints[i], &verification.keypoints[j]);
+                let (da, db) = inputs[position];
+                verify::guided_matches(a, b, da, db, &geometries[position], &guided.config)
+            })
+            .collect();
+        Ok(found.into_iter().collect::<crate::Result<Vec<_>>>()?)
     }
 
     /// The verified geometries of `pairs` (photo indices, matches already written), each pair's

@@ -147,6 +147,15 @@ pub struct FolderJob {
     /// COLMAP's mapper runs straight on it (default [`FolderJob::default_verification`]; `None`:
     /// the match list alone, for COLMAP's `matches_importer` to verify).
     pub verification: Option<VerifyConfig>,
+    /// With [`FolderJob::verification`]: whether each verified pair's descriptors are matched again
+    /// under its geometry ([`crate::verify::guided_matches`], with [`FolderJob::matching`]'s rules
+    /// and the verification's threshold), the guided matches written as the pair's inliers (the
+    /// putative matches stay the match list's), the guided matches passing the verification's
+    /// neighbour rule too. Default `true`: on the generated facades it multiplied the correct
+    /// inliers by 3.8 to 6.7 at 95.7 to 98.9 % within 4 px of the truth, and raised them by 23 % on
+    /// Herz-Jesu at 97.2 % within 4 px of the true epipolar lines (cameras there slightly further
+    /// off), for 1.6 to 2.6 times the run's CPU time (EVALUATION.md, "guided matching").
+    pub guided_matching: bool,
 }
 
 impl FolderJob {
@@ -171,6 +180,7 @@ impl FolderJob {
             overwrite: Overwrite::default(),
             verification: Some(Self::default_verification()),
             write_match_list: false,
+            guided_matching: true,
         }
     }
 
@@ -283,6 +293,29 @@ impl FolderJob {
     /// Whether the run writes the match list: always without verification, on request with it.
     pub fn writes_match_list(&self) -> bool {
         self.verification.is_none() || self.write_match_list
+    }
+
+    /// Whether each verified pair is matched again under its geometry
+    /// ([`FolderJob::guided_matching`]; on by default).
+    pub fn with_guided_matching(mut self, guided: bool) -> Self {
+        self.guided_matching = guided;
+        self
+    }
+
+    /// The guided matching the run does: with verification and [`FolderJob::guided_matching`],
+    /// [`FolderJob::matching`]'s rules under the verification's threshold and with its neighbour
+    /// rule; else `None`.
+    pub fn guided_config(&self) -> Option<crate::verify::GuidedMatching> {
+        let verification = self
+            .verification
+            .as_ref()
+            .filter(|_| self.guided_matching)?;
+        Some(
+            crate::verify::GuidedMatching::default()
+                .with_rules(self.matching.clone())
+                .with_max_error(verification.max_error)
+                .with_neighbour_consistency(verification.neighbour_consistency),
+        )
     }
 
     /// The extractor settings the run uses: [`FolderJob::extractor`] with the detector's sub-pixel

@@ -104,6 +104,7 @@ impl FolderPlan {
             output
                 .holding(self.lock.clone())
                 .with_verification(self.job.verification.clone())
+                .with_guided_matching(self.job.guided_config())
         })
     }
 }

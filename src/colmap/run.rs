@@ -97,7 +97,7 @@ impl FolderPlan {
             &self.job.limits,
             self.job.refinement,
             |i, photo, set| {
-                output.add_photo(&photo)?;
+                output.add_described_photo(&photo, &set)?;
                 descriptors.push(set);
                 progress.tell(FolderStage::Extraction, i + 1, total)
             },

@@ -179,9 +179,36 @@ impl<W: Write> FolderWriter<W> {
         matches: &[Match],
         verified: &verify::TwoViewGeometry,
     ) -> Result<(), ColmapError> {
+        self.write_geometry(i, j, matches, matches, verified)
+    }
+
+    /// [`FolderWriter::add_geometry`] of a pair matched again under its geometry
+    /// ([`crate::verify::guided_matches`]), as COLMAP writes a guided pair: its putative `matches`
+    /// into `matches`, the guided geometry (whose inliers index `guided.matches`) into
+    /// `two_view_geometries`.
+    pub fn add_guided_geometry(
+        &mut self,
+        i: usize,
+        j: usize,
+        matches: &[Match],
+        guided: &verify::GuidedMatches,
+    ) -> Result<(), ColmapError> {
+        self.write_geometry(i, j, matches, &guided.matches, &guided.geometry)
+    }
+
+    /// The `matches` row from `putative`, the `two_view_geometries` row from `verified`, whose
+    /// inliers index `inlier_source`.
+    fn write_geometry(
+        &mut self,
+        i: usize,
+        j: usize,
+        putative: &[Match],
+        inlier_source: &[Match],
+        verified: &verify::TwoViewGeometry,
+    ) -> Result<(), ColmapError> {
         let ((_, id_i, _), (_, id_j, _)) = written_pair(&self.photos, i, j)?;
-        let geometry = TwoViewGeometry::from_verified(*id_i, *id_j, matches, verified)?;
-        self.db.add_matches(*id_i, *id_j, matches)?;
+        let geometry = TwoViewGeometry::from_verified(*id_i, *id_j, inlier_source, verified)?;
+        self.db.add_matches(*id_i, *id_j, putative)?;
         self.db.add_two_view_geometry(&geometry)?;
         self.counts.pairs_verified += 1;
         if !geometry.inliers.is_empty() {

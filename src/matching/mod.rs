@@ -160,6 +160,20 @@ impl MatchConfig {
         with_max_distance => max_distance: Option<u32>;
     }
 
+    /// `Error::InvalidConfig` for a ratio that is not finite and in `(0, 1]`.
+    pub(crate) fn check(&self) -> Result<()> {
+        if let Some(ratio) = self.ratio
+            && !(ratio.is_finite() && ratio > 0.0 && ratio <= 1.0)
+        {
+            return Err(Error::InvalidConfig {
+                field: "ratio",
+                value: ratio.to_string(),
+                reason: "must be finite and in (0, 1]",
+            });
+        }
+        Ok(())
+    }
+
     /// How many nearest neighbours of each query these rules look at: 2 with the ratio test (it
     /// compares the best with the second best), else 1. A gallery needs at least this many
     /// descriptors to be matched against.

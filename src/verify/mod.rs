@@ -7,7 +7,8 @@
 //! ([`VerifyConfig::planar_keeps_homography_inliers`]; off, COLMAP's rule). One more can be turned
 //! on, and is in the folder run: RANSAC sees only the matches whose neighbours move with them
 //! ([`NeighbourConsistency`], [`VerifyConfig::neighbour_consistency`]), which drops matches one
-//! period off on repeated structure.
+//! period off on repeated structure. After verification, [`guided_matches`] matches a pair's
+//! descriptors again under its geometry (COLMAP's guided matching; on in the folder run).
 //!
 //! This is the CPU reference, written as the specification a CUDA twin reproduces bit for bit:
 //! every solver uses `+ − × ÷` and `sqrt` in `f64` in a written order, roots come from Sturm
@@ -45,6 +46,7 @@ mod consistency;
 mod essential;
 mod fundamental;
 mod geometry;
+mod guided;
 mod homography;
 mod linalg;
 mod poly;
@@ -60,6 +62,7 @@ pub use camera::{Camera, Intrinsics};
 pub use config::VerifyConfig;
 pub use consistency::NeighbourConsistency;
 pub use geometry::{GeometryConfig, InlierCounts, TwoViewGeometry};
+pub use guided::{GuidedMatches, GuidedMatching, guided_matches};
 
 use crate::error::{Error, Result};
 use crate::keypoint::KeyPoint;

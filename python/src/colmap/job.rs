@@ -90,6 +90,7 @@ impl FolderJob {
         force = false,
         verify = true,
         match_list = false,
+        guided_matching = true,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -108,6 +109,7 @@ impl FolderJob {
         force: bool,
         verify: bool,
         match_list: bool,
+        guided_matching: bool,
     ) -> PyResult<Self> {
         let mut job = clatch::colmap::FolderJob::new(images, database)
             .with_backend(extractor.inner.backend())
@@ -127,6 +129,7 @@ impl FolderJob {
             job = job.without_verification();
         }
         job = job.with_match_list_written(match_list);
+        job = job.with_guided_matching(guided_matching);
         if let Some(pairs) = pairs {
             job = job.with_pairs(pairs);
         }

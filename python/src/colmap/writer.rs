@@ -6,14 +6,14 @@ use std::io::BufWriter;
 use std::path::PathBuf;
 use std::sync::Mutex;
 
-use clatch::Match;
 use clatch::colmap::{ColmapError, FolderCounts, FolderOutput, FolderWriter as Writer, Photo};
+use clatch::{DescriptorSet, Match};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::folder::PinholeCamera;
 use super::report::report_out;
-use crate::arrays::{keypoints_in, matches_in};
+use crate::arrays::{descriptors_in, keypoints_in, matches_in};
 use crate::errors::{Class, OrRaise, raise};
 
 /// Where a writer writes.
@@ -25,10 +25,15 @@ enum Writing {
 }
 
 impl Writing {
-    fn add_photo(&mut self, photo: &Photo) -> Result<usize, ColmapError> {
-        match self {
-            Writing::Direct(w) => w.add_photo(photo),
-            Writing::Staged(w) => w.add_photo(photo),
+    fn add_photo(
+        &mut self,
+        photo: &Photo,
+        descriptors: Option<&DescriptorSet>,
+    ) -> Result<usize, ColmapError> {
+        match (self, descriptors) {
+            (Writing::Direct(w), _) => w.add_photo(photo),
+            (Writing::Staged(w), Some(set)) => w.add_described_photo(photo, set),
+            (Writing::Staged(w), None) => w.add_photo(photo),
         }
     }
 
@@ -125,9 +130,13 @@ impl FolderWriter {
         })
     }
 
-    /// add_photo(name, width, height, focal_35mm, keypoints) -> int
+    /// add_photo(name, width, height, focal_35mm, keypoints, descriptors=None) -> int
     ///
-    /// The next photo's camera, image row and keypoints; returns its index.
+    /// The next photo's camera, image row and keypoints; returns its index. ``descriptors`` (row
+    /// ``i`` describes keypoint ``i``): what a plan's writer with guided matching needs of every
+    /// photo (``clatch::colmap::FolderOutput::add_described_photo``).
+    #[pyo3(signature = (name, width, height, focal_35mm, keypoints, descriptors = None))]
+    #[allow(clippy::too_many_arguments)]
     fn add_photo(
         &self,
         py: Python<'_>,
@@ -136,10 +145,14 @@ impl FolderWriter {
         height: u32,
         focal_35mm: Option<u16>,
         keypoints: &Bound<'_, PyAny>,
+        descriptors: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<usize> {
         let photo = Photo::new(name, width, height, keypoints_in(keypoints, "keypoints")?)
             .with_focal_35mm(focal_35mm);
-        self.with(py, |w| w.add_photo(&photo))
+        let descriptors = descriptors
+            .map(|d| descriptors_in(d, "descriptors"))
+            .transpose()?;
+        self.with(py, |w| w.add_photo(&photo, descriptors.as_ref()))
     }
 
     /// add_matches(i, j, matches)

@@ -17,7 +17,7 @@ use crate::descriptor::{DescriptorSet, hamming};
 /// Inserts `(distance, train)` into a list sorted by distance, keeping at most `k` entries. Candidates
 /// arrive in increasing train order, so a strict comparison keeps the lowest index among equals.
 #[inline]
-fn insert_neighbour(best: &mut Vec<Match>, k: usize, candidate: Match) {
+pub(crate) fn insert_neighbour(best: &mut Vec<Match>, k: usize, candidate: Match) {
     if best.len() == k && candidate.distance >= best[k - 1].distance {
         return;
     }
@@ -284,23 +284,32 @@ fn select(neighbours: &KnnMatches, reverse: Option<&[u32]>, config: &MatchConfig
         .iter()
         .filter_map(|n| {
             let best = n[0];
-            if let Some(ratio) = config.ratio {
-                // One correctly rounded f32 product, so every backend decides alike.
-                if best.distance as f32 >= ratio * n[1].distance as f32 {
-                    return None;
-                }
-            }
-            if let Some(reverse) = reverse
-                && reverse[best.train as usize] != best.query
-            {
-                return None;
-            }
-            if config.max_distance.is_some_and(|max| best.distance > max) {
-                return None;
-            }
-            Some(best)
+            let second = if config.ratio.is_some() { n[1].distance } else { 0 };
+            let nearest_query = reverse.map(|reverse| reverse[best.train as usize]);
+            passes(best, second, nearest_query, config).then_some(best)
         })
         .collect()
+}
+
+/// Whether the nearest neighbour `best` of its query passes the rules of `config`: the ratio test
+/// against the second-nearest distance `second` (read only with a ratio), the cross-check against
+/// `nearest_query`, the nearest query of `best.train` (`None`: no cross-check), the distance limit.
+pub(crate) fn passes(
+    best: Match,
+    second: u32,
+    nearest_query: Option<u32>,
+    config: &MatchConfig,
+) -> bool {
+    if let Some(ratio) = config.ratio {
+        // One correctly rounded f32 product, so every backend decides alike.
+        if best.distance as f32 >= ratio * second as f32 {
+            return false;
+        }
+    }
+    if nearest_query.is_some_and(|nearest| nearest != best.query) {
+        return false;
+    }
+    config.max_distance.is_none_or(|max| best.distance <= max)
 }
 
 #[cfg(test)]

@@ -154,6 +154,7 @@ fn lz4_block(input: &[u8], size: usize) -> Result<Vec<u8>, String> {
 /// The ELF machine number of CUDA code.
 const EM_CUDA: u16 = 190;
 const SHT_SYMTAB: u32 = 2;
+const SHT_NOBITS: u32 = 8;
 const STT_FUNC: u8 = 2;
 /// `st_other` bit of a kernel entry point in CUDA code.
 const STO_CUDA_ENTRY: u8 = 0x10;
@@ -177,11 +178,16 @@ pub(crate) fn kernels(elf: &[u8]) -> Result<(u32, Vec<String>), String> {
         let at = sections + i * entry_size;
         let offset = usize::try_from(u64_at(elf, at + 0x18)?).map_err(|e| e.to_string())?;
         let size = usize::try_from(u64_at(elf, at + 0x20)?).map_err(|e| e.to_string())?;
-        let data = elf
-            .get(offset..offset.saturating_add(size))
-            .ok_or_else(|| format!("section {i} runs past the file"))?;
+        let kind = u32_at(elf, at + 4)?;
+        // A section of no bits (shared memory, say) has a size and nothing in the file.
+        let data = if kind == SHT_NOBITS {
+            &[]
+        } else {
+            elf.get(offset..offset.saturating_add(size))
+                .ok_or_else(|| format!("section {i} runs past the file"))?
+        };
         let link = usize::try_from(u32_at(elf, at + 0x28)?).map_err(|e| e.to_string())?;
-        Ok((u32_at(elf, at + 4)?, data, link))
+        Ok((kind, data, link))
     };
     let mut kernels = Vec::new();
     for i in 0..count {

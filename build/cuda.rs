@@ -28,8 +28,8 @@ struct Source {
 }
 
 impl Source {
-    /// The architecture of its second PTX, compiled for the newest GPU it is built for (the front end
-    /// tunes its output from Blackwell on), if that is newer than its portable PTX.
+    /// The architecture of its second PTX, for the newest GPU it is built for and any GPU newer still,
+    /// if that is newer than its portable PTX.
     fn newest(&self) -> Option<u32> {
         self.native.last().copied().filter(|&a| a > self.ptx_arch)
     }
@@ -78,7 +78,7 @@ pub fn build() {
 
     if stub {
         let sources = sources(&paths, &[]);
-        write_constants(&out, &sources, &[], false, true);
+        write_constants(&out, &sources, &[], true);
         bind_header(kernels, &out);
         return;
     }
@@ -99,8 +99,7 @@ pub fn build() {
     let requested = std::env::var(archs::VARIABLE).ok();
     let native = archs::select(requested.as_deref(), &supported)
         .unwrap_or_else(|e| panic!("\n\nclatch: {e}\n\n"));
-    let all = native == supported;
-    if all {
+    if native == supported {
         // Lets a test that needs the whole list report itself ignored in a narrowed build.
         println!("cargo::rustc-cfg=clatch_all_archs");
     }
@@ -118,14 +117,21 @@ pub fn build() {
                 .arg(&source.path)
                 .arg("-o")
                 .arg(source.ptx(&out, arch));
-            front.push((with_includes(&source.path), nvcc));
+            // The front end's work grows with the source it reads.
+            let size = with_headers(&source.path)
+                .iter()
+                .map(|f| fs::metadata(f).map_or(0, |m| m.len()))
+                .sum();
+            front.push((size, nvcc));
         }
     }
     parallel::run_all(longest_first(front), threads);
 
-    // 2. ptxas, once per file and architecture: native code, compiled from the portable PTX (for every
-    // architecture up to Hopper the front end's PTX is the same text whatever it targets, so this is the
-    // code `nvcc -arch=sm_NN` gives), or for the newest architecture from its own PTX.
+    // 2. ptxas, once per file and architecture: native code from the portable PTX, or for the newest
+    // architecture from its own. Up to Hopper the front end writes the same PTX whatever it targets, so
+    // this is the code `nvcc -arch=sm_NN` gives (sm_90's is byte for byte the code of the sm_90-only
+    // build); from Blackwell on it tunes its output a little, and the code here is what the driver's
+    // JIT would make of the portable PTX, without the wait.
     let mut back = Vec::new();
     for source in &sources {
         for &arch in &source.native {
@@ -198,7 +204,7 @@ pub fn build() {
         .map(|((stem, arch), text)| format!("== {stem} (sm_{arch})\n{text}\n"))
         .collect();
     fs::write(out.join("ptxas-report.txt"), report).expect("write ptxas report");
-    write_constants(&out, &sources, &native, all, false);
+    write_constants(&out, &sources, &native, false);
     bind_header(kernels, &out);
 }
 
@@ -220,15 +226,12 @@ fn sources(paths: &[PathBuf], native: &[u32]) -> Vec<Source> {
 
 /// `kernels.rs`: per kernel file its PTX, its fatbin and its PTX architecture, and the architectures
 /// with native code (empty stubs in a documentation build).
-fn write_constants(out: &Path, sources: &[Source], native: &[u32], all: bool, stub: bool) {
+fn write_constants(out: &Path, sources: &[Source], native: &[u32], stub: bool) {
     let mut constants = format!(
         "/// True when the kernels below are empty stubs (a documentation build).\n\
          pub const STUB: bool = {stub};\n\
          /// The architectures every fatbin has native code for (those from a file's PTX architecture up).\n\
-         pub const NATIVE_ARCHS: &[u32] = &{native:?};\n\
-         /// True when [`NATIVE_ARCHS`] is every architecture the build's nvcc knows from Turing up ({} unset).\n\
-         pub const ALL_ARCHS: bool = {all};\n",
-        archs::VARIABLE
+         pub const NATIVE_ARCHS: &[u32] = &{native:?};\n"
     );
     for source in sources {
         let (stem, arch) = (&source.stem, source.ptx_arch);
@@ -262,27 +265,24 @@ fn longest_first<T>(mut jobs: Vec<(u64, T)>) -> Vec<T> {
     jobs.into_iter().map(|(_, job)| job).collect()
 }
 
-/// The size of a kernel file with every header it includes (`#include "..."`, each counted once): the
-/// front end's work grows with it.
-fn with_includes(source: &Path) -> u64 {
-    let mut seen = vec![source.to_path_buf()];
+/// A kernel file and every header it includes (`#include "..."`, followed), each once.
+fn with_headers(source: &Path) -> Vec<PathBuf> {
+    let mut files = vec![source.to_path_buf()];
     let mut next = 0;
-    while let Some(file) = seen.get(next).cloned() {
+    while let Some(file) = files.get(next).cloned() {
         next += 1;
-        let text = fs::read_to_string(&file).unwrap_or_default();
+        let text = fs::read_to_string(&file).expect("readable kernel source");
         for line in text.lines() {
             let Some(name) = line.trim().strip_prefix("#include \"") else {
                 continue;
             };
-            let header = file.with_file_name(name.trim_end_matches('"'));
-            if header.is_file() && !seen.contains(&header) {
-                seen.push(header);
+            let header = file.with_file_name(name.split('"').next().unwrap_or_default());
+            if header.is_file() && !files.contains(&header) {
+                files.push(header);
             }
         }
     }
-    seen.iter()
-        .map(|f| fs::metadata(f).map_or(0, |m| m.len()))
-        .sum()
+    files
 }
 
 fn stem(source: &Path) -> String {
@@ -317,15 +317,19 @@ fn bind_header(kernels: &Path, out: &Path) {
 /// loads the file only on devices of that compute capability or later.
 ///
 /// Native code is assembled from this one PTX (see `build`), so a kernel must not branch on
-/// `__CUDA_ARCH__`: the build refuses a file that names it.
+/// `__CUDA_ARCH__`: the build refuses a file, or a header it includes, that names it.
 fn ptx_arch(source: &Path) -> u32 {
+    for file in with_headers(source) {
+        let text = fs::read_to_string(&file).expect("readable kernel source");
+        assert!(
+            !text.contains("__CUDA_ARCH__"),
+            "clatch: {}: native code is assembled from one PTX for every architecture, so \
+             __CUDA_ARCH__ would not be seen; give the kernel file its own `{PTX_ARCH_MARKER}compute_NN` \
+             line instead",
+            file.display()
+        );
+    }
     let text = fs::read_to_string(source).expect("readable kernel source");
-    assert!(
-        !text.contains("__CUDA_ARCH__"),
-        "clatch: {}: native code is assembled from one PTX for every architecture, so __CUDA_ARCH__ \
-         would not be seen; give the file its own `{PTX_ARCH_MARKER}compute_NN` line instead",
-        source.display()
-    );
     match text
         .lines()
         .next()

@@ -339,7 +339,6 @@ mod tests {
         ignore = "built for the architectures CUDA_COMPUTE_CAP lists"
     )]
     fn a_full_build_covers_every_generation_from_turing() {
-        assert!(ptx::ALL_ARCHS);
         for arch in [75, 80, 86, 87, 89, 90, 100, 120] {
             assert!(
                 ptx::NATIVE_ARCHS.contains(&arch),

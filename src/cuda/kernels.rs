@@ -1,7 +1,8 @@
 //! The registry of kernels: every kernel file the build compiles (`kernels/*.cu`), its PTX and fatbin,
 //! and every entry point the crate launches from it, as a typed [`Kernel`]. A launch site names one of
 //! the constants here (or indexes one of the families), never a string, so a kernel it asks for is a
-//! kernel the device loaded; `kernel_lists_match_the_ptx` checks the lists against the PTX.
+//! kernel the device loaded; `kernel_lists_match_the_ptx` checks the lists against the PTX, and
+//! `every_kernel_has_native_code_for_every_listed_architecture` against each fatbin's native code.
 
 use super::ptx;
 

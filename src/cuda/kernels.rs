@@ -141,8 +141,9 @@ pub(crate) fn tensor_cores_on(capability: u32) -> bool {
 }
 
 /// Every kernel file the library loads, with its entry points. Add a kernel above, list it here and
-/// fetch it with `GpuDevice::kernel`.
-pub(crate) const KERNELS: &[KernelFile] = &[
+/// fetch it with `GpuDevice::kernel`. A static, not a const: a const's fatbins and PTX (tens of MB)
+/// would be copied into every codegen unit that names it.
+pub(crate) static KERNELS: &[KernelFile] = &[
     KernelFile {
         path: "kernels/describe.cu",
         ptx: ptx::DESCRIBE_PTX,
@@ -219,7 +220,7 @@ pub(crate) const KERNELS: &[KernelFile] = &[
 /// Bench and diagnostic kernels (`kernels/bench_*.cu`), compiled and loaded only with the `internals`
 /// feature, on first use ([`GpuDevice::load_bench_kernels`]).
 #[cfg(feature = "internals")]
-pub(crate) const BENCH_KERNELS: &[KernelFile] = &[
+pub(crate) static BENCH_KERNELS: &[KernelFile] = &[
     KernelFile {
         path: "kernels/bench_knn_variants.cu",
         ptx: ptx::BENCH_KNN_VARIANTS_PTX,

@@ -5,8 +5,10 @@
 # Builds the test binaries with the `cuda` feature (`cargo test -p clatch --features cuda --no-run`),
 # then runs, one after another: every GPU suite (the `cuda_*` test targets), the library's unit tests
 # and tests/backend.rs (both have device trials with the feature on), and three variants: the small
-# matching trials on the portable popcount kernels (CLATCH_MATCH_KERNEL=popcount), and the collection
-# and describe trials with kernels loaded from PTX instead of the fatbin (CLATCH_FORCE_PTX=1).
+# matching trials on the portable popcount kernels (CLATCH_MATCH_KERNEL=popcount), the collection
+# and describe trials with kernels loaded from PTX instead of the fatbin (CLATCH_FORCE_PTX=1), and the
+# small matching trials with the driver's JIT off (CUDA_DISABLE_PTX_JIT=1: every kernel file must load
+# from the fatbin's native code for this GPU, so a build that left its architecture out fails here).
 #
 #     bash dev/gpu_suite.sh                 build, run everything, print the summary
 #     bash dev/gpu_suite.sh NAME...         only these binaries (cuda_match, backend, clatch_unit, ...)
@@ -111,6 +113,7 @@ if [ $# -eq 0 ]; then
     CLATCH_FORCE_PTX=1 CLATCH_TEST_SCALE=sanitizer \
         run "cuda_collection (CLATCH_FORCE_PTX=1, CLATCH_TEST_SCALE=sanitizer)" cuda_collection
     CLATCH_FORCE_PTX=1 run "cuda_describe describe_every_width (CLATCH_FORCE_PTX=1)" cuda_describe describe_every_width
+    CUDA_DISABLE_PTX_JIT=1 run "cuda_match small_* (CUDA_DISABLE_PTX_JIT=1)" cuda_match small_
 fi
 
 echo "logs: $OUT/suite.txt"

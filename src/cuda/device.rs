@@ -12,7 +12,7 @@ use cudarc::nvrtc::Ptx;
 use super::error::driver_error;
 #[cfg(feature = "internals")]
 use super::kernels::BENCH_KERNELS;
-use super::kernels::{KERNELS, Kernel, KernelFile};
+use super::kernels::{KERNELS, Kernel, KernelFile, tensor_cores_on};
 use super::matching_tensor::{self, MatchKernel};
 use super::memory::arena::LanePool;
 use super::ptx;
@@ -33,6 +33,9 @@ pub struct GpuDevice {
     pub(crate) boundaries: CudaSlice<i64>,
     pub(crate) pitch_alignment: usize,
     pub(crate) multiprocessors: usize,
+    /// Compute capability, `86` for 8.6: which bench kernel files load.
+    #[cfg(feature = "internals")]
+    capability: u32,
     /// Whether the tensor-core kNN kernels are loaded (compute capability 8.0 and later).
     tensor_cores: bool,
     /// The kNN kernels asked for with `CLATCH_MATCH_KERNEL`, if any.
@@ -124,14 +127,14 @@ impl GpuDevice {
         // The fatbin's native code loads without JIT on the GPUs it was built for (and falls back to its
         // PTX elsewhere); CLATCH_FORCE_PTX=1 loads the plain PTX instead, so tests can prove both paths.
         let force_ptx = std::env::var_os("CLATCH_FORCE_PTX").is_some_and(|v| v == "1");
-        let (major, _) = ctx
+        let (major, minor) = ctx
             .compute_capability()
             .map_err(driver_error("reading the compute capability"))?;
-        let tensor_cores = major >= 8;
-        for file in KERNELS
-            .iter()
-            .filter(|f| tensor_cores || !f.needs_tensor_cores)
-        {
+        // A file whose instructions this device lacks (the int8 MMA before 8.0) is not loaded; the
+        // matcher then keeps to the popcount kernels.
+        let capability = u32::try_from(major * 10 + minor).unwrap_or(0);
+        let tensor_cores = tensor_cores_on(capability);
+        for file in KERNELS.iter().filter(|f| f.runs_on(capability)) {
             load_module(&ctx, force_ptx, file, &mut kernels)?;
         }
         let kernels_loaded = lap();
@@ -177,6 +180,8 @@ impl GpuDevice {
             boundaries,
             pitch_alignment,
             multiprocessors,
+            #[cfg(feature = "internals")]
+            capability,
             tensor_cores,
             match_kernel_override: MatchKernel::from_env(),
             name,
@@ -227,9 +232,7 @@ impl GpuDevice {
             return Ok(());
         }
         let mut kernels = HashMap::new();
-        let usable = BENCH_KERNELS
-            .iter()
-            .filter(|f| self.tensor_cores || !f.needs_tensor_cores);
+        let usable = BENCH_KERNELS.iter().filter(|f| f.runs_on(self.capability));
         for file in usable {
             load_module(&self.ctx, self.force_ptx, file, &mut kernels)?;
         }

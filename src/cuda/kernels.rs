@@ -1,7 +1,8 @@
 //! The registry of kernels: every kernel file the build compiles (`kernels/*.cu`), its PTX and fatbin,
 //! and every entry point the crate launches from it, as a typed [`Kernel`]. A launch site names one of
 //! the constants here (or indexes one of the families), never a string, so a kernel it asks for is a
-//! kernel the device loaded; `kernel_lists_match_the_ptx` checks the lists against the PTX.
+//! kernel the device loaded; `kernel_lists_match_the_ptx` checks the lists against the PTX, and
+//! `every_kernel_has_native_code_for_every_listed_architecture` against each fatbin's native code.
 
 use super::ptx;
 
@@ -111,8 +112,9 @@ pub(crate) struct KernelFile {
     pub(crate) fatbin: &'static [u8],
     /// Its entry points, in groups (single kernels, families).
     pub(crate) kernels: &'static [&'static [Kernel]],
-    /// Int8 MMA: loaded only on compute capability 8.0 and later.
-    pub(crate) needs_tensor_cores: bool,
+    /// Its PTX architecture (`80` for compute_80): the oldest compute capability it runs on, where
+    /// it is loaded (the int8 MMA of the tensor-core files needs 8.0).
+    pub(crate) min_capability: u32,
 }
 
 impl KernelFile {
@@ -120,11 +122,28 @@ impl KernelFile {
     pub(crate) fn entry_points(&self) -> impl Iterator<Item = Kernel> + '_ {
         self.kernels.iter().flat_map(|group| group.iter().copied())
     }
+
+    /// Whether a device of compute `capability` (`86` for 8.6) can load it.
+    pub(crate) fn runs_on(&self, capability: u32) -> bool {
+        capability >= self.min_capability
+    }
+}
+
+/// Whether the tensor-core matcher runs on a device of compute `capability`: both of its files load.
+pub(crate) fn tensor_cores_on(capability: u32) -> bool {
+    KERNELS
+        .iter()
+        .filter(|f| {
+            f.entry_points()
+                .any(|k| TENSOR_KNN.contains(&k) || TENSOR_PAIRS_KNN.contains(&k))
+        })
+        .all(|f| f.runs_on(capability))
 }
 
 /// Every kernel file the library loads, with its entry points. Add a kernel above, list it here and
-/// fetch it with `GpuDevice::kernel`.
-pub(crate) const KERNELS: &[KernelFile] = &[
+/// fetch it with `GpuDevice::kernel`. A static, not a const: a const's fatbins and PTX (tens of MB)
+/// would be copied into every codegen unit that names it.
+pub(crate) static KERNELS: &[KernelFile] = &[
     KernelFile {
         path: "kernels/describe.cu",
         ptx: ptx::DESCRIBE_PTX,
@@ -137,14 +156,14 @@ pub(crate) const KERNELS: &[KernelFile] = &[
             SMOOTH_BINOMIAL5,
             GATHER_ROWS,
         ]],
-        needs_tensor_cores: false,
+        min_capability: ptx::DESCRIBE_PTX_ARCH,
     },
     KernelFile {
         path: "kernels/describe_opencv.cu",
         ptx: ptx::DESCRIBE_OPENCV_PTX,
         fatbin: ptx::DESCRIBE_OPENCV_FATBIN,
         kernels: &[&[DESCRIBE_OPENCV]],
-        needs_tensor_cores: false,
+        min_capability: ptx::DESCRIBE_OPENCV_PTX_ARCH,
     },
     KernelFile {
         path: "kernels/detect.cu",
@@ -159,76 +178,85 @@ pub(crate) const KERNELS: &[KernelFile] = &[
             DETECT_ORIENT,
             ORIENT_REFINE,
         ]],
-        needs_tensor_cores: false,
+        min_capability: ptx::DETECT_PTX_ARCH,
     },
     KernelFile {
         path: "kernels/pyramid.cu",
         ptx: ptx::PYRAMID_PTX,
         fatbin: ptx::PYRAMID_FATBIN,
         kernels: &[&[DOWNSCALE]],
-        needs_tensor_cores: false,
+        min_capability: ptx::PYRAMID_PTX_ARCH,
     },
     KernelFile {
         path: "kernels/matching.cu",
         ptx: ptx::MATCHING_PTX,
         fatbin: ptx::MATCHING_FATBIN,
         kernels: &[KNN, &[KNN_MERGE, MATCH_FILTER, MATCH_SCAN, MATCH_COMPACT]],
-        needs_tensor_cores: false,
+        min_capability: ptx::MATCHING_PTX_ARCH,
     },
     KernelFile {
         path: "kernels/match_pairs.cu",
         ptx: ptx::MATCH_PAIRS_PTX,
         fatbin: ptx::MATCH_PAIRS_FATBIN,
         kernels: &[PAIRS_KNN, &[PAIRS_COMPACT]],
-        needs_tensor_cores: false,
+        min_capability: ptx::MATCH_PAIRS_PTX_ARCH,
     },
     KernelFile {
         path: "kernels/match_pairs_tensor.cu",
         ptx: ptx::MATCH_PAIRS_TENSOR_PTX,
         fatbin: ptx::MATCH_PAIRS_TENSOR_FATBIN,
         kernels: &[TENSOR_PAIRS_KNN],
-        needs_tensor_cores: true,
+        min_capability: ptx::MATCH_PAIRS_TENSOR_PTX_ARCH,
     },
     KernelFile {
         path: "kernels/matching_tensor.cu",
         ptx: ptx::MATCHING_TENSOR_PTX,
         fatbin: ptx::MATCHING_TENSOR_FATBIN,
         kernels: &[&[EXPAND_SIGNS], TENSOR_KNN],
-        needs_tensor_cores: true,
+        min_capability: ptx::MATCHING_TENSOR_PTX_ARCH,
     },
 ];
 
 /// Bench and diagnostic kernels (`kernels/bench_*.cu`), compiled and loaded only with the `internals`
 /// feature, on first use ([`GpuDevice::load_bench_kernels`]).
 #[cfg(feature = "internals")]
-pub(crate) const BENCH_KERNELS: &[KernelFile] = &[
+pub(crate) static BENCH_KERNELS: &[KernelFile] = &[
     KernelFile {
         path: "kernels/bench_knn_variants.cu",
         ptx: ptx::BENCH_KNN_VARIANTS_PTX,
         fatbin: ptx::BENCH_KNN_VARIANTS_FATBIN,
         kernels: &[KNN_VARIANTS],
-        needs_tensor_cores: false,
+        min_capability: ptx::BENCH_KNN_VARIANTS_PTX_ARCH,
     },
     KernelFile {
         path: "kernels/bench_mma_rate.cu",
         ptx: ptx::BENCH_MMA_RATE_PTX,
         fatbin: ptx::BENCH_MMA_RATE_FATBIN,
         kernels: &[&[MMA_S8_RATE]],
-        needs_tensor_cores: true,
+        min_capability: ptx::BENCH_MMA_RATE_PTX_ARCH,
     },
     KernelFile {
         path: "kernels/bench_texture_read.cu",
         ptx: ptx::BENCH_TEXTURE_READ_PTX,
         fatbin: ptx::BENCH_TEXTURE_READ_FATBIN,
         kernels: &[&[DEBUG_READ_TEXTURE]],
-        needs_tensor_cores: false,
+        min_capability: ptx::BENCH_TEXTURE_READ_PTX_ARCH,
     },
 ];
 
 #[cfg(test)]
 mod tests {
 
+    use super::super::fatbin::{self, Kind};
     use super::*;
+
+    /// Every kernel file the build compiled: the library's, and with `internals` the bench kernels.
+    fn files() -> impl Iterator<Item = &'static KernelFile> {
+        #[cfg(feature = "internals")]
+        return KERNELS.iter().chain(BENCH_KERNELS);
+        #[cfg(not(feature = "internals"))]
+        KERNELS.iter()
+    }
 
     /// Every entry point a file lists is in that file's PTX, and every kernel of the PTX is listed, so
     /// a moved or renamed kernel fails here, on any machine, not at device start.
@@ -237,11 +265,7 @@ mod tests {
         if ptx::STUB {
             return;
         }
-        #[cfg(feature = "internals")]
-        let files = KERNELS.iter().chain(BENCH_KERNELS);
-        #[cfg(not(feature = "internals"))]
-        let files = KERNELS.iter();
-        for file in files {
+        for file in files() {
             let mut entries: Vec<&str> = file
                 .ptx
                 .lines()
@@ -252,6 +276,91 @@ mod tests {
             entries.sort_unstable();
             listed.sort_unstable();
             assert_eq!(entries, listed, "{}", file.path);
+        }
+    }
+
+    /// Each file's fatbin, read as the driver reads it: native code for every architecture the build
+    /// lists from the file's PTX architecture up (and no other), each defining every kernel of the file
+    /// and no other; then the file's portable PTX and, when the newest listed architecture is newer, its
+    /// PTX too. A kernel or an architecture missing from the native code fails here, on any machine.
+    #[test]
+    fn every_kernel_has_native_code_for_every_listed_architecture() {
+        if ptx::STUB {
+            return;
+        }
+        assert!(!ptx::NATIVE_ARCHS.is_empty());
+        for file in files() {
+            let path = file.path;
+            let images = fatbin::images(file.fatbin).unwrap_or_else(|e| panic!("{path}: {e}"));
+            let mut listed: Vec<&str> = file.entry_points().map(Kernel::name).collect();
+            listed.sort_unstable();
+            let mut native = Vec::new();
+            for image in images.iter().filter(|i| i.kind == Kind::Native) {
+                let (arch, mut kernels) = fatbin::kernels(&image.payload)
+                    .unwrap_or_else(|e| panic!("{path}: sm_{}: {e}", image.arch));
+                assert_eq!(
+                    arch, image.arch,
+                    "{path}: the sm_{arch} code is filed as sm_{}",
+                    image.arch
+                );
+                kernels.sort_unstable();
+                assert_eq!(kernels, listed, "{path}: the kernels of its sm_{arch} code");
+                native.push(arch);
+            }
+            native.sort_unstable();
+            let expected: Vec<u32> = ptx::NATIVE_ARCHS
+                .iter()
+                .copied()
+                .filter(|&a| file.runs_on(a))
+                .collect();
+            assert_eq!(
+                native, expected,
+                "{path}: the architectures with native code"
+            );
+
+            let ptx: Vec<u32> = images
+                .iter()
+                .filter(|i| i.kind == Kind::Ptx)
+                .map(|i| i.arch)
+                .collect();
+            let newest = expected
+                .last()
+                .copied()
+                .filter(|&a| a > file.min_capability);
+            let wanted: Vec<u32> = std::iter::once(file.min_capability).chain(newest).collect();
+            assert_eq!(ptx, wanted, "{path}: the architectures of its PTX");
+        }
+    }
+
+    /// Without `CUDA_COMPUTE_CAP`, every GPU generation from Turing on has native code (the README's
+    /// list: Turing, Ampere and Jetson Orin, Ada, Hopper, Blackwell datacentre and desktop), so a toolkit
+    /// or a reading of its list that dropped one fails here. A narrowed build reports it ignored.
+    #[test]
+    #[cfg_attr(
+        not(clatch_all_archs),
+        ignore = "built for the architectures CUDA_COMPUTE_CAP lists"
+    )]
+    fn a_full_build_covers_every_generation_from_turing() {
+        for arch in [75, 80, 86, 87, 89, 90, 100, 120] {
+            assert!(
+                ptx::NATIVE_ARCHS.contains(&arch),
+                "sm_{arch} missing from {:?}",
+                ptx::NATIVE_ARCHS
+            );
+        }
+    }
+
+    /// The int8 MMA needs compute capability 8.0: the tensor-core files load from there on, the others
+    /// everywhere from Turing.
+    #[test]
+    fn files_load_where_their_instructions_exist() {
+        assert!(!tensor_cores_on(75) && tensor_cores_on(80) && tensor_cores_on(121));
+        for file in KERNELS {
+            let tensor = file
+                .entry_points()
+                .any(|k| TENSOR_KNN.contains(&k) || TENSOR_PAIRS_KNN.contains(&k));
+            assert_eq!(file.runs_on(75), !tensor, "{}", file.path);
+            assert!(file.runs_on(80), "{}", file.path);
         }
     }
 }

@@ -14,6 +14,8 @@ mod describe_opencv;
 mod detect;
 mod device;
 mod error;
+#[cfg(test)]
+mod fatbin;
 mod image;
 mod kernels;
 mod matching;

@@ -1078,7 +1078,8 @@ CV_FN void cv_write_inliers(const Team& team, const cv_model& model, const P& po
     for (cv_u32 base = 0; base < n; base += Team::SIZE) {
         cv_u32 i = base + team.lane();
         bool inlier = i < n && E::residual(model, points.a(i), points.b(i)) <= max_residual;
-        if (inlier) list[written + team.rank(inlier)] = i;
+        cv_u32 rank = team.rank(inlier); /* every lane takes part in the warp's ballot */
+        if (inlier) list[written + rank] = i;
         written += team.count(inlier);
     }
     team.sync();

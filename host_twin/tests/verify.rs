@@ -25,7 +25,12 @@ fn compare(cases: &[Case], config: &VerifyConfig) -> usize {
             first = what.map(|what| format!("{}: {what}", c.name));
         }
     }
-    assert_eq!(differing, 0, "{differing} fields differ; first: {}", first.unwrap_or_default());
+    assert_eq!(
+        differing,
+        0,
+        "{differing} fields differ; first: {}",
+        first.unwrap_or_default()
+    );
     cases.len()
 }
 
@@ -54,5 +59,9 @@ fn other_settings_are_bit_identical_too() {
     for config in &configs {
         compare(&cases, config);
     }
-    println!("compared {} pairs under {} settings, 0 differences", cases.len(), configs.len());
+    println!(
+        "compared {} pairs under {} settings, 0 differences",
+        cases.len(),
+        configs.len()
+    );
 }

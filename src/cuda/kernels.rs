@@ -44,6 +44,8 @@ pub(crate) const MATCH_COMPACT: Kernel = Kernel("clatch_match_compact");
 pub(crate) const PAIRS_COMPACT: Kernel = Kernel("clatch_pairs_compact");
 // kernels/matching_tensor.cu
 pub(crate) const EXPAND_SIGNS: Kernel = Kernel("clatch_expand_signs");
+// kernels/verify.cu
+pub(crate) const VERIFY_PAIRS: Kernel = Kernel("clatch_verify_pairs");
 // kernels/bench_*.cu
 #[cfg(feature = "internals")]
 pub(crate) const MMA_S8_RATE: Kernel = Kernel("clatch_mma_s8_rate");
@@ -195,6 +197,13 @@ pub(crate) const KERNELS: &[KernelFile] = &[
         fatbin: ptx::MATCHING_TENSOR_FATBIN,
         kernels: &[&[EXPAND_SIGNS], TENSOR_KNN],
         needs_tensor_cores: true,
+    },
+    KernelFile {
+        path: "kernels/verify.cu",
+        ptx: ptx::VERIFY_PTX,
+        fatbin: ptx::VERIFY_FATBIN,
+        kernels: &[&[VERIFY_PAIRS]],
+        needs_tensor_cores: false,
     },
 ];
 

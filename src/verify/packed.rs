@@ -8,17 +8,17 @@
 // Used by the CUDA backend and the host twin (`internals`) only.
 #![cfg_attr(not(any(feature = "cuda", feature = "internals")), allow(dead_code))]
 
+use super::ViewPair;
 use super::camera::Intrinsics;
 use super::config::VerifyConfig;
 use super::essential::EssentialEstimator;
 use super::fundamental::FundamentalEstimator;
 use super::geometry::{GeometryConfig, InlierCounts, TwoViewGeometry};
 use super::homography::HomographyEstimator;
+use super::linalg::Mat3;
 use super::ransac::RansacSettings;
 use super::translation::TranslationEstimator;
 use super::two_view::settings;
-use super::ViewPair;
-use super::linalg::Mat3;
 
 /// `u32` scratch entries per correspondence on the device: the F, H, E and translation inliers.
 pub const LISTS: usize = 4;
@@ -187,7 +187,12 @@ impl PackedPairs {
                 Some(kept) => points.extend(kept.iter().map(|&i| point(&pair.matches[i as usize]))),
                 None => points.extend(pair.matches.iter().map(point)),
             }
-            records.push(pair_record(pair, first, points.len() as u64 - first, config));
+            records.push(pair_record(
+                pair,
+                first,
+                points.len() as u64 - first,
+                config,
+            ));
         }
         Self {
             settings: settings_record(config),
@@ -199,9 +204,15 @@ impl PackedPairs {
 
     /// Pair `index`'s geometry from its result record and its inliers (`inliers[..inlier_count]`,
     /// indices into its correspondences).
-    pub fn geometry(&self, index: usize, result: &ResultRecord, inliers: &[u32]) -> TwoViewGeometry {
+    pub fn geometry(
+        &self,
+        index: usize,
+        result: &ResultRecord,
+        inliers: &[u32],
+    ) -> TwoViewGeometry {
         let matrix = |flag: u32, m: &[f64; 9]| -> Option<Mat3> {
-            (result.models & flag != 0).then(|| [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]])
+            (result.models & flag != 0)
+                .then(|| [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]])
         };
         let inliers = &inliers[..result.inlier_count as usize];
         let inliers = match &self.kept[index] {

@@ -44,7 +44,9 @@ pub fn case(seed: u64, index: usize) -> Case {
     let mut rng = Rng::new(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let shapes = [Shape::General, Shape::Planar, Shape::Rotation];
     let shape = shapes[index % 3];
-    let sizes = [0usize, 1, 3, 4, 5, 6, 7, 8, 9, 12, 15, 16, 24, 40, 100, 250, 850];
+    let sizes = [
+        0usize, 1, 3, 4, 5, 6, 7, 8, 9, 12, 15, 16, 24, 40, 100, 250, 850,
+    ];
     let n = sizes[(index / 3) % sizes.len()];
     let outliers = [0.0, 0.1, 0.4, 0.6, 0.9][(index / 7) % 5];
     let noise = [0.0, 0.5, 1.5][(index / 5) % 3];

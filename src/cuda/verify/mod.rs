@@ -11,7 +11,9 @@
 
 use std::sync::Arc;
 
-use cudarc::driver::{CudaStream, DeviceRepr, LaunchConfig, PushKernelArg, ValidAsZeroBits};
+use cudarc::driver::{
+    CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg, ValidAsZeroBits,
+};
 
 use super::device::GpuDevice;
 use super::error::driver_error;
@@ -26,7 +28,7 @@ use crate::verify::packed::{
 };
 use crate::verify::{TwoViewGeometry, VerifyConfig, ViewPair};
 
-// SAFETY (all six): #[repr(C)] records of plain f32/f64/u32/u64 fields, the layouts of
+// SAFETY (all seven): #[repr(C)] records of plain f32/f64/u32/u64 fields, the layouts of
 // kernels/clatch.h's clatch_verify_* structs (checked against bindgen's in `cuda::tests`); any bit
 // pattern is a valid value, so zeroed and device-written memory reads back as a valid record.
 unsafe impl DeviceRepr for PointRecord {}
@@ -35,6 +37,7 @@ unsafe impl DeviceRepr for SettingsRecord {}
 unsafe impl DeviceRepr for ResultRecord {}
 unsafe impl ValidAsZeroBits for ResultRecord {}
 unsafe impl ValidAsZeroBits for PointRecord {}
+unsafe impl ValidAsZeroBits for PairRecord {}
 
 /// Device memory a chunk may take by default: 256 MiB (about 7 million correspondences).
 pub(crate) const CHUNK_BYTES: usize = 256 << 20;
@@ -105,58 +108,98 @@ fn run_chunk(
     stream: &Arc<CudaStream>,
     packed: &PackedPairs,
 ) -> Result<Vec<TwoViewGeometry>> {
-    let n = packed.points.len();
-    let count = packed.pairs.len();
-    let pair_count = u32::try_from(count).map_err(|_| crate::error::Error::Internal {
-        operation: "clatch_verify_pairs launch",
-        message: format!("a chunk of {count} pairs"),
-    })?;
-    let settings = upload(
-        stream,
-        std::slice::from_ref(&packed.settings),
-        "verification settings",
-    )?;
-    let records = upload(stream, &packed.pairs, "verification pair records")?;
-    let points = if n == 0 {
-        alloc_zeros::<PointRecord>(stream, 1, "verification points")?
-    } else {
-        upload(stream, &packed.points, "verification points")?
-    };
-    let mut scratch = alloc_zeros::<u32>(stream, LISTS * n, "verification inlier lists")?;
-    let mut inliers = alloc_zeros::<u32>(stream, n, "verification inliers")?;
-    let mut results = alloc_zeros::<ResultRecord>(stream, count, "verification results")?;
-    let warps = CLATCH_VERIFY_WARPS as usize;
-    let config = LaunchConfig {
-        grid_dim: (count.div_ceil(warps) as u32, 1, 1),
-        block_dim: (32 * warps as u32, 1, 1),
-        shared_mem_bytes: 0,
-    };
-    let mut launch = stream.launch_builder(dev.kernel(kernels::VERIFY_PAIRS));
-    launch
-        .arg(&settings)
-        .arg(&records)
-        .arg(&pair_count)
-        .arg(&points)
-        .arg(&mut scratch)
-        .arg(&mut inliers)
-        .arg(&mut results);
-    // SAFETY: the arguments match clatch_verify_pairs's signature (settings, pairs, pair count,
-    // points, scratch, inliers, results); `records` and `results` hold `pair_count` entries, one warp
-    // per pair reads and writes only its own; each pair's `first .. first + count` lies within the
-    // `n` points and inliers and its `LISTS` lists within `LISTS * n` scratch entries (PackedPairs
-    // lays the pairs back to back). All buffers live on `stream` until the copies below complete.
-    unsafe { launch.launch(config) }.map_err(driver_error("clatch_verify_pairs launch"))?;
-    let results = stream.clone_dtoh(&results).map_err(driver_error(
-        "clatch_verify_pairs (running, or copying results back)",
-    ))?;
-    let inliers = stream
-        .clone_dtoh(&inliers)
-        .map_err(driver_error("copying verification inliers back"))?;
-    Ok(results
-        .iter()
-        .enumerate()
-        .map(|(i, result)| packed.geometry(i, result, &inliers[packed.pairs[i].first as usize..]))
-        .collect())
+    let mut chunk = DeviceChunk::upload(stream, packed)?;
+    chunk.launch(dev, stream)?;
+    chunk.fetch(stream, packed)
+}
+
+/// A packed chunk on the device: its inputs, scratch lists and outputs, on one stream.
+struct DeviceChunk {
+    settings: CudaSlice<SettingsRecord>,
+    records: CudaSlice<PairRecord>,
+    points: CudaSlice<PointRecord>,
+    scratch: CudaSlice<u32>,
+    inliers: CudaSlice<u32>,
+    results: CudaSlice<ResultRecord>,
+    pair_count: u32,
+}
+
+impl DeviceChunk {
+    fn upload(stream: &Arc<CudaStream>, packed: &PackedPairs) -> Result<Self> {
+        let n = packed.points.len();
+        let count = packed.pairs.len();
+        let pair_count = u32::try_from(count).map_err(|_| crate::error::Error::Internal {
+            operation: "clatch_verify_pairs launch",
+            message: format!("a chunk of {count} pairs"),
+        })?;
+        Ok(Self {
+            settings: upload(
+                stream,
+                std::slice::from_ref(&packed.settings),
+                "verification settings",
+            )?,
+            records: if count == 0 {
+                alloc_zeros(stream, 1, "verification pair records")?
+            } else {
+                upload(stream, &packed.pairs, "verification pair records")?
+            },
+            points: if n == 0 {
+                alloc_zeros(stream, 1, "verification points")?
+            } else {
+                upload(stream, &packed.points, "verification points")?
+            },
+            scratch: alloc_zeros(stream, LISTS * n, "verification inlier lists")?,
+            inliers: alloc_zeros(stream, n, "verification inliers")?,
+            results: alloc_zeros(stream, count, "verification results")?,
+            pair_count,
+        })
+    }
+
+    /// Queues the kernel over every pair of the chunk.
+    fn launch(&mut self, dev: &GpuDevice, stream: &Arc<CudaStream>) -> Result<()> {
+        if self.pair_count == 0 {
+            return Ok(());
+        }
+        let warps = CLATCH_VERIFY_WARPS;
+        let config = LaunchConfig {
+            grid_dim: (self.pair_count.div_ceil(warps), 1, 1),
+            block_dim: (32 * warps, 1, 1),
+            shared_mem_bytes: 0,
+        };
+        let mut launch = stream.launch_builder(dev.kernel(kernels::VERIFY_PAIRS));
+        launch
+            .arg(&self.settings)
+            .arg(&self.records)
+            .arg(&self.pair_count)
+            .arg(&self.points)
+            .arg(&mut self.scratch)
+            .arg(&mut self.inliers)
+            .arg(&mut self.results);
+        // SAFETY: the arguments match clatch_verify_pairs's signature (settings, pairs, pair count,
+        // points, scratch, inliers, results); `records` and `results` hold `pair_count` entries and
+        // one warp per pair reads and writes only its own; each pair's `first .. first + count` lies
+        // within the points and inliers, and its `LISTS` lists within the `LISTS` times larger
+        // scratch (PackedPairs lays the pairs back to back). The buffers outlive the work queued on
+        // `stream`: `fetch` copies back on the same stream before dropping them.
+        unsafe { launch.launch(config) }.map_err(driver_error("clatch_verify_pairs launch"))?;
+        Ok(())
+    }
+
+    /// The geometries of the chunk (waits for the kernel).
+    fn fetch(self, stream: &Arc<CudaStream>, packed: &PackedPairs) -> Result<Vec<TwoViewGeometry>> {
+        let results = stream.clone_dtoh(&self.results).map_err(driver_error(
+            "clatch_verify_pairs (running, or copying results back)",
+        ))?;
+        let inliers = stream
+            .clone_dtoh(&self.inliers)
+            .map_err(driver_error("copying verification inliers back"))?;
+        Ok(packed
+            .pairs
+            .iter()
+            .enumerate()
+            .map(|(i, pair)| packed.geometry(i, &results[i], &inliers[pair.first as usize..]))
+            .collect())
+    }
 }
 
 #[cfg(test)]
@@ -188,5 +231,26 @@ pub mod hooks {
     ) -> Result<(Vec<TwoViewGeometry>, usize)> {
         crate::verify::check_pairs(pairs, config)?;
         verify_in_chunks(dev, pairs, config, chunk_bytes)
+    }
+
+    /// Kernel times in milliseconds (CUDA events around each launch, after `warmup` launches) of
+    /// one launch over all of `pairs` (checked; uploaded once, neighbour consistency applied).
+    pub fn time_verify_kernel(
+        dev: &GpuDevice,
+        pairs: &[ViewPair<'_>],
+        config: &VerifyConfig,
+        warmup: usize,
+        repeats: usize,
+    ) -> Result<Vec<f32>> {
+        crate::verify::check_pairs(pairs, config)?;
+        let kept = pairs.iter().map(|p| kept_matches(p, config)).collect();
+        let packed = PackedPairs::new(pairs, kept, config);
+        let stream = dev.new_stream()?;
+        let mut chunk = DeviceChunk::upload(&stream, &packed)?;
+        let times = crate::cuda::device::time_launches(dev, &stream, warmup, repeats, || {
+            chunk.launch(dev, &stream)
+        })?;
+        chunk.fetch(&stream, &packed)?;
+        Ok(times)
     }
 }

@@ -6,7 +6,9 @@
  * section 7, is the contract.
  *
  * The LO-RANSAC driver is written for a "team" of threads (a warp on the GPU, one thread on the host):
- * the solvers run on the team's leader, the residuals and the integer support over all of them. */
+ * the minimal solvers of a batch of trials run one trial per thread, local optimisation on the team's
+ * leader, the residuals and the integer support over all threads; the models are then taken in the
+ * CPU's order (trial by trial, solver order), so the search is the CPU's, step for step. */
 #ifndef CLATCH_VERIFY_MATH_CUH
 #define CLATCH_VERIFY_MATH_CUH
 
@@ -937,7 +939,7 @@ CV_FN int cv_five_point(const P& points, cv_model* out) {
 #define CV_MAX_MODELS 10
 
 struct cv_homography_estimator {
-    enum { SAMPLE_SIZE = 4, LOCAL_MIN_POINTS = 4 };
+    enum { SAMPLE_SIZE = 4, LOCAL_MIN_POINTS = 4, MAX_MODELS = 1 };
     template <class P>
     CV_FN static int minimal(const P& p, cv_model* out) { return cv_homography_dlt(p, out); }
     template <class P>
@@ -946,7 +948,7 @@ struct cv_homography_estimator {
 };
 
 struct cv_fundamental_estimator {
-    enum { SAMPLE_SIZE = 7, LOCAL_MIN_POINTS = 8 };
+    enum { SAMPLE_SIZE = 7, LOCAL_MIN_POINTS = 8, MAX_MODELS = 3 };
     template <class P>
     CV_FN static int minimal(const P& p, cv_model* out) { return cv_seven_point(p, out); }
     template <class P>
@@ -955,7 +957,7 @@ struct cv_fundamental_estimator {
 };
 
 struct cv_essential_estimator {
-    enum { SAMPLE_SIZE = 5, LOCAL_MIN_POINTS = 6 };
+    enum { SAMPLE_SIZE = 5, LOCAL_MIN_POINTS = 6, MAX_MODELS = 10 };
     template <class P>
     CV_FN static int minimal(const P& p, cv_model* out) { return cv_five_point(p, out); }
     template <class P>
@@ -964,7 +966,7 @@ struct cv_essential_estimator {
 };
 
 struct cv_translation_estimator {
-    enum { SAMPLE_SIZE = 1, LOCAL_MIN_POINTS = 1 };
+    enum { SAMPLE_SIZE = 1, LOCAL_MIN_POINTS = 1, MAX_MODELS = 1 };
     template <class P>
     CV_FN static int minimal(const P& p, cv_model* out) {
         cv_vec2 a = p.a(0), b = p.b(0);
@@ -1085,11 +1087,18 @@ CV_FN void cv_write_inliers(const Team& team, const cv_model& model, const P& po
     team.sync();
 }
 
-/* Buffers the leader fills and the team reads: minimal and local models. */
+/* Trials whose minimal models are solved together, one per lane (a sample and its models are a pure
+ * function of the trial's index, so solving ahead changes nothing), and the model slots they fill. */
+#define CV_TRIAL_BATCH 32
+#define CV_MODEL_SLOTS 128
+
+/* Buffers the solving lanes fill and the team reads: the minimal models of a batch of trials (trial
+ * j's at minimal[j * MAX_MODELS]) and the local models. */
 struct cv_model_buffers {
-    cv_model minimal[CV_MAX_MODELS];
+    cv_model minimal[CV_MODEL_SLOTS];
     cv_model local[CV_MAX_MODELS];
-    int minimal_count, local_count;
+    int minimal_count[CV_TRIAL_BATCH];
+    int local_count;
 };
 
 /* lo_ransac over `points` (ransac.rs), the best model's inliers kept in `list` (points.n entries). */
@@ -1109,25 +1118,29 @@ CV_FN cv_ransac_report cv_lo_ransac(const Team& team, const P& points, const cla
     cv_model best_model;
     cv_u32 trials = 0;
     bool done = false;
+    const cv_u32 batch_capacity = CV_MODEL_SLOTS / E::MAX_MODELS < CV_TRIAL_BATCH ? CV_MODEL_SLOTS / E::MAX_MODELS : CV_TRIAL_BATCH;
     while (!done && trials < settings.max_trials) {
-        cv_u32 trial = trials;
-        trials += 1;
+        cv_u32 batch_start = trials;
+        cv_u32 batch = settings.max_trials - trials < batch_capacity ? settings.max_trials - trials : batch_capacity;
         team.sync();
-        if (team.leader()) {
+        for (cv_u32 j = team.lane(); j < batch; j += Team::SIZE) {
             cv_u32 indices[8];
-            cv_sample(key, trial, n, E::SAMPLE_SIZE, indices);
+            cv_sample(key, batch_start + j, n, E::SAMPLE_SIZE, indices);
             cv_sample_points sample;
             sample.n = E::SAMPLE_SIZE;
             for (int k = 0; k < E::SAMPLE_SIZE; ++k) {
                 sample.pa[k] = points.a(indices[k]);
                 sample.pb[k] = points.b(indices[k]);
             }
-            buffers->minimal_count = E::minimal(sample, buffers->minimal);
+            buffers->minimal_count[j] = E::minimal(sample, buffers->minimal + j * E::MAX_MODELS);
         }
         team.sync();
-        int model_count = buffers->minimal_count;
+        for (cv_u32 j = 0; j < batch && !done; ++j) {
+        cv_u32 trial = batch_start + j;
+        trials = trial + 1;
+        int model_count = buffers->minimal_count[j];
         for (int mi = 0; mi < model_count && !done; ++mi) {
-            cv_model model = buffers->minimal[mi];
+            cv_model model = buffers->minimal[j * E::MAX_MODELS + mi];
             cv_support support;
             if (cv_better_support<E>(team, model, points, max_residual, best, &support)) {
                 best = support;
@@ -1159,6 +1172,7 @@ CV_FN cv_ransac_report cv_lo_ransac(const Team& team, const P& points, const cla
             }
             if (trial >= settings.min_trials && cv_dynamic_bound_reached(trial, best.inliers, n, E::SAMPLE_SIZE, settings.stop_threshold))
                 done = true;
+        }
         }
     }
     team.sync();

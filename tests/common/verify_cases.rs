@@ -124,9 +124,12 @@ pub fn case(seed: u64, index: usize) -> Case {
     }
 }
 
+/// The bits of a matrix that may be absent.
+pub type MatrixBits = Option<[u64; 9]>;
+
 /// Every bit of a geometry: configuration, matrices (`None` kept apart from a matrix), inliers,
 /// counts.
-pub fn bits(g: &TwoViewGeometry) -> (i32, [Option<[u64; 9]>; 3], Vec<u32>, [usize; 3]) {
+pub fn bits(g: &TwoViewGeometry) -> (i32, [MatrixBits; 3], Vec<u32>, [usize; 3]) {
     let m = |m: &Option<[[f64; 3]; 3]>| {
         m.map(|m| {
             let flat: Vec<u64> = m.iter().flatten().map(|v| v.to_bits()).collect();

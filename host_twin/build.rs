@@ -1,5 +1,6 @@
 //! Compiles `kernels/verify_math.cuh` as host C++ (through `src/verify_twin.cpp`) with FMA contraction
 //! off, as nvcc compiles it for the device with `--fmad=false`: the same operations in the same order.
+//! The warp's stand-in runs 32 threads per pair (`-pthread`).
 
 fn main() {
     println!("cargo::rerun-if-changed=src/verify_twin.cpp");
@@ -11,6 +12,7 @@ fn main() {
         .include("../kernels")
         .flag("-std=c++17")
         .flag("-ffp-contract=off")
+        .flag("-pthread")
         .flag_if_supported("-fno-fast-math")
         .warnings(true)
         .extra_warnings(true)

@@ -11,7 +11,27 @@ use clatch::verify::packed::{
 };
 use clatch::verify::{TwoViewGeometry, VerifyConfig, ViewPair};
 
+/// The C++ entry points: one thread per pair, or 32 threads per pair standing in for the kernel's warp.
+type Entry = unsafe extern "C" fn(
+    *const SettingsRecord,
+    *const PairRecord,
+    u32,
+    *const PointRecord,
+    *mut u32,
+    *mut u32,
+    *mut ResultRecord,
+);
+
 unsafe extern "C" {
+    fn clatch_twin_verify_pairs_warp(
+        settings: *const SettingsRecord,
+        pairs: *const PairRecord,
+        pair_count: u32,
+        points: *const PointRecord,
+        scratch: *mut u32,
+        inliers: *mut u32,
+        results: *mut ResultRecord,
+    );
     fn clatch_twin_verify_pairs(
         settings: *const SettingsRecord,
         pairs: *const PairRecord,
@@ -27,6 +47,18 @@ unsafe extern "C" {
 /// be valid (`clatch::verify::verify_pairs` succeeds on them): this is a test instrument, which
 /// packs them as the CUDA backend does after its checks.
 pub fn verify_pairs(pairs: &[ViewPair<'_>], config: &VerifyConfig) -> Vec<TwoViewGeometry> {
+    run(clatch_twin_verify_pairs, pairs, config)
+}
+
+/// [`verify_pairs`] with each pair on a team of 32 threads that stands in for the kernel's warp
+/// (ballots, ranks and sums through barriers): the kernel's division of the work between lanes, and
+/// its collectives, which every lane must reach together (a lane that skipped one would deadlock
+/// here). Slow: for small pairs.
+pub fn verify_pairs_on_warp(pairs: &[ViewPair<'_>], config: &VerifyConfig) -> Vec<TwoViewGeometry> {
+    run(clatch_twin_verify_pairs_warp, pairs, config)
+}
+
+fn run(entry: Entry, pairs: &[ViewPair<'_>], config: &VerifyConfig) -> Vec<TwoViewGeometry> {
     let kept = pairs.iter().map(|p| kept_matches(p, config)).collect();
     let packed = PackedPairs::new(pairs, kept, config);
     let n = packed.points.len();
@@ -39,7 +71,7 @@ pub fn verify_pairs(pairs: &[ViewPair<'_>], config: &VerifyConfig) -> Vec<TwoVie
     // entries and `n` inliers, indexed by each pair's `first .. first + count` (PackedPairs lays
     // them back to back). The records are #[repr(C)] mirrors of clatch.h's structs.
     unsafe {
-        clatch_twin_verify_pairs(
+        entry(
             &packed.settings,
             packed.pairs.as_ptr(),
             count,

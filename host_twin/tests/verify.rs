@@ -65,3 +65,27 @@ fn other_settings_are_bit_identical_too() {
         configs.len()
     );
 }
+
+#[test]
+fn the_warps_division_of_the_work_is_bit_identical_too() {
+    // Small pairs (32 threads a pair, every collective a barrier), every shape and oddity.
+    let cases: Vec<Case> = (0..400)
+        .map(|i| case(3, i))
+        .filter(|c| c.matches.len() <= 40)
+        .step_by(3)
+        .collect();
+    let config = VerifyConfig::default().with_max_num_trials(150);
+    let pairs: Vec<ViewPair<'_>> = cases.iter().map(Case::pair).collect();
+    let want = verify_pairs(&pairs, &config).expect("valid pairs");
+    let got = clatch_host_twin::verify_pairs_on_warp(&pairs, &config);
+    let mut differing = 0;
+    for ((c, w), g) in cases.iter().zip(&want).zip(&got) {
+        let (count, what) = differences(w, g);
+        differing += count;
+        assert_eq!(count, 0, "{}: {}", c.name, what.unwrap_or_default());
+    }
+    println!(
+        "compared {} pairs on a 32-thread team, {differing} differences",
+        cases.len()
+    );
+}

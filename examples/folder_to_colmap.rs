@@ -10,7 +10,9 @@
 //! package run: every photo checked before any work, extracted with the settings for structure from
 //! motion (8192 keypoints spread over an 8 x 8 grid, sub-pixel positions), every pair matched with
 //! the ratio test and the cross-check, one camera per image size and EXIF focal length, both files
-//! written under temporary names and put in place once complete.
+//! written under temporary names and put in place once complete. The pairs are left for COLMAP to
+//! verify ([`FolderJob::without_verification`]); by default the library verifies them itself and
+//! writes no match list (`clatch colmap`, then `colmap mapper` alone).
 
 use std::error::Error;
 use std::ops::ControlFlow;
@@ -25,6 +27,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     };
     let backend = Backend::auto();
     let job = FolderJob::new(dir, database)
+        .without_verification()
         .with_match_list(match_list)
         .with_backend(backend);
     let mut progress = |p: FolderProgress| {
@@ -41,7 +44,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         report.counts.matches,
         report.counts.pairs,
         report.database.display(),
-        report.match_list.display()
+        match_list
     );
     Ok(())
 }

@@ -77,14 +77,19 @@ fn a_folder_written_twice_gives_identical_bytes() {
     let dir = workdir("twice");
     let run = |db: &str| {
         FolderJob::new(dir.join("images"), dir.join(db))
+            .with_match_list_written(true)
             .run(None)
             .unwrap()
     };
     let (one, two) = (run("one.db"), run("two.db"));
     assert_eq!(one.database, dir.join("one.db"));
-    assert_eq!(one.match_list, dir.join("one-colmap").join("matches.txt"));
+    let list = |report: &clatch::colmap::FolderReport| bytes(report.match_list.as_ref().unwrap());
+    assert_eq!(
+        one.match_list,
+        Some(dir.join("one-colmap").join("matches.txt"))
+    );
     assert_eq!(bytes(&one.database), bytes(&two.database));
-    assert_eq!(bytes(&one.match_list), bytes(&two.match_list));
+    assert_eq!(list(&one), list(&two));
     assert_eq!(one.counts, two.counts);
     let counts = one.counts;
     assert_eq!((counts.photos, counts.pairs), (PHOTOS, PAIRS));
@@ -107,10 +112,11 @@ fn a_folder_written_twice_gives_identical_bytes() {
 #[test]
 fn the_stages_run_apart_write_the_single_run_s_bytes() {
     let dir = workdir("apart");
-    let job = FolderJob::new(dir.join("images"), dir.join("one.db"));
+    let job = FolderJob::new(dir.join("images"), dir.join("one.db")).with_match_list_written(true);
     let single = job.run(None).unwrap();
 
     let job = FolderJob::new(dir.join("images"), dir.join("apart.db"))
+        .with_match_list_written(true)
         .with_workspace(dir.join("apart-colmap"));
     let plan = job.plan().unwrap();
     let mut output = plan.open_output().unwrap();
@@ -154,7 +160,8 @@ fn the_stages_run_apart_write_the_single_run_s_bytes() {
     let apart = output.finish().unwrap().commit().unwrap();
     assert_eq!(apart.counts, single.counts);
     assert_eq!(bytes(&apart.database), bytes(&single.database));
-    assert_eq!(bytes(&apart.match_list), bytes(&single.match_list));
+    let list = |report: &clatch::colmap::FolderReport| bytes(report.match_list.as_ref().unwrap());
+    assert_eq!(list(&apart), list(&single));
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -203,11 +210,8 @@ fn progress_is_told_in_order_and_can_stop_the_run() {
     );
     assert_eq!(bytes(&db), old);
     assert_eq!(names_in(&dir), ["images", "out-colmap", "out.db"]);
-    // The match list and the name of the database it belongs to (the earlier run's).
-    assert_eq!(
-        names_in(&dir.join("out-colmap")),
-        [".clatch-database", "matches.txt"]
-    );
+    // The name of the database the workspace belongs to (the earlier run's); verified, no match list.
+    assert_eq!(names_in(&dir.join("out-colmap")), [".clatch-database"]);
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -220,15 +224,50 @@ fn given_pairs_by_index_or_name_are_written_in_their_order() {
     ];
     let report = FolderJob::new(dir.join("images"), dir.join("out.db"))
         .with_pairs(given)
+        .with_match_list_written(true)
         .run(None)
         .unwrap();
     assert_eq!(report.counts.pairs, 2);
-    let list = String::from_utf8(bytes(&report.match_list)).unwrap();
-    let headers: Vec<&str> = list
-        .split("\n\n")
+    let list = String::from_utf8(bytes(report.match_list.as_ref().unwrap())).unwrap();
+    let blocks: Vec<&str> = list.split("\n\n").filter(|b| !b.is_empty()).collect();
+    let headers: Vec<&str> = blocks
+        .iter()
         .filter_map(|block| block.lines().next())
         .collect();
     assert_eq!(headers, ["view3.pgm view0.pgm", "view1.pgm view2.pgm"]);
+    // The database's `matches` holds the same rows in COLMAP's order: by pair id (smaller image id
+    // first), the columns of a pair listed the other way round swapped.
+    let db = rusqlite::Connection::open(&report.database).unwrap();
+    let mut query = db
+        .prepare("SELECT pair_id, rows, cols, data FROM matches ORDER BY pair_id")
+        .unwrap();
+    let stored: Vec<(i64, i64, i64, Vec<u8>)> = query
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)))
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    let rows_of = |block: &str, swap: bool| -> Vec<u8> {
+        block
+            .lines()
+            .skip(1)
+            .flat_map(|line| {
+                let (p, q) = line.split_once(' ').unwrap();
+                let (p, q): (u32, u32) = (p.parse().unwrap(), q.parse().unwrap());
+                if swap { [q, p] } else { [p, q] }
+            })
+            .flat_map(u32::to_le_bytes)
+            .collect()
+    };
+    let pair = |a: u32, b: u32| clatch::colmap::pair_id(a, b) as i64;
+    let expected = [
+        (pair(1, 4), rows_of(blocks[0], true)),
+        (pair(2, 3), rows_of(blocks[1], false)),
+    ];
+    assert_eq!(stored.len(), 2);
+    for ((id, rows, cols, data), (want_id, want)) in stored.iter().zip(&expected) {
+        assert_eq!((id, *cols, data), (want_id, 2, want));
+        assert_eq!(*rows as usize * 8, want.len());
+    }
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -361,8 +400,8 @@ fn keypoints_of(db: &rusqlite::Connection) -> std::collections::HashMap<u32, Vec
 /// With verification, every pair's two-view geometry is in the database, as COLMAP's
 /// `matches_importer` would write it, so the mapper runs on it directly: the crops differ by a pure
 /// translation, so each pair is a homography (planar or panoramic, COLMAP's code 6), every inlier
-/// lies on its true epipolar line and nearly all where the translation puts it; two runs write the same bytes; without verification
-/// the table stays empty.
+/// lies on its true epipolar line and nearly all where the translation puts it; two runs write the
+/// same bytes; every pair's matches are in `matches`; without verification both tables stay empty.
 #[test]
 fn verification_writes_every_pair_s_geometry_and_only_true_inliers() {
     let dir = workdir("verify");
@@ -437,13 +476,30 @@ fn verification_writes_every_pair_s_geometry_and_only_true_inliers() {
         errors.len()
     );
 
+    // Every pair's matches are in the database too, and no match list is written.
+    let db = rusqlite::Connection::open(&one.database).unwrap();
+    let (pairs, matches): (i64, i64) = db
+        .query_row("SELECT COUNT(*), SUM(rows) FROM matches", [], |r| {
+            Ok((r.get(0)?, r.get(1)?))
+        })
+        .unwrap();
+    assert_eq!((pairs as usize, matches as usize), (PAIRS, counts.matches));
+    assert_eq!(one.match_list, None);
+    assert!(!dir.join("one-colmap").join("matches.txt").exists());
+
+    // Without verification both tables stay empty: COLMAP's `matches_importer` fills them from the
+    // match list.
     let plain = FolderJob::new(dir.join("images"), dir.join("plain.db"))
+        .without_verification()
         .run(None)
         .unwrap();
     let db = rusqlite::Connection::open(&plain.database).unwrap();
-    let stored: i64 = db
-        .query_row("SELECT COUNT(*) FROM two_view_geometries", [], |r| r.get(0))
-        .unwrap();
-    assert_eq!((stored, plain.counts.pairs_verified), (0, 0));
+    let stored = |table: &str| -> i64 {
+        db.query_row(&format!("SELECT COUNT(*) FROM {table}"), [], |r| r.get(0))
+            .unwrap()
+    };
+    assert_eq!((stored("two_view_geometries"), stored("matches")), (0, 0));
+    assert_eq!(plain.counts.pairs_verified, 0);
+    assert!(bytes(plain.match_list.as_ref().unwrap()).len() > 100);
     std::fs::remove_dir_all(&dir).ok();
 }

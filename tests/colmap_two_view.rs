@@ -1,8 +1,11 @@
 //! `Database::add_two_view_geometry` against COLMAP 3.8 itself, on a synthetic scene: random 3-D
 //! points seen by four cameras of known pose, their exact projections as keypoints.
 //!
-//! - `colmap mapper` straight on a database whose `two_view_geometries` we wrote (no
-//!   `matches_importer`) registers every image, with the poses of the truth;
+//! - `colmap mapper` straight on a database whose `matches` and `two_view_geometries` we wrote (no
+//!   `matches_importer`, as the folder run writes it) registers every image, with the poses of the
+//!   truth;
+//! - the `matches` rows we write equal those `matches_importer --match_type raw` writes for the same
+//!   putative matches, both image orders and a pair without matches;
 //! - the rows we write for matches taken as verified equal the rows `matches_importer --match_type
 //!   inliers` writes for the same matches, both image orders;
 //! - the geometry COLMAP estimates (`--match_type raw`) reads back through our layout as the true
@@ -15,11 +18,11 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use clatch::KeyPoint;
 use clatch::colmap::two_view::{f64s_of_blob, matrix_of_blob, quaternion_rotation};
 use clatch::colmap::{Database, Matrix3, PinholeCamera, RelativePose, TwoViewGeometry};
 use clatch::synthetic::SplitMix64;
 use clatch::verify::GeometryConfig;
+use clatch::{KeyPoint, Match};
 use libtest_mimic::{Arguments, Failed, Trial};
 use rusqlite::Connection;
 
@@ -50,6 +53,10 @@ fn main() {
         Trial::test(
             "colmap_failed_pair_is_stored_as_colmap_stores_it",
             failed_pair_as_colmap,
+        ),
+        Trial::test(
+            "colmap_matches_table_is_written_as_colmap_writes_it",
+            matches_table_as_colmap,
         ),
     ];
     if let Err(reason) = colmap_version() {
@@ -285,6 +292,16 @@ fn mapper_registers_images() -> Result<(), Failed> {
     let mut db = Database::open_existing(&path)?;
     for (a, b) in pairs() {
         let (e, f, pose) = scene.geometry(a, b);
+        // As the folder run writes a verified pair: its matches, then its geometry.
+        let matches: Vec<Match> = putative(a, b)
+            .into_iter()
+            .map(|[query, train]| Match {
+                query,
+                train,
+                distance: 0,
+            })
+            .collect();
+        db.add_matches(ids[a], ids[b], &matches)?;
         db.add_two_view_geometry(&TwoViewGeometry {
             f: Some(f),
             e: Some(e),
@@ -720,6 +737,85 @@ fn failed_pair_as_colmap() -> Result<(), Failed> {
     let (theirs, ours) = (describe(&imported), describe(&written));
     if theirs.len() != 1 || theirs != ours {
         return Err(format!("COLMAP {theirs:?}\nours   {ours:?}").into());
+    }
+    std::fs::remove_dir_all(&dir).ok();
+    Ok(())
+}
+
+/// The rows of a database's `matches`: pair id, rows, cols, the blob (`None`: NULL).
+fn matches_rows(path: &Path) -> Vec<(i64, i64, i64, Option<Vec<u8>>)> {
+    let sql = Connection::open(path).unwrap();
+    let mut statement = sql
+        .prepare("SELECT pair_id, rows, cols, data FROM matches ORDER BY pair_id")
+        .unwrap();
+    statement
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)))
+        .unwrap()
+        .map(Result::unwrap)
+        .collect()
+}
+
+/// COLMAP's `matches_importer` writes the putative matches of every listed pair into `matches`
+/// (its own verification's table beside `two_view_geometries`): [`Database::add_matches`] of the
+/// same pairs writes the same rows, byte for byte, pairs given with the larger image id first
+/// turned round, a pair without matches included.
+fn matches_table_as_colmap() -> Result<(), Failed> {
+    let dir = workspace("matches");
+    let scene = scene();
+    let (imported, db, ids) = scene_database(&dir, "imported.db", &scene);
+    db.finish()?;
+    let list = dir.join("matches.txt");
+    let empty = (2, 3);
+    let listed = |a: usize, b: usize| {
+        if (a, b) == empty {
+            vec![]
+        } else {
+            putative(a, b)
+        }
+    };
+    let mut text = String::new();
+    for (a, b) in pairs() {
+        text += &format!("{} {}\n", image_name(a), image_name(b));
+        for [i, j] in listed(a, b) {
+            text += &format!("{i} {j}\n");
+        }
+        text += "\n";
+    }
+    std::fs::write(&list, text)?;
+    import_matches(&imported, &list, "raw")?;
+    let (written, mut db, _) = scene_database(&dir, "written.db", &scene);
+    for (a, b) in pairs() {
+        let matches: Vec<Match> = listed(a, b)
+            .into_iter()
+            .map(|[query, train]| Match {
+                query,
+                train,
+                distance: 0,
+            })
+            .collect();
+        db.add_matches(ids[a], ids[b], &matches)?;
+    }
+    db.finish()?;
+    let (theirs, ours) = (matches_rows(&imported), matches_rows(&written));
+    if theirs.len() != pairs().len() {
+        return Err(format!("COLMAP wrote {} rows of matches", theirs.len()).into());
+    }
+    for (t, o) in theirs.iter().zip(&ours) {
+        if t != o {
+            let head = |r: &(i64, i64, i64, Option<Vec<u8>>)| {
+                format!(
+                    "{} {} {} {:?}",
+                    r.0,
+                    r.1,
+                    r.2,
+                    r.3.as_ref().map(|d| &d[..d.len().min(16)])
+                )
+            };
+            return Err(format!("COLMAP {}\nours   {}", head(t), head(o)).into());
+        }
+    }
+    if theirs.len() != ours.len() {
+        return Err(format!("{} rows, ours {}", theirs.len(), ours.len()).into());
     }
     std::fs::remove_dir_all(&dir).ok();
     Ok(())

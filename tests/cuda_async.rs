@@ -34,9 +34,11 @@ mod gpu {
 
     const GPU: Backend = Backend::Cuda { device: 0 };
 
+    /// Eight images of different sizes (smaller under the sanitizer scale).
     fn images() -> Vec<Gray> {
+        let (w, h) = scale::pick((640, 480), (320, 240));
         let mut images: Vec<Gray> = (0..7)
-            .map(|i| rectangles(640 + 64 * i, 480 + 8 * i, 40 + i as u64))
+            .map(|i| rectangles(w + 64 * i, h + 8 * i, 40 + i as u64))
             .collect();
         images.push(astronaut());
         images
@@ -44,8 +46,8 @@ mod gpu {
 
     pub fn eight_in_flight() -> Result<(), Failed> {
         let images = images();
-        let gpu = Extractor::new(GPU, ExtractorConfig::default())?;
-        let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+        let gpu = Extractor::new(GPU, scale::budget(ExtractorConfig::default()))?;
+        let cpu = Extractor::new(Backend::Cpu, scale::budget(ExtractorConfig::default()))?;
         let streams: Vec<GpuStream> = (0..4)
             .map(|_| GpuStream::new(0))
             .collect::<Result<_, _>>()?;
@@ -72,8 +74,8 @@ mod gpu {
 
     pub fn pipelined() -> Result<(), Failed> {
         let images = images();
-        let gpu = Extractor::new(GPU, ExtractorConfig::default())?;
-        let cpu = Extractor::new(Backend::Cpu, ExtractorConfig::default())?;
+        let gpu = Extractor::new(GPU, scale::budget(ExtractorConfig::default()))?;
+        let cpu = Extractor::new(Backend::Cpu, scale::budget(ExtractorConfig::default()))?;
         let gpu_matcher = Matcher::new(GPU, MatchConfig::default())?;
         let cpu_matcher = Matcher::new(Backend::Cpu, MatchConfig::default())?;
         let (extract_stream, match_stream) = (GpuStream::new(0)?, GpuStream::new(0)?);
@@ -154,8 +156,11 @@ mod gpu {
         let views: Vec<_> = owned.iter().map(|g| g.view()).collect();
         let mut compared = 0;
         let configs = scale::pick(
-            vec![ExtractorConfig::default(), ExtractorConfig::single_scale()],
-            vec![ExtractorConfig::default()],
+            vec![
+                scale::budget(ExtractorConfig::default()),
+                scale::budget(ExtractorConfig::single_scale()),
+            ],
+            vec![scale::budget(ExtractorConfig::default())],
         );
         for config in configs {
             let gpu = Extractor::new(GPU, config.clone())?;

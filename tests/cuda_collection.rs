@@ -252,17 +252,23 @@ mod gpu {
         let n = sets.len();
         let mut pairs: Vec<(usize, usize)> =
             (0..n).flat_map(|a| (0..n).map(move |b| (a, b))).collect();
-        pairs.extend((0..50).map(|_| (rng.below(n as u64) as usize, rng.below(n as u64) as usize)));
+        let extra = scale::pick(50, 10);
+        pairs.extend(
+            (0..extra).map(|_| (rng.below(n as u64) as usize, rng.below(n as u64) as usize)),
+        );
         let dev = clatch::cuda::hooks::device(0)?;
         let mut compared = 0;
-        for config in scale::thin(match_configs(), 4) {
+        // Under the sanitizer scale every pair runs once per (configuration, family, budget) and each
+        // block is a launch: fewer configurations and budgets, the block shapes all still there.
+        for config in scale::thin(match_configs(), scale::pick(4, 13)) {
             let cpu = matcher(Backend::Cpu, &config)?;
             let want: Vec<Vec<Match>> = pairs
                 .iter()
                 .map(|&(a, b)| expected(&cpu, &sets[a], &sets[b]))
                 .collect();
             for family in families()? {
-                for budget in [(1, 1 << 20), (3, 1 << 20), (1 << 16, 400), (7, 100)] {
+                for budget in scale::thin([(1, 1 << 20), (3, 1 << 20), (1 << 16, 400), (7, 100)], 2)
+                {
                     let got = clatch::cuda::hooks::match_pairs_in_blocks(
                         dev.clone(),
                         &refs,

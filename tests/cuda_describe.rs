@@ -56,7 +56,7 @@ mod gpu {
         weights: PatchWeights,
         smoothing: Smoothing,
     ) -> Extractor {
-        let config = ExtractorConfig::default().with_descriptor(
+        let config = scale::budget(ExtractorConfig::default()).with_descriptor(
             DescriptorConfig::default()
                 .with_width(DescriptorWidth::from_bits(bits).unwrap())
                 .with_weights(weights)

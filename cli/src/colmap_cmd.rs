@@ -85,15 +85,15 @@ fn folder_job(args: &ColmapArgs) -> Result<FolderJob, CliError> {
         },
         None => FolderCamera::PerPhoto,
     };
-    let job = FolderJob::new(&args.images, &args.database);
-    let job = if args.verify {
+    let job = FolderJob::new(&args.images, &args.database).with_match_list_written(args.match_list);
+    let job = if args.no_verify {
+        job.without_verification()
+    } else {
         let mut config = FolderJob::default_verification();
         if args.no_neighbour_consistency {
             config.neighbour_consistency = None;
         }
         job.with_verification(config)
-    } else {
-        job
     };
     Ok(job
         .with_workspace(workspace_path(args))
@@ -197,7 +197,7 @@ fn write_and_run(
             println!("  colmap      not found on PATH: database written, COLMAP not run. Run:");
             let final_paths = (
                 report.database.as_path(),
-                report.match_list.as_path(),
+                report.match_list.as_deref(),
                 workspace.sparse.path(),
             );
             for (step, step_args) in &colmap_steps(args, final_paths) {
@@ -269,7 +269,7 @@ fn keep_after_colmap_failed(
     };
     let final_paths = (
         report.database.as_path(),
-        report.match_list.as_path(),
+        report.match_list.as_deref(),
         workspace.sparse.path(),
     );
     let commands = colmap_steps(args, final_paths)
@@ -374,23 +374,25 @@ fn extraction_config(
 const KEEP_FOCAL_LENGTH: &str = "Mapper.ba_refine_focal_length";
 
 /// The COLMAP steps after the database, on the given database, match list and model folder: import
-/// with verification (unless clatch verified, `--verify`), then the mapper.
+/// with verification (only with `--no-verify`, when clatch did not verify), then the mapper.
 fn colmap_steps(
     args: &ColmapArgs,
-    (database, match_list, sparse): (&Path, &Path, &Path),
+    (database, match_list, sparse): (&Path, Option<&Path>, &Path),
 ) -> Vec<(&'static str, Vec<OsString>)> {
     let os = |s: &str| OsString::from(s);
-    let import = vec![
-        os("--database_path"),
-        database.into(),
-        os("--match_list_path"),
-        match_list.into(),
-        os("--match_type"),
-        os("raw"),
-        // Geometric verification needs no GPU; COLMAP 3.8's GPU default fails on a headless machine.
-        os("--SiftMatching.use_gpu"),
-        os("0"),
-    ];
+    let import = |match_list: &Path| {
+        vec![
+            os("--database_path"),
+            database.into(),
+            os("--match_list_path"),
+            match_list.into(),
+            os("--match_type"),
+            os("raw"),
+            // Geometric verification needs no GPU; COLMAP 3.8's GPU default fails on a headless machine.
+            os("--SiftMatching.use_gpu"),
+            os("0"),
+        ]
+    };
     let mut mapper = vec![
         os("--database_path"),
         database.into(),
@@ -422,10 +424,11 @@ fn colmap_steps(
         mapper.push(format!("--{key}").into());
         mapper.push(value.into());
     }
-    if args.verify {
-        vec![("mapper", mapper)]
-    } else {
-        vec![("matches_importer", import), ("mapper", mapper)]
+    match match_list {
+        Some(list) if args.no_verify => {
+            vec![("matches_importer", import(list)), ("mapper", mapper)]
+        }
+        _ => vec![("mapper", mapper)],
     }
 }
 
@@ -487,6 +490,9 @@ fn print_extraction_report(
         counts.pairs - counts.pairs_with_matches
     );
     println!("  database    {}", report.database.display());
+    if let Some(list) = &report.match_list {
+        println!("  match list  {}", list.display());
+    }
     println!(
         "  extract     {:.2} s ({})",
         times.extraction.as_secs_f64(),
@@ -500,18 +506,29 @@ fn print_extraction_report(
     );
     if counts.pairs_verified > 0 {
         println!(
-            "  verify      {:.2} s ({}): {} of {} pairs kept, {} of {} matches ({:.1} %)",
+            "  verify      {:.2} s ({}): {}",
             times.verification.as_secs_f64(),
             report::per_second(counts.pairs_verified, times.verification, "pairs"),
-            counts.pairs_with_inliers,
-            counts.pairs_verified,
-            counts.inliers,
-            counts.matches,
-            100.0 * counts.inliers as f64 / counts.matches.max(1) as f64
+            kept_share(counts)
         );
     }
     println!("  write       {:.2} s", times.writing.as_secs_f64());
     println!("  total       {run}: extract, match and write");
+}
+
+/// The share of pairs and of matches that verification kept: "P of Q pairs kept (x %), M of N
+/// matches (y %)".
+fn kept_share(counts: &clatch::colmap::FolderCounts) -> String {
+    let percent = |part: usize, whole: usize| 100.0 * part as f64 / whole.max(1) as f64;
+    format!(
+        "{} of {} pairs kept ({:.1} %), {} of {} matches ({:.1} %)",
+        counts.pairs_with_inliers,
+        counts.pairs_verified,
+        percent(counts.pairs_with_inliers, counts.pairs_verified),
+        counts.inliers,
+        counts.matches,
+        percent(counts.inliers, counts.matches)
+    )
 }
 
 fn print_colmap_report(
@@ -575,51 +592,77 @@ mod tests {
     }
 
     #[test]
-    fn verify_drops_inconsistent_neighbours_unless_told_not_to() {
+    fn verification_is_the_default_and_drops_inconsistent_neighbours_unless_told_not_to() {
         let rule = |extra: &[&str]| {
             let job = folder_job(&colmap_args(extra)).unwrap();
             job.verification.map(|v| v.neighbour_consistency.is_some())
         };
-        assert_eq!(rule(&[]), None);
-        assert_eq!(rule(&["--verify"]), Some(true));
+        assert_eq!(rule(&[]), Some(true));
+        assert_eq!(rule(&["--verify"]), Some(true), "--verify is the default");
+        assert_eq!(rule(&["--no-neighbour-consistency"]), Some(false));
+        assert_eq!(rule(&["--no-verify"]), None);
+        for clash in [
+            &["--no-verify", "--verify"][..],
+            &["--no-verify", "--no-neighbour-consistency"],
+        ] {
+            let parsed = crate::Cli::try_parse_from(
+                [
+                    &["clatch", "colmap", "--images", "d", "--database", "d.db"][..],
+                    clash,
+                ]
+                .concat(),
+            );
+            assert!(parsed.is_err(), "{clash:?} accepted");
+        }
+    }
+
+    #[test]
+    fn the_match_list_is_written_without_verification_or_when_asked() {
+        let writes = |extra: &[&str]| folder_job(&colmap_args(extra)).unwrap().writes_match_list();
+        assert!(!writes(&[]));
+        assert!(writes(&["--match-list"]));
+        assert!(writes(&["--no-verify"]));
+    }
+
+    #[test]
+    fn verified_the_mapper_runs_straight_on_the_database() {
+        let names = |extra: &[&str], list: Option<&Path>| {
+            let paths = (Path::new("d.db"), list, Path::new("sparse"));
+            let steps = colmap_steps(&colmap_args(extra), paths);
+            steps.iter().map(|(step, _)| *step).collect::<Vec<_>>()
+        };
+        let list = Some(Path::new("m.txt"));
+        assert_eq!(names(&[], None), ["mapper"]);
+        assert_eq!(names(&["--match-list"], list), ["mapper"]);
         assert_eq!(
-            rule(&["--verify", "--no-neighbour-consistency"]),
-            Some(false)
-        );
-        let parsed = crate::Cli::try_parse_from([
-            "clatch",
-            "colmap",
-            "--images",
-            "d",
-            "--database",
-            "d.db",
-            "--no-neighbour-consistency",
-        ]);
-        assert!(
-            parsed.is_err(),
-            "--no-neighbour-consistency without --verify"
+            names(&["--no-verify"], list),
+            ["matches_importer", "mapper"]
         );
     }
 
     #[test]
-    fn with_verify_the_mapper_runs_straight_on_the_database() {
-        let paths = (Path::new("d.db"), Path::new("m.txt"), Path::new("sparse"));
-        let steps = colmap_steps(&colmap_args(&["--verify"]), paths);
-        let names: Vec<_> = steps.iter().map(|(step, _)| *step).collect();
-        assert_eq!(names, ["mapper"]);
-        let steps = colmap_steps(&colmap_args(&[]), paths);
-        let names: Vec<_> = steps.iter().map(|(step, _)| *step).collect();
-        assert_eq!(names, ["matches_importer", "mapper"]);
+    fn the_verification_line_gives_both_shares_kept() {
+        let mut counts = clatch::colmap::FolderCounts::default();
+        (counts.pairs_verified, counts.pairs_with_inliers) = (8, 6);
+        (counts.matches, counts.inliers) = (1000, 250);
+        assert_eq!(
+            kept_share(&counts),
+            "6 of 8 pairs kept (75.0 %), 250 of 1000 matches (25.0 %)"
+        );
     }
 
     fn mapper_args(extra: &[&str]) -> Vec<String> {
         let args = colmap_args(extra);
         let steps = colmap_steps(
             &args,
-            (Path::new("d.db"), Path::new("m.txt"), Path::new("sparse")),
+            (
+                Path::new("d.db"),
+                Some(Path::new("m.txt")),
+                Path::new("sparse"),
+            ),
         );
-        let [_, (step, mapper)] = steps.as_slice() else {
-            panic!("two steps without --verify")
+        let [.., (step, mapper)] = steps.as_slice() else {
+            panic!("no step")
         };
         assert_eq!(*step, "mapper");
         mapper

@@ -116,16 +116,16 @@ pub enum CliError {
         tail: String,
     },
 
-    /// A COLMAP step failed after the database and match list were complete: both were kept.
+    /// A COLMAP step failed after the database (and match list) were complete: both were kept.
     #[error(
-        "{error}\nthe database {database} and the match list {match_list} are kept (every photo's \
-         features and the putative matches); COLMAP can run on them again without extracting:\n{commands}",
-        database = .database.display(), match_list = .match_list.display()
+        "{error}\n{kept} (every photo's features and the matches); COLMAP can run on them again \
+         without extracting:\n{commands}",
+        kept = kept_files(database, match_list.as_deref())
     )]
     ColmapFailedKept {
         error: Box<CliError>,
         database: PathBuf,
-        match_list: PathBuf,
+        match_list: Option<PathBuf>,
         commands: String,
     },
 
@@ -204,6 +204,18 @@ impl CliError {
             path: path.to_path_buf(),
             source,
         }
+    }
+}
+
+/// "the database X (and the match list Y) are kept".
+fn kept_files(database: &std::path::Path, match_list: Option<&std::path::Path>) -> String {
+    match match_list {
+        Some(list) => format!(
+            "the database {} and the match list {} are kept",
+            database.display(),
+            list.display()
+        ),
+        None => format!("the database {} is kept", database.display()),
     }
 }
 

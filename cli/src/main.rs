@@ -227,7 +227,7 @@ pub struct ColmapArgs {
     /// principal point at the centre, one camera per image size and focal, refined by the mapper.
     #[arg(long, value_name = "FILE")]
     pub camera_k: Option<PathBuf>,
-    /// Folder for the match list, COLMAP's logs and its model (default beside DATABASE: `out.db` gives
+    /// Folder for COLMAP's logs, its model and the match list, if any (default beside DATABASE: `out.db` gives
     /// `out-colmap`, any other name keeps its extension, `out.sqlite` gives `out.sqlite-colmap`).
     #[arg(long, value_name = "DIR")]
     pub workspace: Option<PathBuf>,
@@ -244,19 +244,28 @@ pub struct ColmapArgs {
     pub force: bool,
     #[command(flatten)]
     pub input: InputArgs,
-    /// Only write the database and match list; do not run COLMAP.
+    /// Only write the database (and match list); do not run COLMAP.
     #[arg(long)]
     pub no_colmap: bool,
-    /// Verify every pair in clatch (two-view geometry by LO-RANSAC with COLMAP 3.8's rules) and
-    /// write the geometries into the database: COLMAP's mapper then runs straight on it, without
-    /// `colmap matches_importer`.
-    #[arg(long)]
+    /// Accepted for compatibility: verification is the default (see --no-verify).
+    #[arg(long, conflicts_with = "no_verify")]
     pub verify: bool,
-    /// With --verify: verify every putative match, as COLMAP does, without first dropping those whose
+    /// Leave the verification to COLMAP: write the match list (`matches.txt` in the workspace) and
+    /// run `colmap matches_importer` on it before the mapper. By default clatch verifies every pair
+    /// (two-view geometry by LO-RANSAC with COLMAP 3.8's rules) and writes the matches and their
+    /// geometries into the database, as COLMAP's own matcher does: COLMAP's mapper then runs
+    /// straight on it, and no match list is written (see --match-list).
+    #[arg(long)]
+    pub no_verify: bool,
+    /// Write the match list (`matches.txt` in the workspace) even though clatch verifies the pairs
+    /// (it is always written with --no-verify).
+    #[arg(long)]
+    pub match_list: bool,
+    /// Verify every putative match, as COLMAP does, without first dropping those whose
     /// neighbours (within 160 px in the first image) do not move with them into the second
     /// (clatch::verify::NeighbourConsistency, on by default: it drops matches one period off on
     /// repeated structure, a facade of near-identical windows).
-    #[arg(long, requires = "verify")]
+    #[arg(long, conflicts_with = "no_verify")]
     pub no_neighbour_consistency: bool,
     /// The COLMAP 3.8 executable (default: `colmap` on PATH, skipped with a note if absent).
     #[arg(long, value_name = "PROGRAM", conflicts_with = "no_colmap")]

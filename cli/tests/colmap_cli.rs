@@ -50,6 +50,7 @@ fn writes_database_and_match_list() {
         "--backend",
         "cpu",
         "--no-colmap",
+        "--match-list",
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let sql = Connection::open(&db).unwrap();
@@ -96,6 +97,17 @@ fn writes_database_and_match_list() {
         pairs += 1;
     }
     assert_eq!(pairs, 3);
+    // Verified by default: the database holds every pair's matches, as many as the list's.
+    let (stored, rows): (i64, i64) = sql
+        .query_row("SELECT COUNT(*), SUM(rows) FROM matches", [], |r| {
+            Ok((r.get(0)?, r.get(1)?))
+        })
+        .unwrap();
+    let listed = list
+        .lines()
+        .filter(|l| l.split(' ').all(|w| w.parse::<u32>().is_ok()))
+        .count();
+    assert_eq!((stored, rows as usize), (3, listed));
     // The database is never overwritten without --force.
     let again = clatch(&[
         "--images",
@@ -156,9 +168,18 @@ fn failures_are_reported_with_their_cause() {
     {
         use std::os::unix::fs::PermissionsExt;
         std::fs::set_permissions(&fake, std::fs::Permissions::from_mode(0o755)).unwrap();
+        // Verified by clatch, the mapper is COLMAP's first step; with --no-verify, matches_importer.
         let e = run(&dir.join("images"), &["--colmap", fake.to_str().unwrap()]);
+        assert!(e.contains("colmap mapper failed"), "{e}");
+        assert!(e.contains("fake colmap: mapper broke"), "{e}");
+        assert!(e.contains("the database") && e.contains("is kept"), "{e}");
+        let e = run(
+            &dir.join("images"),
+            &["--colmap", fake.to_str().unwrap(), "--no-verify", "--force"],
+        );
         assert!(e.contains("colmap matches_importer failed"), "{e}");
         assert!(e.contains("fake colmap: matches_importer broke"), "{e}");
+        assert!(e.contains("and the match list"), "{e}");
     }
     std::fs::remove_dir_all(&dir).ok();
 }

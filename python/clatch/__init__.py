@@ -9,6 +9,8 @@ OpenCV LATCH's byte order, matches as structured arrays of ``MATCH_DTYPE``. Ever
 that is also a ``TypeError``). Colour images are RGB unless ``channels="bgr"`` (``cv2.imread``).
 ``points``, ``to_cv2_keypoints`` and ``to_cv2_matches`` hand results to OpenCV;
 ``OpencvLatch`` with ``Extractor.describe_opencv`` computes OpenCV's own LATCH bit for bit.
+``verify_pair`` (and ``verify_pairs``, many at once) gives the two-view geometry COLMAP 3.8 would find
+for a pair's matches (``TwoViewGeometry``: F, E, H, the inliers).
 Extractors and matchers pickle (rebuilt from their settings on the same backend).
 ``clatch.colmap.match_folder`` turns a folder of photos into a COLMAP database
 (as ``clatch colmap``); ``clatch.ray.match_folder`` does the same over a Ray cluster (``import
@@ -26,9 +28,12 @@ from ._clatch import (
     Extractor,
     Matcher,
     OpencvLatch,
+    TwoViewGeometry,
     __version__,
     imread,
     to_gray,
+    verify_pair,
+    verify_pairs,
 )
 from ._exceptions import (
     ArgumentTypeError,
@@ -66,10 +71,13 @@ __all__ = [
     "MissingDependencyError",
     "OpencvLatch",
     "OutOfMemoryError",
+    "TwoViewGeometry",
     "__version__",
     "imread",
     "points",
     "to_cv2_keypoints",
     "to_cv2_matches",
     "to_gray",
+    "verify_pair",
+    "verify_pairs",
 ]

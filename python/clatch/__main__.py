@@ -89,12 +89,14 @@ def colmap(args: argparse.Namespace) -> int:
         matcher={"ratio": args.ratio},
         max_pixels=args.max_pixels,
         force=args.force,
-        verify=args.verify,
+        verify=not args.no_verify,
+        match_list=args.match_list,
     )
-    verified = f", {result.inliers} verified in {result.pairs_with_inliers} pairs" if args.verify else ""
+    verified = "" if args.no_verify else f", {result.inliers} verified in {result.pairs_with_inliers} pairs"
+    outputs = ", ".join(str(p) for p in (result.database, result.match_list) if p is not None)
     print(
         f"{result.images} photos, {result.keypoints} keypoints, {result.pairs} pairs, {result.matches} matches"
-        f"{verified} -> {result.database}, {result.match_list}"
+        f"{verified} -> {outputs}"
     )
     return 0
 
@@ -116,13 +118,20 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--max-distance", type=int)
     _extractor_options(p)
     p.set_defaults(run=match)
-    p = commands.add_parser("colmap", help="a folder of photos -> a COLMAP database and match list")
+    p = commands.add_parser("colmap", help="a folder of photos -> a COLMAP database, pairs verified")
     p.add_argument("--images", required=True)
     p.add_argument("--database", required=True)
     p.add_argument("--workspace")
     p.add_argument("--camera-k", help="a K file: 9 numbers, row-major")
     p.add_argument("--force", action="store_true", help="replace an existing database")
-    p.add_argument("--verify", action="store_true", help="verify every pair and write the geometries (clatch colmap --verify)")
+    verification = p.add_mutually_exclusive_group()
+    verification.add_argument("--verify", action="store_true", help="accepted for compatibility: verification is the default")
+    verification.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="write the match list for colmap matches_importer instead of verifying (clatch colmap --no-verify)",
+    )
+    p.add_argument("--match-list", action="store_true", help="write the match list too when verifying (clatch colmap --match-list)")
     p.add_argument("--ratio", type=float, default=0.8)
     _extractor_options(p)
     p.set_defaults(run=colmap)

@@ -12,6 +12,9 @@ __all__ = [
     "Extractor",
     "Matcher",
     "OpencvLatch",
+    "TwoViewGeometry",
+    "verify_pair",
+    "verify_pairs",
     "imread",
     "to_gray",
     "_reads_in_place",
@@ -195,6 +198,50 @@ def imread(path: Union[str, os.PathLike[str]], max_pixels: int = 100_000_000) ->
 def to_gray(image: _Image, *, channels: _Channels = "rgb") -> _Image:
     """The gray image the extractor sees (colour with OpenCV's integer weights)."""
 
+_Camera = Optional[Union[Tuple[int, int], Tuple[int, int, Any]]]
+_VerifyInput = Union[Tuple[Any, Any, Any], Tuple[Any, Any, Any, _Camera, _Camera]]
+
+@final
+class TwoViewGeometry:
+    """The two-view geometry of a verified pair, as COLMAP 3.8's ``TwoViewGeometry::Estimate``."""
+    @property
+    def config(self) -> str:
+        """``"degenerate"``, ``"calibrated"``, ``"uncalibrated"``, ``"planar_or_panoramic"``, ``"watermark"``, ..."""
+    @property
+    def config_code(self) -> int:
+        """COLMAP 3.8's integer for ``config``."""
+    @property
+    def F(self) -> Optional[npt.NDArray[np.float64]]: ...
+    @property
+    def E(self) -> Optional[npt.NDArray[np.float64]]: ...
+    @property
+    def H(self) -> Optional[npt.NDArray[np.float64]]: ...
+    @property
+    def inliers(self) -> npt.NDArray[np.uint32]:
+        """Indices into the pair's matches of the inliers, ascending."""
+    @property
+    def num_inliers(self) -> int: ...
+    @property
+    def inlier_counts(self) -> dict[str, int]:
+        """Inliers of each model: ``{"E": .., "F": .., "H": ..}``."""
+
+def verify_pair(
+    keypoints_a: npt.NDArray[Any],
+    keypoints_b: npt.NDArray[Any],
+    matches: npt.NDArray[Any],
+    camera_a: _Camera = None,
+    camera_b: _Camera = None,
+    *,
+    key: int = 0,
+    **options: Any,
+) -> TwoViewGeometry:
+    """The two-view geometry COLMAP 3.8 would find for one pair (``clatch::verify``, GIL released)."""
+
+def verify_pairs(
+    pairs: Sequence[_VerifyInput], *, keys: Optional[Sequence[int]] = None, **options: Any
+) -> list[TwoViewGeometry]:
+    """``verify_pair`` of many pairs on the CPU's threads, GIL released; results in order."""
+
 @final
 class ImageFolder:
     """The photos of a folder, checked before any work (``clatch.colmap``): the image files directly
@@ -264,7 +311,8 @@ class _FolderJob:
         subpixel_radius: int = 3,
         max_pixels: int = 100_000_000,
         force: bool = False,
-        verify: bool = False,
+        verify: bool = True,
+        match_list: bool = False,
     ) -> _FolderJob: ...
     def run(self, progress: Optional[Callable[[str, int, int], None]] = None) -> dict[str, Any]: ...
     def plan(self) -> _FolderPlan: ...

@@ -1,18 +1,23 @@
-"""A folder of photos → a COLMAP 3.8 database and match list, as ``clatch colmap`` writes them.
+"""A folder of photos → a COLMAP 3.8 database, as ``clatch colmap`` writes it.
 
 ``match_folder(images, database)`` lists the folder, extracts every photo with the structure-from-
 motion settings of ``clatch colmap`` (8192 keypoints a photo spread over an 8 x 8 grid, sub-pixel
-positions), matches every pair (or the ``pairs`` given) and writes the database (cameras, images,
-keypoints) and the match list (``<workspace>/matches.txt``): it runs the Rust library's one folder
-run (``clatch::colmap::FolderJob``), the code the command-line tool runs, so with the same options
-the files are byte-identical to those of ``clatch colmap --images DIR --database DB --no-colmap``.
-``clatch.ray.match_folder`` spreads the same work over a Ray cluster and writes the same bytes.
+positions), matches and verifies every pair (or the ``pairs`` given) and writes the database
+(cameras, images, keypoints, matches and two-view geometries, as after COLMAP's own matcher): it runs
+the Rust library's one folder run (``clatch::colmap::FolderJob``), the code the command-line tool
+runs, so with the same options the files are byte-identical to those of
+``clatch colmap --images DIR --database DB --no-colmap``. ``clatch.ray.match_folder`` spreads the
+same work over a Ray cluster and writes the same bytes.
 
-COLMAP then verifies the matches and reconstructs::
+COLMAP then reconstructs::
+
+    colmap mapper --database_path DB --image_path DIR --output_path WORKSPACE/sparse
+
+With ``verify=False`` the database holds no matches: the match list (``<workspace>/matches.txt``)
+goes to COLMAP's own verification first::
 
     colmap matches_importer --database_path DB --match_list_path WORKSPACE/matches.txt \\
         --match_type raw --SiftMatching.use_gpu 0
-    colmap mapper --database_path DB --image_path DIR --output_path WORKSPACE/sparse
 """
 
 from __future__ import annotations
@@ -83,7 +88,8 @@ class MatchFolderResult:
     """What ``match_folder`` wrote."""
 
     database: Path
-    match_list: Path
+    #: ``None`` when no match list was written (verified, without ``match_list=True``).
+    match_list: Optional[Path]
     images: int
     keypoints: int
     pairs: int
@@ -91,8 +97,8 @@ class MatchFolderResult:
     matches: int
     #: Pairs with at least one match (the pairs in the match list).
     pairs_with_matches: int
-    #: With ``verify=True``: pairs whose two-view geometry was written, those of them with inliers,
-    #: and the inlier matches over all pairs.
+    #: Verified (the default): pairs whose two-view geometry was written, those of them with inliers,
+    #: and the inlier matches over all pairs; 0 with ``verify=False``.
     pairs_verified: int = 0
     pairs_with_inliers: int = 0
     inliers: int = 0
@@ -113,7 +119,8 @@ def _result(report: Mapping[str, Any], **ray_counts: int) -> MatchFolderResult:
     """The result of the library's report (``_FolderJob.run``, ``_FolderWriter.finish``)."""
     fields: dict[str, Any] = {**report, **ray_counts}
     fields["database"] = Path(fields["database"])
-    fields["match_list"] = Path(fields["match_list"])
+    if fields["match_list"] is not None:
+        fields["match_list"] = Path(fields["match_list"])
     return MatchFolderResult(**fields)
 
 
@@ -225,16 +232,17 @@ def match_folder(
     subpixel_radius: int = 3,
     max_pixels: int = 100_000_000,
     force: bool = False,
-    verify: bool = False,
+    verify: bool = True,
+    match_list: bool = False,
     progress: Optional[Progress] = None,
 ) -> MatchFolderResult:
-    """Features and matches of a folder of photos into a new COLMAP 3.8 database and match list.
+    """Features, matches and verified geometries of a folder of photos into a new COLMAP 3.8 database.
 
     - ``images``: the folder (its image files, not its subfolders, in name order: ``ImageFolder``).
     - ``database``: the database to create; an existing file is a ``DatabaseError`` unless
       ``force=True``, which replaces it once the new one is complete.
-    - ``workspace``: the folder of the match list ``matches.txt`` (default: the database's name +
-      ``-colmap``, beside it), as ``clatch colmap``.
+    - ``workspace``: the folder of the match list ``matches.txt``, if one is written (default: the
+      database's name + ``-colmap``, beside it), as ``clatch colmap``.
     - ``pairs``: the pairs to match, as ``(i, j)`` indices into the folder's photos or
       ``(name_i, name_j)`` file names, written in that order; default every pair ``i < j``.
     - ``camera_k``: a K file (9 numbers, row-major) or a 3 x 3 matrix shared by every photo; default
@@ -243,9 +251,13 @@ def match_folder(
       keywords on top of ``grid=8``; ``matcher``: ``Matcher`` keywords (ratio 0.8, cross-check).
     - ``subpixel``: ``"score"`` (default), ``"none"`` or ``"corner"`` (over a ``2 subpixel_radius + 1``
       window), ``clatch colmap --subpixel``; descriptors and matches do not depend on it.
-    - ``verify``: verify every pair in clatch (``clatch::verify``, on the CPU) and write the two-view
-      geometries into the database, as ``colmap matches_importer`` would: ``colmap mapper`` then runs
-      straight on it (``clatch colmap --verify``).
+    - ``verify`` (default ``True``): verify every pair in clatch (``clatch::verify``, on the CPU,
+      COLMAP 3.8's rules with the neighbour-consistency filter) and write the matches and two-view
+      geometries into the database, as COLMAP's own matcher would: ``colmap mapper`` then runs
+      straight on it. ``False``: the match list alone, for ``colmap matches_importer``
+      (``clatch colmap --no-verify``).
+    - ``match_list``: write the match list even though the pairs are verified
+      (``clatch colmap --match-list``); it is always written with ``verify=False``.
     - ``progress(stage, done, total)``: called as each stage starts (``done = 0``), as photos are
       extracted and as pairs are matched; an exception it raises stops the run.
 
@@ -270,5 +282,6 @@ def match_folder(
         max_pixels=max_pixels,
         force=force,
         verify=verify,
+        match_list=match_list,
     )
     return _result(job.run(progress))

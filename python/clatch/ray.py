@@ -343,7 +343,8 @@ def match_folder(
     subpixel_radius: int = 3,
     max_pixels: int = 100_000_000,
     force: bool = False,
-    verify: bool = False,
+    verify: bool = True,
+    match_list: bool = False,
     progress: Optional[Progress] = None,
     num_actors: Optional[int] = None,
     actor_options: Optional[Mapping[str, Any]] = None,
@@ -373,8 +374,8 @@ def match_folder(
       actors than fit) raise ``ClusterError`` (kind ``"ResourcesUnavailable"``) before any actor
       is made (``ray.cluster_resources()``).
 
-    With ``verify=True`` the driver verifies each pair as it writes its matches (on its CPU), as
-    ``clatch.colmap.match_folder(verify=True)`` does.
+    The driver verifies each pair as it writes its matches (on its CPU), as
+    ``clatch.colmap.match_folder`` does (``verify=False``: the match list alone).
 
     The result's ``blocks``, ``blocks_rerun`` (blocks and extraction tasks run again because their
     actor died), ``actors_lost`` and ``descriptor_fetches`` say how the run went. The two
@@ -400,7 +401,14 @@ def match_folder(
     # Every check before any work, here, where the errors are plain clatch errors; the driver only
     # writes, so its job runs on the CPU.
     job = _job(
-        backend="cpu", workspace=workspace, pairs=pairs, camera_k=camera_k, force=force, verify=verify, **settings
+        backend="cpu",
+        workspace=workspace,
+        pairs=pairs,
+        camera_k=camera_k,
+        force=force,
+        verify=verify,
+        match_list=match_list,
+        **settings,
     )
     plan = job.plan()
     pair_list = plan.pairs

@@ -153,7 +153,7 @@ pub fn descriptors_out<'py>(py: Python<'py>, set: &DescriptorSet) -> PyResult<Bo
 }
 
 /// The `numpy.ndarray` in `obj`, or an `InvalidInputError` naming `what`.
-fn ndarray<'a, 'py>(
+pub(crate) fn ndarray<'a, 'py>(
     obj: &'a Bound<'py, PyAny>,
     what: &str,
 ) -> PyResult<&'a Bound<'py, PyUntypedArray>> {

@@ -9,6 +9,7 @@ mod colmap;
 mod errors;
 mod extractor;
 mod matcher;
+mod verify;
 
 use clatch::decode::DecodeLimits;
 use numpy::{Element, IntoPyArray, PyArrayMethods};
@@ -77,6 +78,9 @@ fn _clatch(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<extractor::Extractor>()?;
     m.add_class::<matcher::Matcher>()?;
     m.add_class::<extractor::OpencvLatch>()?;
+    m.add_class::<verify::TwoViewGeometry>()?;
+    m.add_function(wrap_pyfunction!(verify::verify_pair, m)?)?;
+    m.add_function(wrap_pyfunction!(verify::verify_pairs, m)?)?;
     colmap::register(m)?;
     m.add_function(wrap_pyfunction!(imread, m)?)?;
     m.add_function(wrap_pyfunction!(to_gray, m)?)?;

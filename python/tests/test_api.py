@@ -19,7 +19,7 @@ from helpers import ASTRONAUT, synthetic
 STUB = Path(_clatch.__file__).with_name("_clatch.pyi")
 PUBLIC_CLASSES = [clatch.Extractor, clatch.Matcher, clatch.OpencvLatch, clatch.colmap.ImageFolder]
 # Made by the package only (no constructor): documented and in the stub all the same.
-MADE_CLASSES = [clatch.colmap.PinholeCamera]
+MADE_CLASSES = [clatch.colmap.PinholeCamera, clatch.TwoViewGeometry]
 
 
 def stub_tree() -> ast.Module:

@@ -1,4 +1,4 @@
-"""``clatch.colmap``: a folder of photos → the database and match list of ``clatch colmap``, byte for
+"""``clatch.colmap``: a folder of photos → the database (and match list) of ``clatch colmap``, byte for
 byte, with the command-line tool's own defaults and with its options; given pairs; errors."""
 
 from __future__ import annotations
@@ -39,6 +39,16 @@ def match_list_pairs(path: Path) -> list[tuple[str, str, int]]:
     return out
 
 
+def database_pairs(database: Path) -> list[tuple[int, int]]:
+    """(pair_id, matches) of each pair with matches in a database's ``matches`` table, by pair id."""
+    import sqlite3
+
+    with sqlite3.connect(database) as sql:
+        rows = sql.execute("SELECT pair_id, rows, length(data) FROM matches WHERE rows > 0 ORDER BY pair_id").fetchall()
+    assert all(size == 8 * n for _, n, size in rows), rows
+    return [(pair, n) for pair, n, _ in rows]
+
+
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory) -> Path:
     return photo_folder(tmp_path_factory.mktemp("photos"), count=6)
@@ -51,12 +61,18 @@ OPTIONS = [
         ["--grid", "4", "--subpixel", "corner", "--subpixel-radius", "2", "--ratio", "0.9", "--max-keypoints", "800"],
         {"extractor": {"grid": 4, "max_keypoints": 800}, "subpixel": "corner", "subpixel_radius": 2, "matcher": {"ratio": 0.9}},
     ),
-    (["--single-scale", "--subpixel", "none", "--no-cross-check"], {"extractor": {"single_scale": True}, "subpixel": "none", "matcher": {"cross_check": False}}),
+    (
+        ["--single-scale", "--subpixel", "none", "--no-cross-check", "--match-list"],
+        {"extractor": {"single_scale": True}, "subpixel": "none", "matcher": {"cross_check": False}, "match_list": True},
+    ),
+    (["--no-verify"], {"verify": False}),
     (["--verify"], {"verify": True}),
 ]
 
 
-@pytest.mark.parametrize("flags,keywords", OPTIONS, ids=["defaults", "grid4-corner-ratio", "single-scale-none", "verify"])
+@pytest.mark.parametrize(
+    "flags,keywords", OPTIONS, ids=["defaults", "grid4-corner-ratio", "single-scale-none-list", "no-verify", "verify"]
+)
 def test_folder_is_byte_identical_to_the_tool(cli, backend, folder, tmp_path, flags, keywords):
     run_cli(cli, folder, tmp_path / "tool.db", flags)
     calls = []
@@ -65,17 +81,23 @@ def test_folder_is_byte_identical_to_the_tool(cli, backend, folder, tmp_path, fl
     )
     tool, ours = tmp_path / "tool.db", tmp_path / "py.db"
     assert ours.read_bytes() == tool.read_bytes(), "the databases differ"
-    tool_list = (tmp_path / "tool-colmap" / "matches.txt").read_bytes()
-    assert result.match_list == tmp_path / "py-colmap" / "matches.txt"
-    assert result.match_list.read_bytes() == tool_list, "the match lists differ"
+    verify = keywords.get("verify", True)
+    tool_list = tmp_path / "tool-colmap" / "matches.txt"
+    if verify and not keywords.get("match_list"):
+        # Verified, the matches are in the database; no match list is written.
+        assert result.match_list is None and not tool_list.exists()
+        pairs = database_pairs(ours)
+    else:
+        assert result.match_list == tmp_path / "py-colmap" / "matches.txt"
+        assert result.match_list.read_bytes() == tool_list.read_bytes(), "the match lists differ"
+        pairs = match_list_pairs(result.match_list)
     # Real matches between the overlapping views, or the comparison would say little.
-    pairs = match_list_pairs(result.match_list)
     assert len(pairs) == result.pairs_with_matches >= 10, pairs
     assert result.matches == sum(n for *_, n in pairs) > 200
     assert (result.images, result.pairs) == (6, SIX_PAIRS)
     assert calls[-1] == ("match", SIX_PAIRS, SIX_PAIRS) and ("extract", 6, 6) in calls
     # Verified, every pair's geometry is in the database (the bytes above equal the tool's).
-    verified = SIX_PAIRS if keywords.get("verify") else 0
+    verified = SIX_PAIRS if verify else 0
     assert result.pairs_verified == verified
     assert 0 < result.inliers <= result.matches if verified else result.inliers == 0
     # Nothing but the outputs is left behind.
@@ -98,13 +120,13 @@ def test_camera_matrix_as_file_and_array_equals_the_tool(cli, backend, folder, t
 
 def test_given_pairs_are_the_exhaustive_run_s_in_the_given_order(backend, folder, tmp_path):
     # Without the ratio test (not symmetric), the cross-check makes (i, j) and (j, i) the same matches.
-    mutual = {"ratio": None}
-    everything = clatch.colmap.match_folder(folder, tmp_path / "all.db", backend=backend, matcher=mutual)
+    mutual, lists = {"ratio": None}, {"verify": False}
+    everything = clatch.colmap.match_folder(folder, tmp_path / "all.db", backend=backend, matcher=mutual, **lists)
     blocks = {tuple(b.splitlines()[0].split(" ")): b for b in everything.match_list.read_text().split("\n\n") if b}
     names = clatch.colmap.ImageFolder(folder).names
     # Indices and names, any order; (4, 1) swaps query and train of the exhaustive (1, 4).
     given = [(3, 5), (names[0], names[2]), (4, 1)]
-    result = clatch.colmap.match_folder(folder, tmp_path / "some.db", pairs=given, backend=backend, matcher=mutual)
+    result = clatch.colmap.match_folder(folder, tmp_path / "some.db", pairs=given, backend=backend, matcher=mutual, **lists)
     assert result.pairs == 3
     assert (tmp_path / "some.db").read_bytes() == (tmp_path / "all.db").read_bytes()
     got = [b for b in result.match_list.read_text().split("\n\n") if b]
@@ -193,7 +215,7 @@ def test_outputs_are_readable_by_other_users(backend, folder, tmp_path):
     # usual umask 022, not a temporary file's 0600.
     old = os.umask(0o022)
     try:
-        clatch.colmap.match_folder(folder, tmp_path / "out.db", backend=backend)
+        clatch.colmap.match_folder(folder, tmp_path / "out.db", backend=backend, match_list=True)
     finally:
         os.umask(old)
     for path in [tmp_path / "out.db", tmp_path / "out-colmap" / "matches.txt"]:

@@ -41,10 +41,15 @@ def test_match_and_colmap(tmp_path):
     assert done.returncode == 0, done.stderr
     single = clatch.colmap.match_folder(folder, tmp_path / "lib.db", backend="cpu")
     assert (tmp_path / "py.db").read_bytes() == single.database.read_bytes()
+    assert " verified in " in done.stdout and not (tmp_path / "py-colmap" / "matches.txt").exists()
     done = run("colmap", "--images", str(folder), "--database", str(tmp_path / "v.db"), "--backend", "cpu", "--verify")
     assert done.returncode == 0 and " verified in " in done.stdout, done.stderr
-    single = clatch.colmap.match_folder(folder, tmp_path / "lib_v.db", backend="cpu", verify=True)
-    assert (tmp_path / "v.db").read_bytes() == single.database.read_bytes()
+    assert (tmp_path / "v.db").read_bytes() == single.database.read_bytes(), "--verify is the default"
+    done = run("colmap", "--images", str(folder), "--database", str(tmp_path / "n.db"), "--backend", "cpu", "--no-verify")
+    assert done.returncode == 0 and " verified in " not in done.stdout, done.stderr
+    single = clatch.colmap.match_folder(folder, tmp_path / "lib_n.db", backend="cpu", verify=False)
+    assert (tmp_path / "n.db").read_bytes() == single.database.read_bytes()
+    assert (tmp_path / "n-colmap" / "matches.txt").read_bytes() == (tmp_path / "lib_n-colmap" / "matches.txt").read_bytes()
 
 
 def test_errors_are_one_line(tmp_path):

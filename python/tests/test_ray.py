@@ -56,7 +56,8 @@ def single(folder, tmp_path_factory, backend) -> clatch.colmap.MatchFolderResult
 
 
 def same_files(a: clatch.colmap.MatchFolderResult, b: clatch.colmap.MatchFolderResult) -> bool:
-    return a.database.read_bytes() == b.database.read_bytes() and a.match_list.read_bytes() == b.match_list.read_bytes()
+    lists = [None if r.match_list is None else r.match_list.read_bytes() for r in (a, b)]
+    return a.database.read_bytes() == b.database.read_bytes() and lists[0] == lists[1]
 
 
 def report(label: str, result: clatch.colmap.MatchFolderResult) -> None:
@@ -93,7 +94,7 @@ def test_two_actors_write_the_single_process_files(cluster, backend, folder, sin
         stdout=subprocess.DEVNULL,
     )
     assert (tmp_path / "tool.db").read_bytes() == result.database.read_bytes()
-    assert (tmp_path / "tool-colmap" / "matches.txt").read_bytes() == result.match_list.read_bytes()
+    assert result.match_list is None and not (tmp_path / "tool-colmap" / "matches.txt").exists()
     assert calls[-1] == ("match", single.pairs, single.pairs)
     assert ("extract", PHOTOS, PHOTOS) in calls
 
@@ -125,11 +126,14 @@ def test_a_worker_killed_mid_run_has_its_tasks_rerun(cluster, backend, folder, s
 def test_given_pairs_equal_the_single_process_run(cluster, backend, folder, tmp_path):
     names = clatch.colmap.ImageFolder(folder).names
     pairs = [(6, 0), (names[1], names[2]), (5, 3), (0, 4), (2, 6)]
-    one = clatch.colmap.match_folder(folder, tmp_path / "one.db", pairs=pairs, backend=backend)
-    result = clatch.ray.match_folder(folder, tmp_path / "ray.db", pairs=pairs, backend=backend, num_actors=2, block_size=BLOCK)
+    one = clatch.colmap.match_folder(folder, tmp_path / "one.db", pairs=pairs, backend=backend, match_list=True)
+    result = clatch.ray.match_folder(
+        folder, tmp_path / "ray.db", pairs=pairs, backend=backend, match_list=True, num_actors=2, block_size=BLOCK
+    )
     report("given pairs", result)
     assert result.pairs == 5 and result.blocks == 5
     assert same_files(result, one)
+    assert result.match_list is not None
     first = result.match_list.read_text().splitlines()[0]
     assert first == f"{names[6]} {names[0]}"
 
@@ -145,6 +149,14 @@ def test_verified_run_equals_the_single_process_run(cluster, backend, folder, tm
     assert same_files(result, one)
     assert result.pairs_verified == one.pairs_verified == result.pairs
     assert 0 < result.inliers == one.inliers <= result.matches
+
+
+def test_unverified_run_equals_the_single_process_run(cluster, backend, folder, tmp_path):
+    # Without verification: the match list, the same bytes; neither run writes matches into the database.
+    one = clatch.colmap.match_folder(folder, tmp_path / "one.db", backend=backend, verify=False)
+    result = clatch.ray.match_folder(folder, tmp_path / "ray.db", backend=backend, verify=False, num_actors=2, block_size=3)
+    assert result.match_list is not None and same_files(result, one)
+    assert result.pairs_verified == 0 and result.match_list.stat().st_size > 100
 
 
 def test_options_reach_the_actors(cluster, backend, folder, tmp_path):

@@ -213,11 +213,13 @@ impl Database {
     /// Writes putative matches between two images into the `matches` table: `query` indexes the
     /// keypoints of `image_id1`, `train` those of `image_id2`. Both images' keypoints must be written
     /// first; every index is checked against them. The blob is stored in COLMAP's order (the smaller
-    /// image id's column first), swapping columns when `image_id1 > image_id2`.
+    /// image id's column first), swapping columns when `image_id1 > image_id2`; a pair without
+    /// matches has `rows` 0 and NULL `data`, as COLMAP 3.8 binds an empty matrix.
     ///
-    /// COLMAP's mapper reads only verified matches (`two_view_geometries`): hand these to
-    /// `colmap matches_importer` through a [`crate::colmap::MatchList`] instead when COLMAP should
-    /// verify them. This table is for tools that read putative matches.
+    /// COLMAP's mapper reads only verified matches (`two_view_geometries`,
+    /// [`Database::add_two_view_geometry`]); COLMAP's own matcher writes both tables for every pair.
+    /// Pairs that COLMAP should verify go to `colmap matches_importer` through a
+    /// [`crate::colmap::MatchList`] instead, and not here: it writes this table itself.
     pub fn add_matches(
         &mut self,
         image_id1: u32,
@@ -246,7 +248,7 @@ impl Database {
                 params![
                     pair as i64,
                     matches.len() as i64,
-                    matches_blob(image_id1, image_id2, matches)
+                    (!matches.is_empty()).then(|| matches_blob(image_id1, image_id2, matches))
                 ],
             )
             .map_err(ColmapError::sql("inserting matches"))?;

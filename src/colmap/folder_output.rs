@@ -1,6 +1,6 @@
-//! A folder's database and match list written under temporary names beside their final paths, and
-//! renamed into place only once both are complete: a failed run leaves nothing at the outputs, and an
-//! earlier database is replaced only by a complete one.
+//! A folder's database and match list (when one is written) under temporary names beside their final
+//! paths, and renamed into place only once both are complete: a failed run leaves nothing at the
+//! outputs, and an earlier database is replaced only by a complete one.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -36,14 +36,17 @@ pub(crate) fn workspace_owner(match_list: &Path) -> Option<String> {
 
 /// A write failure of the database or the match list as an error naming the file (its final path:
 /// the temporary one beside it is removed).
-fn naming_the_file(e: ColmapError, (database, match_list): &(PathBuf, PathBuf)) -> ColmapError {
+fn naming_the_file(
+    e: ColmapError,
+    (database, match_list): &(PathBuf, Option<PathBuf>),
+) -> ColmapError {
     match e {
         ColmapError::Sqlite { .. } => ColmapError::Writing {
             path: database.clone(),
             source: Box::new(e),
         },
         ColmapError::MatchListIo(_) => ColmapError::Writing {
-            path: match_list.clone(),
+            path: match_list.clone().unwrap_or_else(|| database.clone()),
             source: Box::new(e),
         },
         other => other,
@@ -60,9 +63,9 @@ pub struct FolderOutput {
     staged: Staged,
     /// The locks on the database and on the match list (its file beside it, removed before `made`).
     locks: Vec<OutputLock>,
-    /// The temporary database and match list, then their final paths.
-    temp: (PathBuf, PathBuf),
-    outputs: (PathBuf, PathBuf),
+    /// The temporary database and match list (if written), then their final paths.
+    temp: (PathBuf, Option<PathBuf>),
+    outputs: (PathBuf, Option<PathBuf>),
     writing: Duration,
     /// The pairs' verification, when the job asks for it.
     verification: Option<Verification>,
@@ -115,14 +118,15 @@ impl Drop for MadeFolders {
 }
 
 impl FolderOutput {
-    /// Creates the match list's folder if it is missing (removed again, if still empty, when the run
-    /// fails), then a new database and match list under temporary names beside `database` and
-    /// `match_list`.
-    /// `camera`: one camera for every photo, or `None` for one per size and focal
+    /// Creates the match list's folder, the workspace, if it is missing (removed again, if still
+    /// empty, when the run fails), then a new database and (with `write_match_list`) match list under
+    /// temporary names beside `database` and `match_list`; the match list's path is locked either
+    /// way. `camera`: one camera for every photo, or `None` for one per size and focal
     /// ([`FolderWriter::create`]).
     pub fn create(
         database: &Path,
         match_list: &Path,
+        write_match_list: bool,
         camera: Option<&PinholeCamera>,
     ) -> Result<Self, ColmapError> {
         let began = Instant::now();
@@ -135,16 +139,23 @@ impl FolderOutput {
         let temp_database = staged.reserve(database)?;
         // `Database::create` makes the file itself (and never opens an existing one).
         std::fs::remove_file(&temp_database).map_err(OutputError::write(&temp_database))?;
-        let (temp_list, list) = staged.open(match_list)?;
+        let (temp_list, list) = match write_match_list {
+            true => {
+                let (path, file) = staged.open(match_list)?;
+                (Some(path), Some(BufWriter::new(file)))
+            }
+            false => (None, None),
+        };
         let owner = database.file_name().unwrap_or_default().to_string_lossy();
         staged.write(&owner_path(match_list), |w| writeln!(w, "{owner}"))?;
-        let writer = FolderWriter::create(&temp_database, BufWriter::new(list), camera)?;
+        let writer = FolderWriter::create(&temp_database, list, camera)?;
+        let final_list = write_match_list.then(|| match_list.to_path_buf());
         Ok(Self {
             writer,
             staged,
             locks,
             temp: (temp_database, temp_list),
-            outputs: (database.to_path_buf(), match_list.to_path_buf()),
+            outputs: (database.to_path_buf(), final_list),
             writing: began.elapsed(),
             verification: None,
             made,
@@ -152,8 +163,8 @@ impl FolderOutput {
     }
 
     /// The same output verifying every pair it is given with `config` ([`crate::verify`], on the
-    /// CPU) and writing its two-view geometry into the database ([`FolderWriter::add_geometry`]);
-    /// `None`: the matches alone.
+    /// CPU) and writing its matches and two-view geometry into the database
+    /// ([`FolderWriter::add_geometry`]); `None`: the match list alone.
     pub(crate) fn with_verification(mut self, config: Option<VerifyConfig>) -> Self {
         self.verification = config.map(|config| Verification {
             config,
@@ -285,12 +296,13 @@ impl FolderOutput {
         let counts = self.writer.counts();
         let outputs = &self.outputs;
         let name = |e| naming_the_file(e, outputs);
-        let list = self.writer.finish().map_err(name)?;
-        let file = list
-            .into_inner()
-            .map_err(|e| name(ColmapError::MatchListIo(e.into_error())))?;
-        file.sync_all()
-            .map_err(|e| name(ColmapError::MatchListIo(e)))?;
+        if let Some(list) = self.writer.finish().map_err(name)? {
+            let file = list
+                .into_inner()
+                .map_err(|e| name(ColmapError::MatchListIo(e.into_error())))?;
+            file.sync_all()
+                .map_err(|e| name(ColmapError::MatchListIo(e)))?;
+        }
         Ok(WrittenFolder {
             staged: self.staged,
             locks: self.locks,
@@ -321,8 +333,8 @@ pub struct WrittenFolder {
     locks: Vec<OutputLock>,
     /// The report, its paths the temporary files'.
     report: FolderReport,
-    /// The final database and match list.
-    outputs: (PathBuf, PathBuf),
+    /// The final database and match list (if written).
+    outputs: (PathBuf, Option<PathBuf>),
     /// Declared last: removed (if still empty) after the temporary files.
     made: MadeFolders,
 }
@@ -339,9 +351,10 @@ impl WrittenFolder {
         &self.report.database
     }
 
-    /// The complete match list, under its temporary name.
-    pub fn match_list(&self) -> &Path {
-        &self.report.match_list
+    /// The complete match list, under its temporary name (`None`: the run writes none,
+    /// [`super::FolderJob::writes_match_list`]).
+    pub fn match_list(&self) -> Option<&Path> {
+        self.report.match_list.as_deref()
     }
 
     /// Photos, keypoints, pairs and matches written.
@@ -376,7 +389,7 @@ mod tests {
     fn a_failed_write_names_the_file() {
         let outputs = (
             PathBuf::from("runs/out.db"),
-            PathBuf::from("runs/ws/matches.txt"),
+            Some(PathBuf::from("runs/ws/matches.txt")),
         );
         let full = || std::io::Error::other("No space left on device");
         let e = naming_the_file(

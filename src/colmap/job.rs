@@ -78,7 +78,7 @@ pub enum Overwrite {
     Replace,
 }
 
-/// A folder of photos into a new COLMAP 3.8 database and match list: which photos, which settings,
+/// A folder of photos into a new COLMAP 3.8 database (and, without verification, a match list): which photos, which settings,
 /// which outputs. [`FolderJob::run`] does the whole run in this process; its stages are
 /// [`FolderJob::plan`] (every check, before any work), then [`super::FolderPlan::run`] (extract every
 /// photo, match every pair, write both files under temporary names) and
@@ -99,11 +99,12 @@ pub enum Overwrite {
 ///     std::ops::ControlFlow::Continue(())
 /// }))?;
 /// println!(
-///     "{} photos, {} matches over {} pairs in {}",
+///     "{} photos, {} matches over {} pairs, {} verified, in {}",
 ///     report.counts.photos,
 ///     report.counts.matches,
 ///     report.counts.pairs,
-///     report.match_list.display()
+///     report.counts.pairs_with_inliers,
+///     report.database.display()
 /// );
 /// # Ok::<(), clatch::colmap::ColmapError>(())
 /// ```
@@ -114,9 +115,14 @@ pub struct FolderJob {
     pub images: PathBuf,
     /// The database to create.
     pub database: PathBuf,
-    /// The match list to write (default: [`MATCH_LIST_NAME`] in [`default_workspace`]); its folder
-    /// is created if missing.
+    /// The match list (default: [`MATCH_LIST_NAME`] in [`default_workspace`]); its folder, the
+    /// workspace, is created if missing. Written without verification (for COLMAP's
+    /// `matches_importer`), and with verification only when [`FolderJob::write_match_list`] says so.
     pub match_list: PathBuf,
+    /// Whether a run with verification writes the match list too (default `false`: the database
+    /// holds the matches and their geometries, as after COLMAP's own matcher). A run without
+    /// verification always writes it.
+    pub write_match_list: bool,
     /// The cameras.
     pub camera: FolderCamera,
     /// The pairs to match, in the order they are written; `None`: every pair `(i, j)`, `i < j`
@@ -136,17 +142,19 @@ pub struct FolderJob {
     pub limits: DecodeLimits,
     /// What may happen to an existing database.
     pub overwrite: Overwrite,
-    /// Whether and how every pair's matches are verified ([`crate::verify`]) and their two-view
-    /// geometries written into the database, as COLMAP's `matches_importer` would, so that COLMAP's
-    /// mapper runs straight on it (default `None`: the match list alone, for COLMAP to verify).
+    /// Whether and how every pair's matches are verified ([`crate::verify`]) and written into the
+    /// database's `matches` and `two_view_geometries`, as COLMAP's own matcher would, so that
+    /// COLMAP's mapper runs straight on it (default [`FolderJob::default_verification`]; `None`:
+    /// the match list alone, for COLMAP's `matches_importer` to verify).
     pub verification: Option<VerifyConfig>,
 }
 
 impl FolderJob {
-    /// The photos of `images` into the new database `database` and the match list
-    /// `<database>-colmap/matches.txt` beside it, on the CPU, with the settings for structure from
-    /// motion: [`FolderJob::default_extractor`], the default [`MatchConfig`] (ratio 0.8,
-    /// cross-check), [`Refinement::Score`], one camera per image size and focal, every pair.
+    /// The photos of `images` into the new database `database` (its workspace
+    /// `<database>-colmap/` beside it), on the CPU, with the settings for structure from motion:
+    /// [`FolderJob::default_extractor`], the default [`MatchConfig`] (ratio 0.8, cross-check),
+    /// [`Refinement::Score`], one camera per image size and focal, every pair, every pair verified
+    /// ([`FolderJob::default_verification`]) and no match list.
     pub fn new(images: impl Into<PathBuf>, database: impl Into<PathBuf>) -> Self {
         let database = database.into();
         Self {
@@ -161,12 +169,13 @@ impl FolderJob {
             refinement: Refinement::Score,
             limits: DecodeLimits::default(),
             overwrite: Overwrite::default(),
-            verification: None,
+            verification: Some(Self::default_verification()),
+            write_match_list: false,
         }
     }
 
-    /// The verification settings of the folder run (`clatch colmap --verify`, the Python
-    /// `match_folder(verify=True)`): COLMAP 3.8's ([`VerifyConfig::default`]) with the neighbour rule
+    /// The verification settings of the folder run (`clatch colmap`, the Python `match_folder`):
+    /// COLMAP 3.8's ([`VerifyConfig::default`]) with the neighbour rule
     /// on ([`crate::verify::NeighbourConsistency::default`]), which drops matches one period off on
     /// repeated structure (EVALUATION.md, "repeated structure: neighbour consistency").
     pub fn default_verification() -> VerifyConfig {
@@ -251,11 +260,29 @@ impl FolderJob {
         self
     }
 
-    /// Verifies every pair with `config` and writes the geometries into the database
+    /// Verifies every pair with `config` and writes the matches and geometries into the database
     /// ([`FolderJob::verification`]).
     pub fn with_verification(mut self, config: VerifyConfig) -> Self {
         self.verification = Some(config);
         self
+    }
+
+    /// Verifies nothing: writes the match list for COLMAP's `matches_importer` to verify
+    /// ([`FolderJob::verification`] `None`).
+    pub fn without_verification(mut self) -> Self {
+        self.verification = None;
+        self
+    }
+
+    /// Whether a run with verification writes the match list too ([`FolderJob::write_match_list`]).
+    pub fn with_match_list_written(mut self, write: bool) -> Self {
+        self.write_match_list = write;
+        self
+    }
+
+    /// Whether the run writes the match list: always without verification, on request with it.
+    pub fn writes_match_list(&self) -> bool {
+        self.verification.is_none() || self.write_match_list
     }
 
     /// The extractor settings the run uses: [`FolderJob::extractor`] with the detector's sub-pixel

@@ -8,8 +8,9 @@
 //!   (which files, their names and sizes), the camera, the pairs ([`resolve_pairs`]), the outputs);
 //! - [`FolderPlan::run`]: [`extract_photos`] (features with the positions refined by a
 //!   [`Refinement`]), [`match_photo_pairs`] (any subset of the pairs, wherever their photos'
-//!   descriptors are) and [`FolderOutput`] (the one [`FolderWriter`] of the database and the match
-//!   list, in one order, under temporary names);
+//!   descriptors are) and [`FolderOutput`] (every pair verified, by default, and the one
+//!   [`FolderWriter`] of the database and, if any, the match list, in one order, under temporary
+//!   names);
 //! - [`WrittenFolder::commit`]: both files renamed into place, only once both are complete.
 //!
 //! ```no_run
@@ -21,12 +22,12 @@
 //! ```
 //!
 //! COLMAP cannot match binary descriptors and needs none: it gets keypoints in its SQLite database
-//! ([`Database`]) and putative matches as a text file ([`MatchList`]) that
-//! `colmap matches_importer --match_type raw` reads, verifies geometrically and stores in
-//! `two_view_geometries`, the only match table its `mapper` reads. Pairs verified outside COLMAP
-//! go straight into that table instead ([`Database::add_two_view_geometry`] of a
-//! [`TwoViewGeometry`], into a new database or one opened by [`Database::open_existing`]), and the
-//! mapper runs without `matches_importer`.
+//! ([`Database`]) and either the verified matches, as its own matcher writes them (`matches` and
+//! `two_view_geometries`, the only match table its `mapper` reads: [`Database::add_matches`] and
+//! [`Database::add_two_view_geometry`] of a [`TwoViewGeometry`], into a new database or one opened by
+//! [`Database::open_existing`]; the folder run's default, [`crate::verify`]), or putative matches
+//! as a text file ([`MatchList`]) that `colmap matches_importer --match_type raw` reads, verifies
+//! geometrically and stores in both tables ([`FolderJob::without_verification`]).
 //!
 //! **Target: COLMAP 3.8** (Debian 12's), whose schema is [`schema::SCHEMA_3_8`]. Conventions, from
 //! COLMAP 3.8's source and checked by running it:

@@ -97,6 +97,7 @@ impl FolderPlan {
         FolderOutput::create(
             &self.job.database,
             &self.job.match_list,
+            self.job.writes_match_list(),
             self.camera.as_ref(),
         )
         .map(|output| {

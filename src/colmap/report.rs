@@ -12,8 +12,7 @@ use crate::prefetch::Prefetched;
 pub enum FolderStage {
     /// Photos decoded, detected, described, refined and written to the database.
     Extraction,
-    /// Pairs matched and written to the match list (and verified, with
-    /// [`super::FolderJob::verification`]).
+    /// Pairs matched, verified ([`super::FolderJob::verification`]) and written.
     Matching,
 }
 
@@ -65,8 +64,8 @@ pub struct FolderTimes {
 pub struct FolderReport {
     /// The database (once committed; before, the run's temporary file beside it).
     pub database: PathBuf,
-    /// The match list (likewise).
-    pub match_list: PathBuf,
+    /// The match list (likewise; `None`: the run wrote none, [`super::FolderJob::writes_match_list`]).
+    pub match_list: Option<PathBuf>,
     /// Photos, keypoints, pairs and matches written.
     pub counts: FolderCounts,
     /// Wall time of each stage (those a run spread over other processes did not time are zero).

@@ -1,5 +1,6 @@
-//! The one writer of a folder's COLMAP input: the database (cameras, images, keypoints) and the match
-//! list, in the order every run writes them.
+//! The one writer of a folder's COLMAP input: the database (cameras, images, keypoints, and for
+//! verified pairs their matches and two-view geometries) and the match list, in the order every run
+//! writes them.
 
 use std::io::Write;
 use std::path::Path;
@@ -30,7 +31,7 @@ pub struct FolderCounts {
     pub pairs: usize,
     /// Matches over all pairs.
     pub matches: usize,
-    /// Pairs with at least one match: the pairs of the match list.
+    /// Pairs with at least one match: the pairs of the match list (when one is written).
     pub pairs_with_matches: usize,
     /// Pairs whose two-view geometry was written ([`FolderWriter::add_geometry`]).
     pub pairs_verified: usize,
@@ -40,11 +41,13 @@ pub struct FolderCounts {
     pub inliers: usize,
 }
 
-/// Writes a folder's photos into a new COLMAP 3.8 database and their matches into a match list.
+/// Writes a folder's photos into a new COLMAP 3.8 database and their matches into a match list
+/// (when given one) and, for pairs verified, into the database.
 ///
 /// Photos go in first, in image-id order ([`FolderWriter::add_photo`]), then the matches of each pair
-/// ([`FolderWriter::add_matches`]) in the order the pairs are listed; [`FolderWriter::finish`]
-/// commits the database. With one camera given, every photo shares it (and must have its size);
+/// ([`FolderWriter::add_matches`]) in the order the pairs are listed, each followed by its
+/// verification, if any ([`FolderWriter::add_geometry`]); [`FolderWriter::finish`] commits the
+/// database. With one camera given, every photo shares it (and must have its size);
 /// without, each distinct image size and EXIF focal length gets its own ([`photo_camera`]), in the
 /// order of the photos. The same calls give the same bytes: a database is a function of its photos and
 /// camera, a match list of its pairs and matches, whatever process computed them.
@@ -58,18 +61,18 @@ pub struct FolderCounts {
 /// let photo = |name: &str| {
 ///     Photo::new(name, 640, 480, vec![KeyPoint::new(10.0, 20.0), KeyPoint::new(30.0, 40.0)])
 /// };
-/// let mut writer = FolderWriter::create(&path, Vec::new(), None)?;
+/// let mut writer = FolderWriter::create(&path, Some(Vec::new()), None)?;
 /// writer.add_photo(&photo("a.png"))?;
 /// writer.add_photo(&photo("b.png"))?;
 /// writer.add_matches(0, 1, &[Match { query: 1, train: 0, distance: 12 }])?;
-/// let list = writer.finish()?;
+/// let list = writer.finish()?.unwrap();
 /// assert_eq!(String::from_utf8(list).unwrap(), "a.png b.png\n1 0\n\n");
 /// # std::fs::remove_file(&path).ok();
 /// # Ok::<(), clatch::colmap::ColmapError>(())
 /// ```
 pub struct FolderWriter<W: Write> {
     db: Database,
-    list: MatchList<W>,
+    list: Option<MatchList<W>>,
     /// The given camera and its id.
     shared: Option<(u32, PinholeCamera)>,
     /// The cameras made per size and focal length, with their ids.
@@ -82,10 +85,11 @@ pub struct FolderWriter<W: Write> {
 
 impl<W: Write> FolderWriter<W> {
     /// Creates the database at `database` (an existing file is an error) and writes the match list
-    /// to `match_list`. `camera`: one camera for every photo, or `None` for one per size and focal.
+    /// to `match_list` (`None`: no match list). `camera`: one camera for every photo, or `None` for
+    /// one per size and focal.
     pub fn create(
         database: &Path,
-        match_list: W,
+        match_list: Option<W>,
         camera: Option<&PinholeCamera>,
     ) -> Result<Self, ColmapError> {
         let mut db = Database::create(database)?;
@@ -94,7 +98,7 @@ impl<W: Write> FolderWriter<W> {
             .transpose()?;
         Ok(Self {
             db,
-            list: MatchList::new(match_list),
+            list: match_list.map(MatchList::new),
             shared,
             cameras: Vec::new(),
             photos: Vec::new(),
@@ -142,8 +146,8 @@ impl<W: Write> FolderWriter<W> {
     }
 
     /// Appends the matches of photos `i` and `j` (indices of [`FolderWriter::add_photo`]; `query`
-    /// indexes `i`'s keypoints, `train` `j`'s) to the match list, every index checked. A pair without
-    /// matches is left out of the list, as COLMAP needs nothing of it.
+    /// indexes `i`'s keypoints, `train` `j`'s) to the match list, if any, every index checked. A pair
+    /// without matches is left out of the list, as COLMAP needs nothing of it.
     pub fn add_matches(
         &mut self,
         i: usize,
@@ -153,7 +157,9 @@ impl<W: Write> FolderWriter<W> {
         let ((name_i, id_i, n_i), (name_j, id_j, n_j)) = written_pair(&self.photos, i, j)?;
         check_match_indices(*id_i, *id_j, matches, *n_i, *n_j)?;
         if !matches.is_empty() {
-            self.list.add_pair(name_i, name_j, matches)?;
+            if let Some(list) = &mut self.list {
+                list.add_pair(name_i, name_j, matches)?;
+            }
             self.counts.pairs_with_matches += 1;
         }
         self.counts.pairs += 1;
@@ -161,10 +167,11 @@ impl<W: Write> FolderWriter<W> {
         Ok(())
     }
 
-    /// Writes what [`crate::verify`] found for the pair `i`, `j` whose matches were `matches`
-    /// ([`FolderWriter::add_matches`]'s indices and order) into the database's
-    /// `two_view_geometries`, as COLMAP's own verification would
-    /// ([`TwoViewGeometry::from_verified`]).
+    /// Writes the pair `i`, `j` whose matches were `matches` ([`FolderWriter::add_matches`]'s indices
+    /// and order) and what [`crate::verify`] found for it into the database, as COLMAP's own matcher
+    /// does: the matches into `matches` ([`Database::add_matches`]), the geometry into
+    /// `two_view_geometries` ([`TwoViewGeometry::from_verified`]), a row in each for every pair,
+    /// with or without matches.
     pub fn add_geometry(
         &mut self,
         i: usize,
@@ -174,6 +181,7 @@ impl<W: Write> FolderWriter<W> {
     ) -> Result<(), ColmapError> {
         let ((_, id_i, _), (_, id_j, _)) = written_pair(&self.photos, i, j)?;
         let geometry = TwoViewGeometry::from_verified(*id_i, *id_j, matches, verified)?;
+        self.db.add_matches(*id_i, *id_j, matches)?;
         self.db.add_two_view_geometry(&geometry)?;
         self.counts.pairs_verified += 1;
         if !geometry.inliers.is_empty() {
@@ -200,10 +208,10 @@ impl<W: Write> FolderWriter<W> {
         self.counts
     }
 
-    /// Commits the database, flushes the match list and returns its writer.
-    pub fn finish(self) -> Result<W, ColmapError> {
+    /// Commits the database, flushes the match list and returns its writer (`None` without one).
+    pub fn finish(self) -> Result<Option<W>, ColmapError> {
         self.db.finish()?;
-        self.list.into_inner()
+        self.list.map(MatchList::into_inner).transpose()
     }
 }
 

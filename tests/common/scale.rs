@@ -64,3 +64,18 @@ pub fn banner() -> Option<String> {
     sanitizer()
         .then(|| format!("{VAR}=sanitizer: reduced workload (every path, fewer and smaller cases)"))
 }
+
+/// The keypoint budget of an extraction under `CLATCH_TEST_SCALE=sanitizer`: enough for the
+/// selection to cut (level shares, grid, the top-N over levels) on every test image, small enough
+/// that racecheck, which pays for each shared-memory access of the describe kernel's 64x64 window,
+/// finishes the trial in a minute or two.
+pub const SANITIZER_KEYPOINTS: usize = 300;
+
+/// `config` in a normal run; under `CLATCH_TEST_SCALE=sanitizer` the same settings with the
+/// keypoint budget capped at [`SANITIZER_KEYPOINTS`]. Give the CPU and the GPU the same result.
+pub fn budget(mut config: clatch::ExtractorConfig) -> clatch::ExtractorConfig {
+    if sanitizer() {
+        config.detector.max_keypoints = config.detector.max_keypoints.min(SANITIZER_KEYPOINTS);
+    }
+    config
+}

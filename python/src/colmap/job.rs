@@ -41,11 +41,13 @@ impl From<PhotoArg> for PhotoRef {
 ///
 /// _FolderJob(images, database, *, extractor, matcher, workspace=None, pairs=None, camera_k=None,
 ///            camera_k_file=None, subpixel="score", subpixel_radius=3, max_pixels=100_000_000,
-///            force=False)
+///            force=False, verify=True, match_list=False)
 ///
 /// ``extractor`` and ``matcher`` give the settings and the backend (the detector's sub-pixel method
 /// is ``subpixel``'s); ``pairs``: ``(a, b)`` of photo indices or names; ``camera_k``: the text of
-/// K, read from ``camera_k_file`` if that is given.
+/// K, read from ``camera_k_file`` if that is given; ``verify``: the library's verification
+/// (``FolderJob::default_verification``), else none; ``match_list``: the match list written with
+/// verification too.
 #[pyclass(module = "clatch.colmap", frozen, name = "_FolderJob")]
 pub struct FolderJob {
     inner: clatch::colmap::FolderJob,
@@ -86,7 +88,8 @@ impl FolderJob {
         subpixel_radius = 3,
         max_pixels = 100_000_000,
         force = false,
-        verify = false,
+        verify = true,
+        match_list = false,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -104,6 +107,7 @@ impl FolderJob {
         max_pixels: u64,
         force: bool,
         verify: bool,
+        match_list: bool,
     ) -> PyResult<Self> {
         let mut job = clatch::colmap::FolderJob::new(images, database)
             .with_backend(extractor.inner.backend())
@@ -119,9 +123,10 @@ impl FolderJob {
         if let Some(workspace) = workspace {
             job = job.with_workspace(workspace);
         }
-        if verify {
-            job = job.with_verification(clatch::colmap::FolderJob::default_verification());
+        if !verify {
+            job = job.without_verification();
         }
+        job = job.with_match_list_written(match_list);
         if let Some(pairs) = pairs {
             job = job.with_pairs(pairs);
         }

@@ -114,8 +114,12 @@ impl FolderWriter {
                 format!("cannot write {}: {e}", match_list.display()),
             )
         })?;
-        let writer = Writer::create(&database, BufWriter::new(list), camera.map(|c| &c.inner))
-            .or_raise(py)?;
+        let writer = Writer::create(
+            &database,
+            Some(BufWriter::new(list)),
+            camera.map(|c| &c.inner),
+        )
+        .or_raise(py)?;
         Ok(Self {
             inner: Mutex::new(Some(Writing::Direct(Box::new(writer)))),
         })
@@ -176,9 +180,11 @@ impl FolderWriter {
                 Ok(Some(report_out(py, &report)?))
             }
             Writing::Direct(writer) => {
-                let list = writer.finish().or_raise(py)?;
-                let file = list.into_inner().map_err(|e| list_error(py, e.error()))?;
-                file.sync_all().map_err(|e| list_error(py, e))?;
+                // A direct writer always has its match list.
+                if let Some(list) = writer.finish().or_raise(py)? {
+                    let file = list.into_inner().map_err(|e| list_error(py, e.error()))?;
+                    file.sync_all().map_err(|e| list_error(py, e))?;
+                }
                 Ok(None)
             }
         }

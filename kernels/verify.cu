@@ -28,11 +28,12 @@ struct cv_warp_team {
     }
 };
 
-extern "C" __global__ void __launch_bounds__(32 * CLATCH_VERIFY_WARPS)
-    clatch_verify_pairs(const clatch_verify_settings* __restrict__ settings, const clatch_verify_pair* __restrict__ pairs,
-                        unsigned int pair_count, const clatch_verify_point* __restrict__ points,
-                        unsigned int* __restrict__ scratch, unsigned int* __restrict__ inliers,
-                        clatch_verify_result* __restrict__ results) {
+/* The body of both entry points: pair blockIdx.x * CLATCH_VERIFY_WARPS + warp. */
+__device__ __forceinline__ void verify_pairs_body(const clatch_verify_settings* __restrict__ settings,
+                                                  const clatch_verify_pair* __restrict__ pairs, unsigned int pair_count,
+                                                  const clatch_verify_point* __restrict__ points,
+                                                  unsigned int* __restrict__ scratch, unsigned int* __restrict__ inliers,
+                                                  clatch_verify_result* __restrict__ results) {
     __shared__ cv_model_buffers buffers[CLATCH_VERIFY_WARPS];
     unsigned int warp = threadIdx.x / 32;
     unsigned int index = blockIdx.x * CLATCH_VERIFY_WARPS + warp;
@@ -45,4 +46,23 @@ extern "C" __global__ void __launch_bounds__(32 * CLATCH_VERIFY_WARPS)
     cv_pair_lists l = {lists, lists + pair.count, lists + 2ull * pair.count, lists + 3ull * pair.count};
     const clatch_verify_settings s = *settings;
     cv_estimate_two_view(team, s, pair, points + first, l, inliers + first, &buffers[warp], &results[index]);
+}
+
+/* Registers as the compiler likes (255 on sm_90: 8 warps per SM). */
+extern "C" __global__ void __launch_bounds__(32 * CLATCH_VERIFY_WARPS)
+    clatch_verify_pairs(const clatch_verify_settings* __restrict__ settings, const clatch_verify_pair* __restrict__ pairs,
+                        unsigned int pair_count, const clatch_verify_point* __restrict__ points,
+                        unsigned int* __restrict__ scratch, unsigned int* __restrict__ inliers,
+                        clatch_verify_result* __restrict__ results) {
+    verify_pairs_body(settings, pairs, pair_count, points, scratch, inliers, results);
+}
+
+/* The same work in at most 128 registers (16 warps per SM, more spills): the same results, for the
+ * bench to measure which is faster. */
+extern "C" __global__ void __launch_bounds__(32 * CLATCH_VERIFY_WARPS, 4)
+    clatch_verify_pairs_16_warps(const clatch_verify_settings* __restrict__ settings,
+                                 const clatch_verify_pair* __restrict__ pairs, unsigned int pair_count,
+                                 const clatch_verify_point* __restrict__ points, unsigned int* __restrict__ scratch,
+                                 unsigned int* __restrict__ inliers, clatch_verify_result* __restrict__ results) {
+    verify_pairs_body(settings, pairs, pair_count, points, scratch, inliers, results);
 }

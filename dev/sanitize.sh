@@ -20,7 +20,8 @@
 # little memory), JOBS=N (every tool-and-binary run as its own job, N at a time: all binaries side by
 # side, which is what lets the whole set finish within minutes on a large GPU and many cores), TRIALS=1
 # with JOBS (every test function of every binary as its own job: a binary's trials side by side, so
-# the whole set takes about as long as its slowest trial).
+# the whole set takes about as long as its slowest trial), TRIAL_MATCH=REGEX with TRIALS=1 (only the
+# trials whose names match the extended regular expression, to run again the ones that failed).
 #
 # Logs: $OUT/TOOL/NAME.txt or, with TRIALS=1, $OUT/TOOL/NAME.TRIAL.txt (each run's whole output),
 # $OUT/progress.txt (each run's summary line as it ends), $OUT/summary.txt (one line a run, printed last).
@@ -99,7 +100,7 @@ one() {
 # trials NAME: the names of the binary's test functions (an ignored one stays ignored when run).
 trials() {
     local path; path=$(awk -v n="$1" '$1 == n { print $2 }' "$list")
-    "$path" --list --format terse 2> /dev/null | sed -n 's/: test$//p'
+    "$path" --list --format terse 2> /dev/null | sed -n 's/: test$//p' | grep -E -- "${TRIAL_MATCH:-.}"
 }
 
 # sequence TOOL: every binary under the tool, one after another.

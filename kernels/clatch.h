@@ -123,4 +123,81 @@ typedef struct clatch_levels {
     int count;
 } clatch_levels;
 
+/* Verification (kernels/verify.cu, kernels/verify_math.cuh, src/cuda/verify/): one warp per pair. */
+#define CLATCH_VERIFY_WARPS 4 /* warps (pairs) per block of clatch_verify_pairs */
+#define CLATCH_VERIFY_LISTS 4 /* u32 scratch entries per correspondence: the F, H, E and translation inliers */
+/* clatch_verify_pair.flags */
+#define CLATCH_VERIFY_CAMERAS 1u    /* both cameras known: the watermark test may run */
+#define CLATCH_VERIFY_INTRINSICS 2u /* both cameras have intrinsics: E is estimated */
+/* clatch_verify_result.models */
+#define CLATCH_VERIFY_HAS_F 1u
+#define CLATCH_VERIFY_HAS_E 2u
+#define CLATCH_VERIFY_HAS_H 4u
+/* clatch_verify_result.config: COLMAP's numbers (clatch::verify::GeometryConfig). */
+#define CLATCH_VERIFY_DEGENERATE 1
+#define CLATCH_VERIFY_CALIBRATED 2
+#define CLATCH_VERIFY_UNCALIBRATED 3
+#define CLATCH_VERIFY_PLANAR_OR_PANORAMIC 6
+#define CLATCH_VERIFY_WATERMARK 7
+
+/* One correspondence: the matched keypoints' positions in image A and image B. */
+typedef struct clatch_verify_point {
+    float xa;
+    float ya;
+    float xb;
+    float yb;
+} clatch_verify_point;
+
+/* One estimator's LO-RANSAC settings, resolved on the host (clatch::verify's RansacSettings). */
+typedef struct clatch_verify_ransac {
+    double max_residual;   /* squared threshold (E's comes per pair) */
+    double stop_threshold; /* (1 - confidence)^multiplier */
+    unsigned int min_trials;
+    unsigned int max_trials;
+} clatch_verify_ransac;
+
+/* The settings of a launch (clatch::verify::VerifyConfig, resolved on the host). */
+typedef struct clatch_verify_settings {
+    clatch_verify_ransac fundamental;
+    clatch_verify_ransac homography;
+    clatch_verify_ransac essential;
+    clatch_verify_ransac translation;
+    double min_e_f_inlier_ratio;
+    double max_h_inlier_ratio;
+    double watermark_min_inlier_ratio;
+    double watermark_border_size;
+    unsigned long long seed;
+    unsigned long long min_num_inliers;
+    unsigned int detect_watermark;
+    unsigned int planar_keeps_homography_inliers;
+} clatch_verify_settings;
+
+/* One pair of a launch: correspondences [first, first + count) of the point buffer (its scratch lists
+ * and output inliers at the same offsets). */
+typedef struct clatch_verify_pair {
+    unsigned long long key; /* the sampler's pair key */
+    unsigned long long first;
+    unsigned int count;
+    unsigned int flags; /* CLATCH_VERIFY_CAMERAS | CLATCH_VERIFY_INTRINSICS */
+    double intrinsics_a[4]; /* fx, fy, cx, cy */
+    double intrinsics_b[4];
+    double size_a[2]; /* width, height */
+    double size_b[2];
+    double essential_max_residual; /* E's squared threshold in camera units */
+} clatch_verify_pair;
+
+/* What one pair gives: clatch::verify::TwoViewGeometry; the inliers are written at the pair's offset. */
+typedef struct clatch_verify_result {
+    double f[9];
+    double e[9];
+    double h[9];
+    unsigned long long inliers_e;
+    unsigned long long inliers_f;
+    unsigned long long inliers_h;
+    unsigned int config;
+    unsigned int models; /* CLATCH_VERIFY_HAS_* */
+    unsigned int inlier_count;
+    unsigned int pad;
+} clatch_verify_result;
+
 #endif /* CLATCH_H */

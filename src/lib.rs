@@ -30,6 +30,7 @@ mod keypoint;
 mod matcher;
 mod names;
 mod parallel;
+mod verifier;
 
 #[cfg(feature = "colmap")]
 #[cfg_attr(docsrs, doc(cfg(feature = "colmap")))]
@@ -74,6 +75,7 @@ pub use matcher::Matcher;
 pub use matching::{KnnMatches, Match, MatchConfig};
 pub use names::{NamedOption, ParseNameError};
 pub use pyramid::Pyramid;
+pub use verifier::Verifier;
 
 #[cfg(feature = "cuda")]
 #[cfg_attr(docsrs, doc(cfg(feature = "cuda")))]

@@ -45,6 +45,9 @@ pub(crate) const MATCH_COMPACT: Kernel = Kernel("clatch_match_compact");
 pub(crate) const PAIRS_COMPACT: Kernel = Kernel("clatch_pairs_compact");
 // kernels/matching_tensor.cu
 pub(crate) const EXPAND_SIGNS: Kernel = Kernel("clatch_expand_signs");
+// kernels/verify.cu
+pub(crate) const VERIFY_PAIRS: Kernel = Kernel("clatch_verify_pairs");
+pub(crate) const VERIFY_PAIRS_16_WARPS: Kernel = Kernel("clatch_verify_pairs_16_warps");
 // kernels/bench_*.cu
 #[cfg(feature = "internals")]
 pub(crate) const MMA_S8_RATE: Kernel = Kernel("clatch_mma_s8_rate");
@@ -214,6 +217,13 @@ pub(crate) static KERNELS: &[KernelFile] = &[
         fatbin: ptx::MATCHING_TENSOR_FATBIN,
         kernels: &[&[EXPAND_SIGNS], TENSOR_KNN],
         min_capability: ptx::MATCHING_TENSOR_PTX_ARCH,
+    },
+    KernelFile {
+        path: "kernels/verify.cu",
+        ptx: ptx::VERIFY_PTX,
+        fatbin: ptx::VERIFY_FATBIN,
+        kernels: &[&[VERIFY_PAIRS, VERIFY_PAIRS_16_WARPS]],
+        min_capability: ptx::VERIFY_PTX_ARCH,
     },
 ];
 

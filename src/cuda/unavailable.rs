@@ -129,6 +129,14 @@ pub(crate) fn device(ordinal: usize) -> Result<Arc<GpuDevice>> {
     Err(unavailable(ordinal, NOT_BUILT))
 }
 
+pub(crate) fn verify_pairs(
+    dev: &GpuDevice,
+    _: &[crate::verify::ViewPair<'_>],
+    _: &crate::verify::VerifyConfig,
+) -> Result<Vec<crate::verify::TwoViewGeometry>> {
+    match *dev {}
+}
+
 pub(crate) fn detect(dev: &GpuDevice, _: &GrayView, _: &DetectorConfig) -> Result<Vec<KeyPoint>> {
     match *dev {}
 }

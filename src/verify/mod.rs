@@ -49,6 +49,11 @@ mod geometry;
 mod guided;
 mod homography;
 mod linalg;
+#[cfg(feature = "internals")]
+#[doc(hidden)]
+pub mod packed;
+#[cfg(not(feature = "internals"))]
+pub(crate) mod packed;
 mod poly;
 mod ransac;
 mod sampler;
@@ -234,7 +239,16 @@ pub fn verify_pair(
 /// Verifies many pairs in parallel (rayon with the `cpu` feature); results in input order, each
 /// equal to [`ViewPair::verify`] of that pair whatever the thread count. Every pair is checked
 /// before any work: the first bad one (in input order) is the error, its message naming the pair.
+///
+/// [`crate::Verifier`] runs the same on a chosen backend (the CPU or a CUDA device).
 pub fn verify_pairs(pairs: &[ViewPair<'_>], config: &VerifyConfig) -> Result<Vec<TwoViewGeometry>> {
+    check_pairs(pairs, config)?;
+    Ok(pairs.par_iter().map(|pair| pair.estimate(config)).collect())
+}
+
+/// The checks of [`verify_pairs`], the same on every backend: the configuration, then every pair in
+/// input order, the first bad one's error naming it.
+pub(crate) fn check_pairs(pairs: &[ViewPair<'_>], config: &VerifyConfig) -> Result<()> {
     config.check()?;
     for (index, pair) in pairs.iter().enumerate() {
         pair.check().map_err(|error| match error {
@@ -245,5 +259,5 @@ pub fn verify_pairs(pairs: &[ViewPair<'_>], config: &VerifyConfig) -> Result<Vec
             other => other,
         })?;
     }
-    Ok(pairs.par_iter().map(|pair| pair.estimate(config)).collect())
+    Ok(())
 }

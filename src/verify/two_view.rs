@@ -14,7 +14,7 @@ use super::sampler::Stream;
 use super::translation::TranslationEstimator;
 
 /// The LO-RANSAC settings of one estimator: squared threshold, trial bounds resolved on the host.
-fn settings<E: Estimator>(
+pub(super) fn settings<E: Estimator>(
     config: &VerifyConfig,
     max_error: f64,
     min_inlier_ratio: f64,

@@ -6,6 +6,7 @@ pub mod gpu;
 pub mod reference;
 pub mod scale;
 pub mod two_view;
+pub mod verify_cases;
 
 use clatch::synthetic::SplitMix64;
 use clatch::{DescriptorSet, DescriptorWidth, GrayView};

@@ -201,8 +201,10 @@ mod gpu {
         let pairs: Vec<ViewPair<'_>> = cases.iter().map(Case::pair).collect();
         let config = scaled(VerifyConfig::default());
         let want = verify_pairs(&pairs, &config)?;
-        // About ten pairs' worth of bytes per chunk, and one byte: every pair alone.
-        for budget in [10 * 250 * 36, 1] {
+        // Half the batch's point records (16 bytes a match; a pair takes more on the device), so at
+        // least two chunks at either scale; and one byte: every pair alone.
+        let half = cases.iter().map(|c| c.matches.len()).sum::<usize>() * 8;
+        for budget in [half, 1] {
             let (got, chunks) =
                 clatch::cuda::hooks::verify_pairs_in_chunks(&dev, &pairs, &config, budget)?;
             if chunks < 2 {

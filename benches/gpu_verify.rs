@@ -4,7 +4,7 @@
 //! Batches of synthetic pairs of 850 putative matches, 40 % outliers, 0.5 px noise (general 3-D
 //! scenes; uncalibrated, F and H, and calibrated, E, F and H), COLMAP 3.8's default settings. For the
 //! GPU: the kernel time of one launch over the batch (CUDA events, after warm-up; the median of the
-//! repeats; both builds of the kernel, 255 and at most 128 registers) and the wall time of `Verifier::verify_pairs` (packing, upload, kernel, download); for the
+//! repeats) and the wall time of `Verifier::verify_pairs` (packing, upload, kernel, download); for the
 //! CPU backend (rayon, every thread of the machine) the wall time of the same call, median of the
 //! repeats. Pairs per second, and the GPU/CPU ratio. Every GPU result is checked equal to the CPU's.
 
@@ -26,7 +26,6 @@ fn main() {
 fn main() {
     use std::time::Instant;
 
-    use clatch::cuda::hooks::VerifyKernel;
     use clatch::verify::{Camera, Intrinsics, VerifyConfig, ViewPair};
     use clatch::{Backend, KeyPoint, Match, Verifier};
     use two_view::{Shape, scene};
@@ -102,20 +101,12 @@ fn main() {
             "uncalibrated (F, H)"
         };
 
-        let time = |kernel| {
-            let ms = clatch::cuda::hooks::time_verify_kernel(
-                &dev, &pairs, &config, kernel, WARMUP, REPEATS,
-            )
-            .expect("timed kernel");
-            median(ms.into_iter().map(f64::from).collect())
-        };
-        let kernel_ms = time(VerifyKernel::Unbounded);
-        let sixteen_ms = time(VerifyKernel::SixteenWarps);
-        println!(
-            "{what}: kernel in at most 128 registers (16 warps per SM) {sixteen_ms:.1} ms = {:.0} pairs/s, \
-             {:.2}x the default kernel's rate",
-            gpu_pairs as f64 / (sixteen_ms / 1e3),
-            kernel_ms / sixteen_ms
+        let kernel_ms = median(
+            clatch::cuda::hooks::time_verify_kernel(&dev, &pairs, &config, WARMUP, REPEATS)
+                .expect("timed kernel")
+                .into_iter()
+                .map(f64::from)
+                .collect(),
         );
         let gpu = Verifier::new(Backend::Cuda { device: 0 }, config.clone()).expect("gpu");
         let cpu = Verifier::new(Backend::Cpu, config.clone()).expect("cpu");

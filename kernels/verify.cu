@@ -2,11 +2,12 @@
  * clatch::verify::two_view::estimate_two_view (src/verify/two_view.rs). The arithmetic is in
  * verify_math.cuh, shared with a host C++ build that is compared with the Rust reference without a GPU.
  *
- * One warp per pair (CLATCH_VERIFY_WARPS pairs per block). Lane 0 draws the samples and runs the
- * solvers, in the CPU's operation order; all 32 lanes compute residuals and count the support, an
- * integer (inliers, score), so the reduction order does not matter; the inlier lists are written in
- * index order by a ballot prefix (the local solver reads them in that order, as the CPU). Built with
- * --fmad=false: no contraction anywhere. */
+ * One warp per pair (CLATCH_VERIFY_WARPS pairs per block). Each lane draws the sample of one trial
+ * and runs its minimal solver (32 trials at once: a trial's sample and models depend only on its
+ * index); then all 32 lanes compute residuals and count each model's support, in the trials' order,
+ * an integer (inliers, score), so the reduction order does not matter; local optimisation runs on
+ * lane 0. The inlier lists are written in index order by a ballot prefix (the local solver reads them
+ * in that order, as the CPU). Built with --fmad=false: no contraction anywhere. */
 #include "verify_math.cuh"
 
 #define CV_FULL_MASK 0xffffffffu
@@ -48,21 +49,13 @@ __device__ __forceinline__ void verify_pairs_body(const clatch_verify_settings* 
     cv_estimate_two_view(team, s, pair, points + first, l, inliers + first, &buffers[warp], &results[index]);
 }
 
-/* Registers as the compiler likes (255 on sm_90: 8 warps per SM). */
+/* Registers as the compiler likes (255 on sm_90: 8 warps per SM). A build in at most 128 registers
+ * (16 warps per SM) was measured at 0.94-1.01x this one's rate and doubled ptxas's time (BENCHMARKS.md,
+ * "Verification on the GPU"), so there is one. */
 extern "C" __global__ void __launch_bounds__(32 * CLATCH_VERIFY_WARPS)
     clatch_verify_pairs(const clatch_verify_settings* __restrict__ settings, const clatch_verify_pair* __restrict__ pairs,
                         unsigned int pair_count, const clatch_verify_point* __restrict__ points,
                         unsigned int* __restrict__ scratch, unsigned int* __restrict__ inliers,
                         clatch_verify_result* __restrict__ results) {
-    verify_pairs_body(settings, pairs, pair_count, points, scratch, inliers, results);
-}
-
-/* The same work in at most 128 registers (16 warps per SM, more spills): the same results, for the
- * bench to measure which is faster. */
-extern "C" __global__ void __launch_bounds__(32 * CLATCH_VERIFY_WARPS, 4)
-    clatch_verify_pairs_16_warps(const clatch_verify_settings* __restrict__ settings,
-                                 const clatch_verify_pair* __restrict__ pairs, unsigned int pair_count,
-                                 const clatch_verify_point* __restrict__ points, unsigned int* __restrict__ scratch,
-                                 unsigned int* __restrict__ inliers, clatch_verify_result* __restrict__ results) {
     verify_pairs_body(settings, pairs, pair_count, points, scratch, inliers, results);
 }

@@ -31,7 +31,6 @@ fn trials() -> Vec<Trial> {
         Trial::test("generated_pairs_other_settings", gpu::other_settings),
         Trial::test("bench_sized_pairs", gpu::bench_sized_pairs),
         Trial::test("batch_larger_than_one_chunk", gpu::chunked_batch),
-        Trial::test("kernel_of_16_warps_per_sm", gpu::sixteen_warps),
         Trial::test("errors_and_edge_cases", gpu::errors_and_edges),
     ]
 }
@@ -213,20 +212,6 @@ mod gpu {
             let n = compare_results(&cases, &want, &got)?;
             println!("compared {n} pairs in {chunks} chunks, 0 differences");
         }
-        Ok(())
-    }
-
-    /// The build of the kernel in at most 128 registers gives the same geometries.
-    pub fn sixteen_warps() -> Result<(), Failed> {
-        use clatch::cuda::hooks::{VerifyKernel, verify_pairs_with};
-        let dev = clatch::cuda::hooks::device(0)?;
-        let cases = cases(6, scale::pick(300, 24), scale::pick(usize::MAX, 24));
-        let pairs: Vec<ViewPair<'_>> = cases.iter().map(Case::pair).collect();
-        let config = scaled(VerifyConfig::default());
-        let want = verify_pairs(&pairs, &config)?;
-        let got = verify_pairs_with(&dev, &pairs, &config, VerifyKernel::SixteenWarps)?;
-        let n = compare_results(&cases, &want, &got)?;
-        println!("compared {n} pairs, 0 differences");
         Ok(())
     }
 

@@ -47,7 +47,6 @@ pub(crate) const PAIRS_COMPACT: Kernel = Kernel("clatch_pairs_compact");
 pub(crate) const EXPAND_SIGNS: Kernel = Kernel("clatch_expand_signs");
 // kernels/verify.cu
 pub(crate) const VERIFY_PAIRS: Kernel = Kernel("clatch_verify_pairs");
-pub(crate) const VERIFY_PAIRS_16_WARPS: Kernel = Kernel("clatch_verify_pairs_16_warps");
 // kernels/bench_*.cu
 #[cfg(feature = "internals")]
 pub(crate) const MMA_S8_RATE: Kernel = Kernel("clatch_mma_s8_rate");
@@ -222,7 +221,7 @@ pub(crate) static KERNELS: &[KernelFile] = &[
         path: "kernels/verify.cu",
         ptx: ptx::VERIFY_PTX,
         fatbin: ptx::VERIFY_FATBIN,
-        kernels: &[&[VERIFY_PAIRS, VERIFY_PAIRS_16_WARPS]],
+        kernels: &[&[VERIFY_PAIRS]],
         min_capability: ptx::VERIFY_PTX_ARCH,
     },
 ];

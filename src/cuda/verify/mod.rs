@@ -109,28 +109,8 @@ fn run_chunk(
     packed: &PackedPairs,
 ) -> Result<Vec<TwoViewGeometry>> {
     let mut chunk = DeviceChunk::upload(stream, packed)?;
-    chunk.launch(dev, stream, VerifyKernel::default())?;
+    chunk.launch(dev, stream)?;
     chunk.fetch(stream, packed)
-}
-
-/// The two builds of the kernel: registers as the compiler likes (255 on sm_90, 8 warps per SM), or
-/// at most 128 (16 warps per SM, more spills). The same results; the bench measures both.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum VerifyKernel {
-    /// `clatch_verify_pairs`, what the library launches.
-    #[default]
-    Unbounded,
-    /// `clatch_verify_pairs_16_warps`.
-    SixteenWarps,
-}
-
-impl VerifyKernel {
-    fn kernel(self) -> kernels::Kernel {
-        match self {
-            VerifyKernel::Unbounded => kernels::VERIFY_PAIRS,
-            VerifyKernel::SixteenWarps => kernels::VERIFY_PAIRS_16_WARPS,
-        }
-    }
 }
 
 /// A packed chunk on the device: its inputs, scratch lists and outputs, on one stream.
@@ -176,12 +156,7 @@ impl DeviceChunk {
     }
 
     /// Queues the kernel over every pair of the chunk.
-    fn launch(
-        &mut self,
-        dev: &GpuDevice,
-        stream: &Arc<CudaStream>,
-        kernel: VerifyKernel,
-    ) -> Result<()> {
+    fn launch(&mut self, dev: &GpuDevice, stream: &Arc<CudaStream>) -> Result<()> {
         if self.pair_count == 0 {
             return Ok(());
         }
@@ -191,7 +166,7 @@ impl DeviceChunk {
             block_dim: (32 * warps, 1, 1),
             shared_mem_bytes: 0,
         };
-        let mut launch = stream.launch_builder(dev.kernel(kernel.kernel()));
+        let mut launch = stream.launch_builder(dev.kernel(kernels::VERIFY_PAIRS));
         launch
             .arg(&self.settings)
             .arg(&self.records)
@@ -200,7 +175,7 @@ impl DeviceChunk {
             .arg(&mut self.scratch)
             .arg(&mut self.inliers)
             .arg(&mut self.results);
-        // SAFETY: the arguments match the signature of both entry points (settings, pairs, pair count,
+        // SAFETY: the arguments match the signature of `clatch_verify_pairs` (settings, pairs, pair count,
         // points, scratch, inliers, results); `records` and `results` hold `pair_count` entries and
         // one warp per pair reads and writes only its own; each pair's `first .. first + count` lies
         // within the points and inliers, and its `LISTS` lists within the `LISTS` times larger
@@ -244,7 +219,6 @@ mod tests {
 /// The test suites' and benches' hooks (`internals` feature; not public API).
 #[cfg(feature = "internals")]
 pub mod hooks {
-    pub use super::VerifyKernel;
     use super::*;
 
     /// [`crate::verify::verify_pairs`] on the device under a chunk budget of `chunk_bytes`: the
@@ -265,7 +239,6 @@ pub mod hooks {
         dev: &GpuDevice,
         pairs: &[ViewPair<'_>],
         config: &VerifyConfig,
-        kernel: VerifyKernel,
         warmup: usize,
         repeats: usize,
     ) -> Result<Vec<f32>> {
@@ -275,25 +248,9 @@ pub mod hooks {
         let stream = dev.new_stream()?;
         let mut chunk = DeviceChunk::upload(&stream, &packed)?;
         let times = crate::cuda::device::time_launches(dev, &stream, warmup, repeats, || {
-            chunk.launch(dev, &stream, kernel)
+            chunk.launch(dev, &stream)
         })?;
         chunk.fetch(&stream, &packed)?;
         Ok(times)
-    }
-
-    /// [`crate::verify::verify_pairs`] on the device in one launch of `kernel`.
-    pub fn verify_pairs_with(
-        dev: &GpuDevice,
-        pairs: &[ViewPair<'_>],
-        config: &VerifyConfig,
-        kernel: VerifyKernel,
-    ) -> Result<Vec<TwoViewGeometry>> {
-        crate::verify::check_pairs(pairs, config)?;
-        let kept = pairs.iter().map(|p| kept_matches(p, config)).collect();
-        let packed = PackedPairs::new(pairs, kept, config);
-        let stream = dev.new_stream()?;
-        let mut chunk = DeviceChunk::upload(&stream, &packed)?;
-        chunk.launch(dev, &stream, kernel)?;
-        chunk.fetch(&stream, &packed)
     }
 }

@@ -7,6 +7,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use crate::backend::Backend;
 use crate::colmap::camera::PinholeCamera;
 use crate::colmap::error::ColmapError;
 use crate::colmap::folder::Photo;
@@ -18,7 +19,8 @@ use crate::keypoint::KeyPoint;
 use crate::matching::Match;
 use crate::output::{OutputError, OutputLock, Staged};
 use crate::parallel::*;
-use crate::verify::{self, GuidedMatches, GuidedMatching, VerifyConfig, ViewPair, verify_pairs};
+use crate::verifier::Verifier;
+use crate::verify::{self, GuidedMatches, GuidedMatching, VerifyConfig, ViewPair};
 
 /// The file in a match list's folder naming the database the list belongs to.
 pub const OWNER_NAME: &str = ".clatch-database";
@@ -82,6 +84,8 @@ pub struct FolderOutput {
 #[derive(Debug)]
 struct Verification {
     config: VerifyConfig,
+    /// The run's backend: verification waits for its set-up only when the first pairs come.
+    backend: Backend,
     keypoints: Vec<Vec<KeyPoint>>,
     time: Duration,
 }
@@ -175,12 +179,17 @@ impl FolderOutput {
         })
     }
 
-    /// The same output verifying every pair it is given with `config` ([`crate::verify`], on the
-    /// CPU) and writing its matches and two-view geometry into the database
+    /// The same output verifying every pair it is given with `config` ([`crate::verify`]) on
+    /// `backend` and writing its matches and two-view geometry into the database
     /// ([`FolderWriter::add_geometry`]); `None`: the match list alone.
-    pub(crate) fn with_verification(mut self, config: Option<VerifyConfig>) -> Self {
+    pub(crate) fn with_verification(
+        mut self,
+        config: Option<VerifyConfig>,
+        backend: Backend,
+    ) -> Self {
         self.verification = config.map(|config| Verification {
             config,
+            backend,
             keypoints: Vec::new(),
             time: Duration::ZERO,
         });
@@ -347,7 +356,8 @@ impl FolderOutput {
                     .with_key(pair_id(i as u32 + 1, j as u32 + 1)))
             })
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(verify_pairs(&views, &verification.config)?)
+        let verifier = Verifier::new(verification.backend, verification.config.clone())?;
+        Ok(verifier.verify_pairs(&views)?)
     }
 
     /// Time spent verifying so far (zero without verification).

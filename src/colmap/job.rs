@@ -145,7 +145,8 @@ pub struct FolderJob {
     /// Whether and how every pair's matches are verified ([`crate::verify`]) and written into the
     /// database's `matches` and `two_view_geometries`, as COLMAP's own matcher would, so that
     /// COLMAP's mapper runs straight on it (default [`FolderJob::default_verification`]; `None`:
-    /// the match list alone, for COLMAP's `matches_importer` to verify).
+    /// the match list alone, for COLMAP's `matches_importer` to verify). Verification runs on the
+    /// job's backend ([`crate::Verifier`]): the same geometries, bit for bit, on every backend.
     pub verification: Option<VerifyConfig>,
     /// With [`FolderJob::verification`]: whether each verified pair's descriptors are matched again
     /// under its geometry ([`crate::verify::guided_matches`], with [`FolderJob::matching`]'s rules

@@ -103,7 +103,7 @@ impl FolderPlan {
         .map(|output| {
             output
                 .holding(self.lock.clone())
-                .with_verification(self.job.verification.clone())
+                .with_verification(self.job.verification.clone(), self.job.backend)
                 .with_guided_matching(self.job.guided_config())
         })
     }

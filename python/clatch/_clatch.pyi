@@ -238,9 +238,14 @@ def verify_pair(
     """The two-view geometry COLMAP 3.8 would find for one pair (``clatch::verify``, GIL released)."""
 
 def verify_pairs(
-    pairs: Sequence[_VerifyInput], *, keys: Optional[Sequence[int]] = None, **options: Any
+    pairs: Sequence[_VerifyInput],
+    *,
+    keys: Optional[Sequence[int]] = None,
+    backend: str = "cpu",
+    **options: Any,
 ) -> list[TwoViewGeometry]:
-    """``verify_pair`` of many pairs on the CPU's threads, GIL released; results in order."""
+    """``verify_pair`` of many pairs, GIL released, on the CPU's threads or (``backend="cuda"``) a
+    batch per launch on the GPU, the same geometries bit for bit; results in order."""
 
 @final
 class ImageFolder:

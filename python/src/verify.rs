@@ -2,7 +2,7 @@
 //! (`clatch::verify`, COLMAP 3.8's two-view geometry) on numpy arrays.
 
 use clatch::verify::{self, Camera, GeometryConfig, Intrinsics, VerifyConfig, ViewPair};
-use clatch::{KeyPoint, Match};
+use clatch::{KeyPoint, Match, Verifier};
 use numpy::ndarray::Ix2;
 use numpy::{
     Element, IntoPyArray, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods,
@@ -12,6 +12,7 @@ use pyo3::types::{PyDict, PyTuple};
 
 use crate::args::typed;
 use crate::arrays::{KeyPointRecord, MatchRecord, keypoints_in, matches_in, ndarray, shape_text};
+use crate::backend::{backend_error, parse_backend};
 use crate::errors::{compute, invalid_input};
 
 /// The options `verify_pair` and `verify_pairs` take, each a `VerifyConfig` field.
@@ -440,22 +441,27 @@ pub fn verify_pair(
     Ok(TwoViewGeometry { inner })
 }
 
-/// verify_pairs(pairs, *, keys=None, **options) -> list[TwoViewGeometry]
+/// verify_pairs(pairs, *, keys=None, backend="cpu", **options) -> list[TwoViewGeometry]
 ///
-/// ``verify_pair`` of many pairs, side by side on the CPU's threads with the GIL released; each
-/// result equals ``verify_pair`` of that pair (with its key) whatever the batch. ``pairs``: a
-/// sequence of ``(keypoints_a, keypoints_b, matches)`` or ``(keypoints_a, keypoints_b, matches,
-/// camera_a, camera_b)``; ``keys``: one sampler key per pair (default 0 each); ``options`` as for
-/// ``verify_pair``. Every pair is checked before any work; an error names the pair.
+/// ``verify_pair`` of many pairs, with the GIL released: side by side on the CPU's threads, or with
+/// ``backend="cuda"`` (``"cuda:N"``, ``"auto"``) a whole batch per launch on the GPU, the same
+/// geometries bit for bit. Each result equals ``verify_pair`` of that pair (with its key) whatever the
+/// batch and the backend. ``pairs``: a sequence of ``(keypoints_a, keypoints_b, matches)`` or
+/// ``(keypoints_a, keypoints_b, matches, camera_a, camera_b)``; ``keys``: one sampler key per pair
+/// (default 0 each); ``options`` as for ``verify_pair``. Every pair is checked before any work; an
+/// error names the pair.
 #[pyfunction]
-#[pyo3(signature = (pairs, *, keys = None, **options))]
+#[pyo3(signature = (pairs, *, keys = None, backend = "cpu", **options))]
 pub fn verify_pairs(
     py: Python<'_>,
     pairs: &Bound<'_, PyAny>,
     keys: Option<&Bound<'_, PyAny>>,
+    backend: &str,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Vec<TwoViewGeometry>> {
     let config = config_of(options)?;
+    let backend = parse_backend(py, backend)?;
+    let verifier = Verifier::new(backend, config).map_err(|e| backend_error(py, e))?;
     let expected = "a sequence of (keypoints_a, keypoints_b, matches[, camera_a, camera_b])";
     let pairs: Vec<Bound<'_, PyAny>> = typed(pairs, "pairs", expected)?;
     let keys: Vec<u64> = match keys {
@@ -493,7 +499,7 @@ pub fn verify_pairs(
         .collect::<PyResult<Vec<PairInput>>>()?;
     let geometries = compute(py, || {
         let views: Vec<ViewPair<'_>> = inputs.iter().map(PairInput::view).collect();
-        verify::verify_pairs(&views, &config)
+        verifier.verify_pairs(&views)
     })?;
     Ok(geometries
         .into_iter()

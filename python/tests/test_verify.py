@@ -124,6 +124,29 @@ def test_the_batch_equals_each_pair_alone():
     assert clatch.verify_pairs([]) == []
 
 
+def test_the_batch_on_the_tested_backend_equals_the_cpus(backend):
+    a, b, matches = scene()
+    pa, pb, pm = shifted_plane()
+    camera = (WIDTH, HEIGHT, K)
+    pairs = [(a, b, matches), (pa, pb, pm), (a, b, matches, camera, camera), (a[:5], b[:5], matches[:5])]
+    on_cpu = clatch.verify_pairs(pairs, keys=[1, 2, 3, 4])
+    got = clatch.verify_pairs(pairs, keys=[1, 2, 3, 4], backend=backend)
+    assert len(got) == len(on_cpu) == 4
+    assert all(same(g, h) for g, h in zip(got, on_cpu))
+    assert got[0].num_inliers > 0
+
+
+def test_a_bad_or_missing_backend_is_a_typed_error():
+    with pytest.raises(clatch.InvalidInputError) as e:
+        clatch.verify_pairs([], backend="gpu")
+    assert e.value.kind == "InvalidBackend"
+    try:
+        clatch.Extractor("cuda")
+    except clatch.BackendUnavailableError:
+        with pytest.raises(clatch.BackendUnavailableError):
+            clatch.verify_pairs([], backend="cuda")
+
+
 def test_options_reach_the_verification():
     a, b, matches = scene()
     assert clatch.verify_pair(a, b, matches, min_num_inliers=1000).config == "degenerate"

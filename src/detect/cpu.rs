@@ -2,6 +2,7 @@
 
 use crate::parallel::*;
 
+use super::rows::{LANES, RowKernel};
 use super::{DetectorConfig, FAST_ARC, FAST_CIRCLE, ORIENTATION_RADIUS, SUBPIXEL_FRAC_BITS};
 use crate::angle::{bin_degrees, direction_bin};
 use crate::gray_view::GrayView;
@@ -116,7 +117,9 @@ fn may_be_corners(img: &GrayView, y: usize, xs: std::ops::Range<usize>, threshol
 }
 
 /// Score map: FAST score of each pixel inside the margin (at least 3) that is a corner, 0 elsewhere.
-/// Row-major, `width * height`.
+/// Row-major, `width * height`. Rows of at least [`LANES`] scored pixels go through the vectorised
+/// row kernel (`detect/rows.rs`, the same integers); narrower ones through the quick test and
+/// [`arc_score`] pixel by pixel.
 pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
     let (w, h) = (img.width(), img.height());
     let t = threshold as i32;
@@ -126,12 +129,16 @@ pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
     if w <= 2 * margin || h <= 2 * margin {
         return scores;
     }
+    let kernel = RowKernel::detect();
     scores
         .par_chunks_mut(w)
         .enumerate()
         .skip(margin)
         .take(h - 2 * margin)
         .for_each_init(Vec::new, |candidates, (y, row)| {
+            if w - 2 * margin >= LANES {
+                return kernel.score_row(img, y, margin..w - margin, threshold, &mut row[margin..w - margin]);
+            }
             candidates.resize(w - 2 * margin, false);
             may_be_corners(img, y, margin..w - margin, threshold, candidates);
             for (i, _) in candidates.iter().enumerate().filter(|&(_, &c)| c) {

@@ -1,0 +1,191 @@
+//! FAST scores of whole row segments, [`LANES`] pixels at a time, for [`super::cpu::score_map`]: the
+//! integers of [`super::cpu::fast_score`] wherever that score exceeds the threshold, 0 elsewhere.
+//!
+//! Why saturating `u8` lanes give the same integers: with `s = max(B, D)` the exact score,
+//! `B = max_k min_j (c[k+j] - p)` and `D = max_k min_j (p - c[k+j])`, the same minima and maxima of
+//! the saturated differences `max(c - p, 0)` and `max(p - c, 0)` give `max(B, 0)` and `max(D, 0)`
+//! (min and max commute with `max(·, 0)`), so `max(s, 0)`: equal to `s` wherever `s > threshold ≥ 0`,
+//! the only pixels whose score is kept. Every lane is computed on its own, so the segments may
+//! overlap (the last one is moved back to end at the segment's end) without changing a value.
+//!
+//! The same code is compiled twice: with AVX2 (32-byte registers) where the CPU reports it at run
+//! time, and for the target's baseline (SSE2 on x86-64) otherwise; being integer code, both give the
+//! same bytes (a test compares them with the scalar reference).
+
+use super::FAST_CIRCLE;
+use crate::gray_view::GrayView;
+
+/// Pixels scored together.
+pub(super) const LANES: usize = 32;
+
+type Lanes = [u8; LANES];
+
+/// How the rows are scored on this CPU (chosen once per score map).
+#[derive(Clone, Copy, Debug)]
+pub(super) enum RowKernel {
+    /// The code below compiled with AVX2 (x86-64 CPUs that report it at run time).
+    #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+    Avx2,
+    /// The code below for the target's baseline.
+    Portable,
+}
+
+impl RowKernel {
+    /// The fastest kernel this CPU runs.
+    pub(super) fn detect() -> Self {
+        #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            return RowKernel::Avx2;
+        }
+        RowKernel::Portable
+    }
+
+    /// Scores of row `y` for `x` in `xs` into `out` (`out[i]` for `x = xs.start + i`): the FAST score
+    /// where it exceeds `threshold`, 0 elsewhere. Every circle must lie inside the image
+    /// (`xs.start ≥ 3`, `xs.end + 3 ≤ width`, `3 ≤ y < height - 3`) and `xs` hold at least [`LANES`]
+    /// pixels.
+    pub(super) fn score_row(
+        self,
+        img: &GrayView,
+        y: usize,
+        xs: std::ops::Range<usize>,
+        threshold: u8,
+        out: &mut [u8],
+    ) {
+        let rows: [&[u8]; 7] = std::array::from_fn(|j| img.row(y + j - 3));
+        match self {
+            #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+            // SAFETY: `RowKernel::Avx2` is only made when the CPU reports AVX2 (`detect`); the
+            // function is otherwise safe code.
+            RowKernel::Avx2 => unsafe { score_row_avx2(rows, xs, threshold, out) },
+            RowKernel::Portable => score_row(rows, xs, threshold, out),
+        }
+    }
+}
+
+/// [`score_row`] compiled with AVX2.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+#[target_feature(enable = "avx2")]
+unsafe fn score_row_avx2(rows: [&[u8]; 7], xs: std::ops::Range<usize>, threshold: u8, out: &mut [u8]) {
+    score_row(rows, xs, threshold, out)
+}
+
+/// See [`RowKernel::score_row`]; `rows[j]` is image row `y + j - 3`.
+#[inline(always)]
+fn score_row(rows: [&[u8]; 7], xs: std::ops::Range<usize>, threshold: u8, out: &mut [u8]) {
+    let n = xs.len();
+    assert!(n >= LANES && out.len() == n && xs.start >= 3);
+    let mut i = 0;
+    loop {
+        // The last segment ends at the row's end, overlapping the one before.
+        let start = i.min(n - LANES);
+        let lanes: &mut Lanes = (&mut out[start..start + LANES]).try_into().expect("LANES bytes");
+        score_lanes(&rows, xs.start + start, threshold, lanes);
+        if start + LANES == n {
+            break;
+        }
+        i += LANES;
+    }
+}
+
+/// The scores of pixels `x..x + LANES` of the middle row of `rows`.
+#[inline(always)]
+fn score_lanes(rows: &[&[u8]; 7], x: usize, threshold: u8, out: &mut Lanes) {
+    let at = |dx: i32, dy: i32| -> &Lanes {
+        let row = rows[(dy + 3) as usize];
+        (&row[(x as i32 + dx) as usize..][..LANES]).try_into().expect("LANES bytes")
+    };
+    let p = at(0, 0);
+    let circle: [&Lanes; 16] = std::array::from_fn(|k| at(FAST_CIRCLE[k][0], FAST_CIRCLE[k][1]));
+    // The quick test of `may_be_corners` (two adjacent compass pixels beyond the threshold on the
+    // same side), a necessary condition: segments where no pixel passes it are all 0.
+    let [n, e, s, w] = [circle[0], circle[4], circle[8], circle[12]];
+    let mut any = 0u8;
+    for i in 0..LANES {
+        let b = |v: u8| (v.saturating_sub(p[i]) > threshold) as u8;
+        let d = |v: u8| (p[i].saturating_sub(v) > threshold) as u8;
+        let (bn, be, bs, bw) = (b(n[i]), b(e[i]), b(s[i]), b(w[i]));
+        let (dn, de, ds, dw) = (d(n[i]), d(e[i]), d(s[i]), d(w[i]));
+        any |= (bn & be) | (be & bs) | (bs & bw) | (bw & bn) | (dn & de) | (de & ds) | (ds & dw) | (dw & dn);
+    }
+    if any == 0 {
+        *out = [0; LANES];
+        return;
+    }
+    let (mut brighter, mut darker) = ([[0u8; LANES]; 16], [[0u8; LANES]; 16]);
+    for k in 0..16 {
+        for i in 0..LANES {
+            brighter[k][i] = circle[k][i].saturating_sub(p[i]);
+            darker[k][i] = p[i].saturating_sub(circle[k][i]);
+        }
+    }
+    let (b, d) = (arc_maximum(&brighter), arc_maximum(&darker));
+    for i in 0..LANES {
+        let score = b[i].max(d[i]);
+        out[i] = if score > threshold { score } else { 0 };
+    }
+}
+
+/// Lane by lane, the largest over the 16 arcs of nine contiguous circle pixels of the smallest value
+/// on the arc (indices modulo 16), by sliding minima as in `arc_score`.
+#[inline(always)]
+fn arc_maximum(ring: &[Lanes; 16]) -> Lanes {
+    let (mut min2, mut min4) = ([[0u8; LANES]; 16], [[0u8; LANES]; 16]);
+    for k in 0..16 {
+        for i in 0..LANES {
+            min2[k][i] = ring[k][i].min(ring[(k + 1) & 15][i]);
+        }
+    }
+    for k in 0..16 {
+        for i in 0..LANES {
+            min4[k][i] = min2[k][i].min(min2[(k + 2) & 15][i]);
+        }
+    }
+    let mut best = [0u8; LANES];
+    for k in 0..16 {
+        for i in 0..LANES {
+            let min9 = min4[k][i].min(min4[(k + 4) & 15][i]).min(ring[(k + 8) & 15][i]);
+            best[i] = best[i].max(min9);
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_kernel_gives_the_reference_scores() {
+        // Random strided images of a few grey levels (ties, saturation at 0 and 255) and of all 256,
+        // every threshold class, segments of LANES pixels and longer (the overlapping last segment).
+        let mut rng = crate::synthetic::SplitMix64::new(17);
+        let mut kernels = vec![RowKernel::Portable];
+        #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            kernels.push(RowKernel::Avx2);
+        }
+        for (w, h, stride) in [(38, 9, 38), (39, 12, 41), (70, 10, 70), (131, 16, 140)] {
+            for (levels, threshold) in [(2u64, 1u8), (3, 40), (256, 1), (256, 20), (256, 254), (5, 100)] {
+                let data: Vec<u8> = (0..stride * h)
+                    .map(|_| (rng.below(levels) * 255 / (levels - 1)) as u8)
+                    .collect();
+                let img = GrayView::new(&data, w, h, stride).unwrap();
+                for kernel in &kernels {
+                    for y in 3..h - 3 {
+                        let mut out = vec![7u8; w - 6];
+                        kernel.score_row(&img, y, 3..w - 3, threshold, &mut out);
+                        for (i, &got) in out.iter().enumerate() {
+                            let s = super::super::cpu::fast_score(&img, 3 + i, y);
+                            let want = if s > threshold as i32 { s as u8 } else { 0 };
+                            assert_eq!(got, want, "{kernel:?} ({}, {y}) of {w}x{h}, t {threshold}", 3 + i);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

@@ -56,10 +56,12 @@ pub fn subpixel_offset(img: &GrayView, x: usize, y: usize) -> [i32; 2] {
     if !inside {
         return [0, 0];
     }
-    let c = fast_score(img, x, y);
+    // `fast_score_in_rows`: the same integers as `fast_score`, by sliding minima.
+    let score = |x, y| fast_score_in_rows(img, x, y);
+    let c = score(x, y);
     [
-        parabola_offset(fast_score(img, x - 1, y), c, fast_score(img, x + 1, y)),
-        parabola_offset(fast_score(img, x, y - 1), c, fast_score(img, x, y + 1)),
+        parabola_offset(score(x - 1, y), c, score(x + 1, y)),
+        parabola_offset(score(x, y - 1), c, score(x, y + 1)),
     ]
 }
 
@@ -153,30 +155,28 @@ pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
 }
 
 /// Corners that survive 3x3 non-maximum suppression (ties go to the first in raster order), as
-/// `(x, y, score)` in raster order.
+/// `(x, y, score)` in raster order. Rows are tested [`LANES`] pixels at a time (`detect/rows.rs`),
+/// the few pixels left at a row's end one by one.
 pub fn suppress_non_maxima(scores: &[u8], width: usize, height: usize) -> Vec<(u32, u32, u8)> {
-    // Score maps are mostly zeros: rows are scanned a block at a time and empty blocks skipped.
-    const BLOCK: usize = 32;
+    let kernel = RowKernel::detect();
     (1..height.saturating_sub(1))
         .into_par_iter()
         .flat_map_iter(|y| {
             let above = &scores[(y - 1) * width..y * width];
             let here = &scores[y * width..(y + 1) * width];
             let below = &scores[(y + 1) * width..(y + 2) * width];
-            let inner = 1..width.saturating_sub(1);
-            inner
-                .clone()
-                .step_by(BLOCK)
-                .filter(move |&start| here[start..(start + BLOCK).min(inner.end)].iter().any(|&s| s != 0))
-                .flat_map(move |start| start..(start + BLOCK).min(width - 1))
-                .filter_map(move |x| {
-                    let s = here[x];
-                    let earlier = [above[x - 1], above[x], above[x + 1], here[x - 1]];
-                    let later = [here[x + 1], below[x - 1], below[x], below[x + 1]];
-                    let kept =
-                        s > 0 && earlier.iter().all(|&n| s > n) && later.iter().all(|&n| s >= n);
-                    kept.then_some((x as u32, y as u32, s))
-                })
+            let mut kept = Vec::new();
+            let mut keep = |x: usize| kept.push((x as u32, y as u32, here[x]));
+            let tail = kernel.suppress_row([above, here, below], &mut keep);
+            for x in tail {
+                let s = here[x];
+                let earlier = [above[x - 1], above[x], above[x + 1], here[x - 1]];
+                let later = [here[x + 1], below[x - 1], below[x], below[x + 1]];
+                if s > 0 && earlier.iter().all(|&n| s > n) && later.iter().all(|&n| s >= n) {
+                    keep(x);
+                }
+            }
+            kept
         })
         .collect()
 }

@@ -18,6 +18,9 @@ use crate::gray_view::GrayView;
 /// Pixels scored together.
 pub(super) const LANES: usize = 32;
 
+// The suppression gathers one bit per lane into a `u32`.
+const _: () = assert!(LANES <= 32);
+
 type Lanes = [u8; LANES];
 
 /// How the rows are scored on this CPU (chosen once per score map).
@@ -61,6 +64,67 @@ impl RowKernel {
             RowKernel::Portable => score_row(rows, xs, threshold, out),
         }
     }
+    /// Non-maximum suppression of the middle row of `rows` (three rows of one score map): calls
+    /// `keep(x)`, in increasing `x`, for each pixel of `1..` that the suppression keeps, [`LANES`]
+    /// pixels at a time, and returns the pixels left at the row's end (before `width - 1`) for the
+    /// caller to test one by one.
+    pub(super) fn suppress_row(
+        self,
+        rows: [&[u8]; 3],
+        keep: &mut impl FnMut(usize),
+    ) -> std::ops::Range<usize> {
+        match self {
+            #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+            // SAFETY: as in `score_row`.
+            RowKernel::Avx2 => unsafe { suppress_row_avx2(rows, keep) },
+            RowKernel::Portable => suppress_row(rows, keep),
+        }
+    }
+}
+
+/// [`suppress_row`] compiled with AVX2.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+#[target_feature(enable = "avx2")]
+unsafe fn suppress_row_avx2(rows: [&[u8]; 3], keep: &mut impl FnMut(usize)) -> std::ops::Range<usize> {
+    suppress_row(rows, keep)
+}
+
+/// See [`RowKernel::suppress_row`]. A pixel is kept iff its score is positive, `>` the three above
+/// and the left one, `>=` the right one and the three below.
+#[inline(always)]
+fn suppress_row(rows: [&[u8]; 3], keep: &mut impl FnMut(usize)) -> std::ops::Range<usize> {
+    let [above, here, below] = rows;
+    let width = here.len();
+    assert!(above.len() == width && below.len() == width);
+    let lanes = |row: &[u8], x: usize| -> Lanes { row[x..x + LANES].try_into().expect("LANES bytes") };
+    let mut x = 1;
+    while x + LANES < width {
+        let s = lanes(here, x);
+        if s.iter().fold(0, |any, &v| any | v) != 0 {
+            let earlier = [lanes(above, x - 1), lanes(above, x), lanes(above, x + 1), lanes(here, x - 1)];
+            let later = [lanes(here, x + 1), lanes(below, x - 1), lanes(below, x), lanes(below, x + 1)];
+            let mut bits = 0u32;
+            for i in 0..LANES {
+                let mut kept = s[i] > 0;
+                for n in &earlier {
+                    kept &= s[i] > n[i];
+                }
+                for n in &later {
+                    kept &= s[i] >= n[i];
+                }
+                bits |= (kept as u32) << i;
+            }
+            while bits != 0 {
+                keep(x + bits.trailing_zeros() as usize);
+                bits &= bits - 1;
+            }
+        }
+        x += LANES;
+    }
+    x..width.saturating_sub(1).max(x)
 }
 
 /// [`score_row`] compiled with AVX2.
@@ -158,16 +222,52 @@ fn arc_maximum(ring: &[Lanes; 16]) -> Lanes {
 mod tests {
     use super::*;
 
-    #[test]
-    fn every_kernel_gives_the_reference_scores() {
-        // Random strided images of a few grey levels (ties, saturation at 0 and 255) and of all 256,
-        // every threshold class, segments of LANES pixels and longer (the overlapping last segment).
-        let mut rng = crate::synthetic::SplitMix64::new(17);
+    fn kernels() -> Vec<RowKernel> {
         let mut kernels = vec![RowKernel::Portable];
         #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
         if std::arch::is_x86_feature_detected!("avx2") {
             kernels.push(RowKernel::Avx2);
         }
+        kernels
+    }
+
+    #[test]
+    fn every_kernel_suppresses_as_the_plain_rule() {
+        // Sparse maps with runs of equal scores, rows of every width around the lane count.
+        let mut rng = crate::synthetic::SplitMix64::new(23);
+        for kernel in kernels() {
+            for width in (1..3).chain(LANES - 2..LANES + 5).chain([3 * LANES + 7, 100]) {
+                let rows: [Vec<u8>; 3] = std::array::from_fn(|_| {
+                    (0..width)
+                        .map(|_| match rng.below(6) {
+                            0 => 5,
+                            1 => 4 + rng.below(4) as u8,
+                            _ => 0,
+                        })
+                        .collect()
+                });
+                let [above, here, below] = [&rows[0][..], &rows[1][..], &rows[2][..]];
+                let mut got = Vec::new();
+                let tail = kernel.suppress_row([above, here, below], &mut |x| got.push(x));
+                let plain = |x: usize| {
+                    let s = here[x];
+                    let earlier = [above[x - 1], above[x], above[x + 1], here[x - 1]];
+                    let later = [here[x + 1], below[x - 1], below[x], below[x + 1]];
+                    s > 0 && earlier.iter().all(|&n| s > n) && later.iter().all(|&n| s >= n)
+                };
+                got.extend(tail.filter(|&x| plain(x)));
+                let want: Vec<usize> = (1..width.saturating_sub(1)).filter(|&x| plain(x)).collect();
+                assert_eq!(got, want, "{kernel:?} width {width}");
+            }
+        }
+    }
+
+    #[test]
+    fn every_kernel_gives_the_reference_scores() {
+        // Random strided images of a few grey levels (ties, saturation at 0 and 255) and of all 256,
+        // every threshold class, segments of LANES pixels and longer (the overlapping last segment).
+        let mut rng = crate::synthetic::SplitMix64::new(17);
+        let kernels = kernels();
         for (w, h, stride) in [(38, 9, 38), (39, 12, 41), (70, 10, 70), (131, 16, 140)] {
             for (levels, threshold) in [(2u64, 1u8), (3, 40), (256, 1), (256, 20), (256, 254), (5, 100)] {
                 let data: Vec<u8> = (0..stride * h)

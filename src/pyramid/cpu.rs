@@ -33,9 +33,18 @@ fn taps(n: usize, source: usize, step: i64) -> Vec<Tap> {
         .collect()
 }
 
+/// Output rows per parallel task of [`downscale`]: within a band, source rows interpolated along
+/// `x` are reused by the next output row.
+const BAND: usize = 16;
+
 /// One level down: `floor(W · 2^16 / step)` x `floor(H · 2^16 / step)` pixels, each the bilinear sample
 /// (description's rule) of `img` at its source position. Returns the pixels (stride = width), width
 /// and height.
+///
+/// Computed in two passes with the same integers: each source row is interpolated along `x` first,
+/// `p[low] (256 - fx) + p[high] fx` (at most `255 · 256`, exact in `u16`; the reference's `upper` and
+/// `lower`), then each output row combines two such rows, `(upper (256 - fy) + lower fy + 2^15) >> 16`
+/// (vectorised). Consecutive output rows often share a source row, which is then interpolated once.
 pub fn downscale(img: &GrayView, step: i64) -> (Vec<u8>, usize, usize) {
     debug_assert!(step > 1 << STEP_FRAC_BITS && step <= 2 << STEP_FRAC_BITS);
     let (w, h) = (
@@ -48,16 +57,36 @@ pub fn downscale(img: &GrayView, step: i64) -> (Vec<u8>, usize, usize) {
     if w == 0 {
         return (out, w, h);
     }
-    out.par_chunks_mut(w)
-        .zip(rows.par_iter())
-        .for_each(|(line, row)| {
-            let (top, bottom) = (img.row(row.low), img.row(row.high));
-            let fy = row.weight;
-            for (pixel, col) in line.iter_mut().zip(&columns) {
-                let fx = col.weight;
-                let upper = top[col.low] as i32 * (256 - fx) + top[col.high] as i32 * fx;
-                let lower = bottom[col.low] as i32 * (256 - fx) + bottom[col.high] as i32 * fx;
-                *pixel = ((upper * (256 - fy) + lower * fy + (1 << 15)) >> 16) as u8;
+    let along_x = |source: usize, line: &mut [u16]| {
+        let pixels = img.row(source);
+        for (value, col) in line.iter_mut().zip(&columns) {
+            let fx = col.weight as u32;
+            *value = (pixels[col.low] as u32 * (256 - fx) + pixels[col.high] as u32 * fx) as u16;
+        }
+    };
+    out.par_chunks_mut(w * BAND)
+        .zip(rows.par_chunks(BAND))
+        .for_each(|(lines, band)| {
+            // Two interpolated source rows and their indices: [0] the upper, [1] the lower one.
+            let mut held = [(usize::MAX, vec![0u16; w]), (usize::MAX, vec![0u16; w])];
+            for (line, row) in lines.chunks_mut(w).zip(band) {
+                if held[0].0 != row.low {
+                    if held[1].0 == row.low {
+                        held.swap(0, 1);
+                    } else {
+                        along_x(row.low, &mut held[0].1);
+                        held[0].0 = row.low;
+                    }
+                }
+                if held[1].0 != row.high {
+                    along_x(row.high, &mut held[1].1);
+                    held[1].0 = row.high;
+                }
+                let fy = row.weight as u32;
+                let (upper, lower) = (&held[0].1[..w], &held[1].1[..w]);
+                for ((pixel, &u), &l) in line.iter_mut().zip(upper).zip(lower) {
+                    *pixel = ((u as u32 * (256 - fy) + l as u32 * fy + (1 << 15)) >> 16) as u8;
+                }
             }
         });
     (out, w, h)

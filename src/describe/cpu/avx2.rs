@@ -7,6 +7,7 @@
 //! [`OFFSETS`]) instead of per pixel.
 
 use std::arch::x86_64::*;
+use std::ops::Range;
 
 use super::Window;
 use super::optimized::{OFFSETS, PatchOffsets, PixelMask, SamplePlan};
@@ -24,18 +25,25 @@ impl Avx2 {
         is_x86_feature_detected!("avx2").then_some(Avx2(()))
     }
 
-    /// Exactly [`super::sample_window`] for a frame whose plan the image allows.
-    pub(super) fn sample_window(self, img: &GrayView, plan: &SamplePlan, window: &mut Window) {
+    /// Exactly [`super::sample_window`] on window rows `rows`, for a frame whose plan the image
+    /// allows.
+    pub(super) fn sample_window(
+        self,
+        img: &GrayView,
+        plan: &SamplePlan,
+        rows: Range<usize>,
+        window: &mut Window,
+    ) {
         let data = img.data();
         // A plan made for another image is refused here rather than read out of bounds.
         assert!(plan.end <= data.len() && plan.stride == img.stride());
         if plan.stride > i16::MAX as usize {
             // Offsets are 16-bit multiply-adds here; rows this long take the portable kernel.
-            return super::portable::sample_window(img, plan, window);
+            return super::portable::sample_window(img, plan, rows, window);
         }
         // SAFETY: AVX2 is present (self); every gather reads inside `data` (checked just above, by
         // the plan's construction: see `SamplePlan::end`).
-        unsafe { sample_window(data, plan, window) }
+        unsafe { sample_window(data, plan, rows, window) }
     }
 
     /// Exactly [`super::window_bits`] for 0/1 weights (`mask`).
@@ -60,7 +68,7 @@ impl Avx2 {
 /// # Safety
 /// AVX2 must be present, and `plan` must be a plan for an image whose data is `data`.
 #[target_feature(enable = "avx2")]
-unsafe fn sample_window(data: &[u8], plan: &SamplePlan, window: &mut Window) {
+unsafe fn sample_window(data: &[u8], plan: &SamplePlan, rows: Range<usize>, window: &mut Window) {
     // SAFETY: `base` and `base + stride` lie inside `data` (`plan.end` is past both).
     let top = unsafe { data.as_ptr().add(plan.base) } as *const i32;
     let below = unsafe { data.as_ptr().add(plan.base + plan.stride) } as *const i32;
@@ -70,7 +78,8 @@ unsafe fn sample_window(data: &[u8], plan: &SamplePlan, window: &mut Window) {
     let lane_x = _mm256_mullo_epi32(lane, _mm256_set1_epi32(plan.step_u[0]));
     let lane_y = _mm256_mullo_epi32(lane, _mm256_set1_epi32(plan.step_u[1]));
     let eight = [0, 1].map(|axis| _mm256_set1_epi32(8 * plan.step_u[axis]));
-    for (v, out_row) in window.chunks_exact_mut(WINDOW).enumerate() {
+    let (first, end) = (rows.start, rows.end);
+    for (v, out_row) in window.chunks_exact_mut(WINDOW).enumerate().take(end).skip(first) {
         let row = [0, 1].map(|axis| plan.start[axis] + v as i32 * plan.step_v[axis]);
         let mut x = _mm256_add_epi32(_mm256_set1_epi32(row[0]), lane_x);
         let mut y = _mm256_add_epi32(_mm256_set1_epi32(row[1]), lane_y);

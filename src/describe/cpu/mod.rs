@@ -99,6 +99,7 @@ pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfi
     let weights = config.weights.as_array().map(|w| w as i32);
     let kernels = optimized::Kernels::detect();
     let mask = optimized::pixel_mask(&weights);
+    let rows = optimized::weighted_rows(&weights, width.bits());
     let frames: Vec<Option<SamplingFrame>> = keypoints
         .iter()
         .map(|kp| Some(SamplingFrame::of(kp)).filter(|f| f.fits(img.width(), img.height())))
@@ -129,7 +130,7 @@ pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfi
                 let frame = frames[i]
                     .as_ref()
                     .expect("only fitting frames are described");
-                kernels.sample(img, frame, window);
+                kernels.sample(img, frame, rows.clone(), window);
                 match &mask {
                     Some(mask) => kernels.masked_bits(window, width, mask, out),
                     None => window_bits(window, width, &weights, out),

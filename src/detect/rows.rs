@@ -158,39 +158,55 @@ fn score_row(rows: [&[u8]; 7], xs: std::ops::Range<usize>, threshold: u8, out: &
 /// The scores of pixels `x..x + LANES` of the middle row of `rows`.
 #[inline(always)]
 fn score_lanes(rows: &[&[u8]; 7], x: usize, threshold: u8, out: &mut Lanes) {
-    let at = |dx: i32, dy: i32| -> &Lanes {
+    let at = |[dx, dy]: [i32; 2]| -> &Lanes {
         let row = rows[(dy + 3) as usize];
         (&row[(x as i32 + dx) as usize..][..LANES]).try_into().expect("LANES bytes")
     };
-    let p = at(0, 0);
-    let circle: [&Lanes; 16] = std::array::from_fn(|k| at(FAST_CIRCLE[k][0], FAST_CIRCLE[k][1]));
+    let p = at([0, 0]);
     // The quick test of `may_be_corners` (two adjacent compass pixels beyond the threshold on the
-    // same side), a necessary condition: segments where no pixel passes it are all 0.
-    let [n, e, s, w] = [circle[0], circle[4], circle[8], circle[12]];
-    let mut any = 0u8;
+    // same side), a necessary condition, side by side: a side no pixel passes it on has no arc
+    // beyond the threshold, so its saturated maximum (at most the threshold) never decides a kept
+    // score and is left at 0; segments where neither side passes are all 0.
+    let [n, e, s, w] = [0, 4, 8, 12].map(|k| at(FAST_CIRCLE[k]));
+    let (mut any_brighter, mut any_darker) = (0u8, 0u8);
     for i in 0..LANES {
         let b = |v: u8| (v.saturating_sub(p[i]) > threshold) as u8;
         let d = |v: u8| (p[i].saturating_sub(v) > threshold) as u8;
         let (bn, be, bs, bw) = (b(n[i]), b(e[i]), b(s[i]), b(w[i]));
         let (dn, de, ds, dw) = (d(n[i]), d(e[i]), d(s[i]), d(w[i]));
-        any |= (bn & be) | (be & bs) | (bs & bw) | (bw & bn) | (dn & de) | (de & ds) | (ds & dw) | (dw & dn);
+        any_brighter |= (bn & be) | (be & bs) | (bs & bw) | (bw & bn);
+        any_darker |= (dn & de) | (de & ds) | (ds & dw) | (dw & dn);
     }
-    if any == 0 {
+    if any_brighter | any_darker == 0 {
         *out = [0; LANES];
         return;
     }
-    let (mut brighter, mut darker) = ([[0u8; LANES]; 16], [[0u8; LANES]; 16]);
-    for k in 0..16 {
-        for i in 0..LANES {
-            brighter[k][i] = circle[k][i].saturating_sub(p[i]);
-            darker[k][i] = p[i].saturating_sub(circle[k][i]);
-        }
-    }
-    let (b, d) = (arc_maximum(&brighter), arc_maximum(&darker));
+    let b = if any_brighter != 0 { side_maximum::<true>(rows, x, p) } else { [0; LANES] };
+    let d = if any_darker != 0 { side_maximum::<false>(rows, x, p) } else { [0; LANES] };
     for i in 0..LANES {
         let score = b[i].max(d[i]);
         out[i] = if score > threshold { score } else { 0 };
     }
+}
+
+/// Lane by lane, [`arc_maximum`] of the saturated differences of the circle pixels to the centre `p`:
+/// circle minus centre (`BRIGHTER`) or centre minus circle.
+#[inline(always)]
+fn side_maximum<const BRIGHTER: bool>(rows: &[&[u8]; 7], x: usize, p: &Lanes) -> Lanes {
+    let mut ring = [[0u8; LANES]; 16];
+    for (differences, [dx, dy]) in ring.iter_mut().zip(FAST_CIRCLE) {
+        let c: &Lanes = (&rows[(dy + 3) as usize][(x as i32 + dx) as usize..][..LANES])
+            .try_into()
+            .expect("LANES bytes");
+        for i in 0..LANES {
+            differences[i] = if BRIGHTER {
+                c[i].saturating_sub(p[i])
+            } else {
+                p[i].saturating_sub(c[i])
+            };
+        }
+    }
+    arc_maximum(&ring)
 }
 
 /// Lane by lane, the largest over the 16 arcs of nine contiguous circle pixels of the smallest value

@@ -2,6 +2,7 @@
 
 use crate::parallel::*;
 
+use super::along_x::ColumnPlan;
 use super::{LevelKeypoint, Plan, Pyramid, STEP_FRAC_BITS, downscaled, source_position};
 use crate::describe::{self, DescriptorConfig};
 use crate::detect::{self, DetectorConfig, Ranking, Subpixel};
@@ -12,14 +13,14 @@ use crate::gray_view::GrayView;
 /// Where one output coordinate reads: the lower neighbour, the upper one (clamped to the last pixel)
 /// and the 8-bit weight of the upper one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Tap {
-    low: usize,
-    high: usize,
-    weight: i32,
+pub(super) struct Tap {
+    pub(super) low: usize,
+    pub(super) high: usize,
+    pub(super) weight: i32,
 }
 
 /// The taps of the `n` output coordinates of a side of `source` pixels.
-fn taps(n: usize, source: usize, step: i64) -> Vec<Tap> {
+pub(super) fn taps(n: usize, source: usize, step: i64) -> Vec<Tap> {
     (0..n)
         .map(|i| {
             let p8 = (source_position(i, step) + 128) >> 8;
@@ -43,7 +44,7 @@ const BAND: usize = 16;
 ///
 /// Computed in two passes with the same integers: each source row is interpolated along `x` first,
 /// `p[low] (256 - fx) + p[high] fx` (at most `255 · 256`, exact in `u16`; the reference's `upper` and
-/// `lower`), then each output row combines two such rows, `(upper (256 - fy) + lower fy + 2^15) >> 16`
+/// `lower`; 8 columns at a time with AVX2, `pyramid/along_x.rs`), then each output row combines two such rows, `(upper (256 - fy) + lower fy + 2^15) >> 16`
 /// (vectorised). Consecutive output rows often share a source row, which is then interpolated once.
 pub fn downscale(img: &GrayView, step: i64) -> (Vec<u8>, usize, usize) {
     debug_assert!(step > 1 << STEP_FRAC_BITS && step <= 2 << STEP_FRAC_BITS);
@@ -57,13 +58,8 @@ pub fn downscale(img: &GrayView, step: i64) -> (Vec<u8>, usize, usize) {
     if w == 0 {
         return (out, w, h);
     }
-    let along_x = |source: usize, line: &mut [u16]| {
-        let pixels = img.row(source);
-        for (value, col) in line.iter_mut().zip(&columns) {
-            let fx = col.weight as u32;
-            *value = (pixels[col.low] as u32 * (256 - fx) + pixels[col.high] as u32 * fx) as u16;
-        }
-    };
+    let plan = ColumnPlan::new(&columns, img.width());
+    let along_x = |source: usize, line: &mut [u16]| plan.interpolate(img.row(source), line);
     out.par_chunks_mut(w * BAND)
         .zip(rows.par_chunks(BAND))
         .for_each(|(lines, band)| {

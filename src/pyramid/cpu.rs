@@ -131,8 +131,10 @@ fn detect_levels(
         .map(|l| level_view(img, levels, plan, l))
         .collect();
     // Orientation does not take part in the selection: only the kept keypoints are oriented.
+    // The levels are independent: detected side by side (each also in parallel over its rows), so
+    // that the small levels and each level's sort keep the threads busy.
     let per_level: Vec<_> = views
-        .iter()
+        .par_iter()
         .map(|view| detect::cpu::detect_unoriented(view, &candidates))
         .collect();
     let rank = |level: usize, k: &crate::keypoint::KeyPoint| match config.ranking {
@@ -140,22 +142,15 @@ fn detect_levels(
         Ranking::Harris => detect::cpu::harris_response(&views[level], k.x as usize, k.y as usize),
     };
     let mut selected = super::select(&per_level, &plan.sizes, plan.scale_factor(), config, &rank);
+    let subpixel = config.subpixel == Subpixel::Score;
     selected.par_iter_mut().for_each(|k| {
         let view = &views[k.level];
-        k.keypoint.angle = detect::cpu::orientation(view, k.keypoint.x as usize, k.keypoint.y as usize);
-    });
-    if config.subpixel == Subpixel::Score {
-        let offsets: Vec<[i32; 2]> = selected
-            .par_iter()
-            .map(|k| {
-                let (x, y) = (k.keypoint.x as usize, k.keypoint.y as usize);
-                detect::cpu::subpixel_offset(&views[k.level], x, y)
-            })
-            .collect();
-        for (k, offset) in selected.iter_mut().zip(offsets) {
-            k.offset = offset;
+        let (x, y) = (k.keypoint.x as usize, k.keypoint.y as usize);
+        k.keypoint.angle = detect::cpu::orientation(view, x, y);
+        if subpixel {
+            k.offset = detect::cpu::subpixel_offset(view, x, y);
         }
-    }
+    });
     selected
 }
 
@@ -183,7 +178,9 @@ pub fn detect_and_describe(
     let plan = Plan::new(pyramid, img.width(), img.height(), detector.margin());
     let levels = build_levels(img, &plan);
     let selected = detect_levels(img, &levels, &plan, detector);
+    // Each level's keypoints are described on their level, the levels side by side.
     let per_level: Vec<_> = (0..plan.sizes.len())
+        .into_par_iter()
         .map(|l| {
             let view = level_view(img, &levels, &plan, l);
             let described =

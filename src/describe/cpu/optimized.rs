@@ -305,6 +305,13 @@ mod tests {
                 .map(|bin| random_frame(&mut rng, w, h, bin))
                 .collect();
             frames.extend(edge_frames(w, h));
+            // The default keypoints: whole-pixel positions, size 40 (the AVX2 sampler's local copy).
+            frames.extend((0..ANGLE_BINS).filter(|bin| bin % 4 == shape).filter_map(|bin| {
+                let (x, y) = (30 + rng.below(w as u64 - 60), 30 + rng.below(h as u64 - 60));
+                let kp = KeyPoint::new(x as f32, y as f32).with_angle(bin as f32 / 8.0);
+                let frame = SamplingFrame::of(&KeyPoint { size: 40.0, ..kp });
+                frame.fits(w, h).then_some(frame)
+            }));
             // The fast samplers take all but the windows that reach the buffer's last row.
             let planned = frames
                 .iter()

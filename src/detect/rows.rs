@@ -167,7 +167,8 @@ fn score_lanes(rows: &[&[u8]; 7], x: usize, threshold: u8, out: &mut Lanes) {
     // same side), a necessary condition, side by side: a side no pixel passes it on has no arc
     // beyond the threshold, so its saturated maximum (at most the threshold) never decides a kept
     // score and is left at 0; segments where neither side passes are all 0.
-    let [n, e, s, w] = [0, 4, 8, 12].map(|k| at(FAST_CIRCLE[k]));
+    // (Four calls, not an array `map`, whose closure would be compiled outside the AVX2 code.)
+    let (n, e, s, w) = (at(FAST_CIRCLE[0]), at(FAST_CIRCLE[4]), at(FAST_CIRCLE[8]), at(FAST_CIRCLE[12]));
     let (mut any_brighter, mut any_darker) = (0u8, 0u8);
     for i in 0..LANES {
         let b = |v: u8| (v.saturating_sub(p[i]) > threshold) as u8;

@@ -143,14 +143,27 @@ fn detect_levels(
     };
     let mut selected = super::select(&per_level, &plan.sizes, plan.scale_factor(), config, &rank);
     let subpixel = config.subpixel == Subpixel::Score;
-    selected.par_iter_mut().for_each(|k| {
-        let view = &views[k.level];
-        let (x, y) = (k.keypoint.x as usize, k.keypoint.y as usize);
-        k.keypoint.angle = detect::cpu::orientation(view, x, y);
-        if subpixel {
-            k.offset = detect::cpu::subpixel_offset(view, x, y);
-        }
-    });
+    // In raster order of each level, so that the discs of neighbouring keypoints, which share most
+    // of their rows, are read while those rows are in the cache; then back to selection order.
+    let mut order: Vec<(usize, u32, u32, usize)> = selected
+        .iter()
+        .enumerate()
+        .map(|(i, k)| (k.level, k.keypoint.y as u32, k.keypoint.x as u32, i))
+        .collect();
+    order.sort_unstable();
+    let found: Vec<(f32, [i32; 2])> = order
+        .par_iter()
+        .map(|&(level, y, x, _)| {
+            let (view, x, y) = (&views[level], x as usize, y as usize);
+            let angle = detect::cpu::orientation(view, x, y);
+            let offset = if subpixel { detect::cpu::subpixel_offset(view, x, y) } else { [0, 0] };
+            (angle, offset)
+        })
+        .collect();
+    for (&(.., i), (angle, offset)) in order.iter().zip(found) {
+        selected[i].keypoint.angle = angle;
+        selected[i].offset = offset;
+    }
     selected
 }
 

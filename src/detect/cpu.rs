@@ -289,8 +289,14 @@ pub fn detect_unoriented(img: &GrayView, config: &DetectorConfig) -> Vec<KeyPoin
     let margin = config.margin();
     let scores = score_map(img, config.threshold, margin);
     let mut corners = suppress_non_maxima(&scores, img.width(), img.height());
-    corners.sort_unstable_by(|a, b| b.2.cmp(&a.2).then(a.1.cmp(&b.1)).then(a.0.cmp(&b.0)));
-    corners.truncate(config.max_keypoints);
+    // Score descending, then raster order: a total order (positions are unique), so keeping the
+    // first `max_keypoints` by a partition and sorting only those gives the full sort's prefix.
+    let order = |a: &(u32, u32, u8), b: &(u32, u32, u8)| b.2.cmp(&a.2).then(a.1.cmp(&b.1)).then(a.0.cmp(&b.0));
+    if corners.len() > config.max_keypoints {
+        corners.select_nth_unstable_by(config.max_keypoints, order);
+        corners.truncate(config.max_keypoints);
+    }
+    corners.sort_unstable_by(order);
     corners
         .iter()
         .map(|&(x, y, score)| KeyPoint {

@@ -21,27 +21,17 @@ written to PNG files that both sides read, so both see the same pixels. Without 
 
 import argparse
 import os
-import platform
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 
+from cpu_vs_opencv import cpu_model
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TIMER = os.path.join(ROOT, "target", "release", "examples", "cpu_extract")
 OPENCV = "opencv-contrib-python-headless"
-
-
-def cpu_model():
-    try:
-        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=True).stdout
-        for line in out.splitlines():
-            if line.startswith("Model name:"):
-                return line.split(":", 1)[1].strip()
-    except (OSError, subprocess.CalledProcessError):
-        pass
-    return platform.processor() or "unknown"
 
 
 def fields(timer, *args):

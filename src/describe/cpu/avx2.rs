@@ -79,29 +79,48 @@ unsafe fn sample_window(data: &[u8], plan: &SamplePlan, rows: Range<usize>, wind
     let below = unsafe { data.as_ptr().add(plan.base + plan.stride) } as *const i32;
     // (1, stride) in the 16-bit halves of each lane.
     let stride = _mm256_set1_epi32(1 | (plan.stride as i32) << 16);
-    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    let lane_x = _mm256_mullo_epi32(lane, _mm256_set1_epi32(plan.step_u[0]));
-    let lane_y = _mm256_mullo_epi32(lane, _mm256_set1_epi32(plan.step_u[1]));
-    let eight = [0, 1].map(|axis| _mm256_set1_epi32(8 * plan.step_u[axis]));
-    let (first, end) = (rows.start, rows.end);
-    for (v, out_row) in window.chunks_exact_mut(WINDOW).enumerate().take(end).skip(first) {
-        let row = [0, 1].map(|axis| plan.start[axis] + v as i32 * plan.step_v[axis]);
-        let mut x = _mm256_add_epi32(_mm256_set1_epi32(row[0]), lane_x);
-        let mut y = _mm256_add_epi32(_mm256_set1_epi32(row[1]), lane_y);
-        for out in out_row.chunks_exact_mut(16) {
-            let mut halves = [_mm256_setzero_si256(); 2];
-            for half in &mut halves {
-                // SAFETY: the lanes are window samples, whose reads the plan checked.
-                *half = unsafe { bilinear8(top, below, stride, x, y) };
-                x = _mm256_add_epi32(x, eight[0]);
-                y = _mm256_add_epi32(y, eight[1]);
+    // SAFETY: AVX2 is present (this function's contract); the lanes are window samples, whose
+    // reads the plan checked.
+    unsafe { sample_rows(plan, rows, window, |x, y| bilinear8(top, below, stride, x, y)) }
+}
+
+/// Window rows `rows` of `plan`, 8 samples at a time by `eight`, which is given each lane's
+/// relative 16.16 position (plus the 24.8 rounding half, see [`SamplePlan`]) and returns the samples
+/// as `i32` lanes; packed to `i16` and stored.
+///
+/// # Safety
+/// AVX2 must be present (inlined into the AVX2 samplers, it is compiled with it).
+#[inline(always)]
+unsafe fn sample_rows(
+    plan: &SamplePlan,
+    rows: Range<usize>,
+    window: &mut Window,
+    mut eight: impl FnMut(__m256i, __m256i) -> __m256i,
+) {
+    // SAFETY: AVX2 is present (the caller's contract); the one store writes the 32 bytes of `out`.
+    unsafe {
+        let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        let lane_x = _mm256_mullo_epi32(lane, _mm256_set1_epi32(plan.step_u[0]));
+        let lane_y = _mm256_mullo_epi32(lane, _mm256_set1_epi32(plan.step_u[1]));
+        let step = [0, 1].map(|axis| _mm256_set1_epi32(8 * plan.step_u[axis]));
+        let (first, end) = (rows.start, rows.end);
+        for (v, out_row) in window.chunks_exact_mut(WINDOW).enumerate().take(end).skip(first) {
+            let row = [0, 1].map(|axis| plan.start[axis] + v as i32 * plan.step_v[axis]);
+            let mut x = _mm256_add_epi32(_mm256_set1_epi32(row[0]), lane_x);
+            let mut y = _mm256_add_epi32(_mm256_set1_epi32(row[1]), lane_y);
+            for out in out_row.chunks_exact_mut(16) {
+                let mut halves = [_mm256_setzero_si256(); 2];
+                for half in &mut halves {
+                    *half = eight(x, y);
+                    x = _mm256_add_epi32(x, step[0]);
+                    y = _mm256_add_epi32(y, step[1]);
+                }
+                // Samples are 0..=255, so the saturating pack is exact; it interleaves 128-bit
+                // halves, which the permutation undoes.
+                let packed = _mm256_packs_epi32(halves[0], halves[1]);
+                let ordered = _mm256_permute4x64_epi64::<0b11_01_10_00>(packed);
+                _mm256_storeu_si256(out.as_mut_ptr() as *mut __m256i, ordered);
             }
-            // Samples are 0..=255, so the saturating pack is exact; it interleaves 128-bit halves,
-            // which the permutation undoes.
-            let packed = _mm256_packs_epi32(halves[0], halves[1]);
-            let ordered = _mm256_permute4x64_epi64::<0b11_01_10_00>(packed);
-            // SAFETY: `out` holds exactly 16 i16 = 32 bytes.
-            unsafe { _mm256_storeu_si256(out.as_mut_ptr() as *mut __m256i, ordered) };
         }
     }
 }
@@ -218,10 +237,6 @@ unsafe fn sample_local(
         .wrapping_offset(-(local.top as isize * LOCAL as isize + local.left as isize))
         as *const i32;
     let pitch = _mm256_set1_epi32(1 | (LOCAL as i32) << 16);
-    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    let lane_x = _mm256_mullo_epi32(lane, _mm256_set1_epi32(plan.step_u[0]));
-    let lane_y = _mm256_mullo_epi32(lane, _mm256_set1_epi32(plan.step_u[1]));
-    let eight = [0, 1].map(|axis| _mm256_set1_epi32(8 * plan.step_u[axis]));
     let byte = _mm256_set1_epi32(255);
     // Bytes 0, 1 (the row) and 2, 3 (the row below) of each entry -> 16-bit halves.
     let spread = |first: i8| {
@@ -233,37 +248,25 @@ unsafe fn sample_local(
         )
     };
     let (upper_pair, lower_pair) = (spread(0), spread(2));
-    for (v, out_row) in window.chunks_exact_mut(WINDOW).enumerate().take(rows.end).skip(rows.start) {
-        let row = [0, 1].map(|axis| plan.start[axis] + v as i32 * plan.step_v[axis]);
-        let mut x = _mm256_add_epi32(_mm256_set1_epi32(row[0]), lane_x);
-        let mut y = _mm256_add_epi32(_mm256_set1_epi32(row[1]), lane_y);
-        for out in out_row.chunks_exact_mut(16) {
-            let mut halves = [_mm256_setzero_si256(); 2];
-            for half in &mut halves {
-                let (fx, fy) = (
-                    _mm256_and_si256(_mm256_srli_epi32::<8>(x), byte),
-                    _mm256_and_si256(_mm256_srli_epi32::<8>(y), byte),
-                );
-                let whole = _mm256_blend_epi16::<0b1010_1010>(_mm256_srli_epi32::<16>(x), y);
-                let index = _mm256_madd_epi16(whole, pitch);
-                // SAFETY: every sample of the sampled rows lies in the box, whose entries were
-                // all written above (LocalBox::new took the extremes of these rows).
-                let entry = unsafe { _mm256_i32gather_epi32::<4>(origin, index) };
-                *half = interpolate(
-                    _mm256_shuffle_epi8(entry, upper_pair),
-                    _mm256_shuffle_epi8(entry, lower_pair),
-                    fx,
-                    fy,
-                );
-                x = _mm256_add_epi32(x, eight[0]);
-                y = _mm256_add_epi32(y, eight[1]);
-            }
-            let packed = _mm256_packs_epi32(halves[0], halves[1]);
-            let ordered = _mm256_permute4x64_epi64::<0b11_01_10_00>(packed);
-            // SAFETY: `out` holds exactly 16 i16 = 32 bytes.
-            unsafe { _mm256_storeu_si256(out.as_mut_ptr() as *mut __m256i, ordered) };
-        }
-    }
+    let eight = |x, y| {
+        let (fx, fy) = (
+            _mm256_and_si256(_mm256_srli_epi32::<8>(x), byte),
+            _mm256_and_si256(_mm256_srli_epi32::<8>(y), byte),
+        );
+        let whole = _mm256_blend_epi16::<0b1010_1010>(_mm256_srli_epi32::<16>(x), y);
+        let index = _mm256_madd_epi16(whole, pitch);
+        // SAFETY: every sample of the sampled rows lies in the box, whose entries were all
+        // written above (LocalBox::new took the extremes of these rows).
+        let entry = unsafe { _mm256_i32gather_epi32::<4>(origin, index) };
+        interpolate(
+            _mm256_shuffle_epi8(entry, upper_pair),
+            _mm256_shuffle_epi8(entry, lower_pair),
+            fx,
+            fy,
+        )
+    };
+    // SAFETY: AVX2 is present (this function's contract).
+    unsafe { sample_rows(plan, rows, window, eight) }
 }
 
 /// Eight bilinear samples at the relative positions `x, y` (see [`SamplePlan`]), as `i32` lanes.

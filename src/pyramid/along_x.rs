@@ -12,9 +12,11 @@
 use super::cpu::Tap;
 
 /// Output columns per block.
+#[cfg(all(target_arch = "x86_64", feature = "cpu"))]
 const BLOCK: usize = 8;
 
 /// One block's bytes: where it reads and, per output, the shuffle indices and weights.
+#[cfg(all(target_arch = "x86_64", feature = "cpu"))]
 #[derive(Clone, Copy, Debug)]
 struct Block {
     /// The first output's `low`: the block reads the 16 bytes from here.
@@ -28,56 +30,40 @@ struct Block {
     weights: [[u16; BLOCK]; 2],
 }
 
-/// The taps of one level in blocks (see the module).
+/// The taps of one level, in blocks where the CPU runs AVX2 (see the module).
 pub(super) struct ColumnPlan<'a> {
     taps: &'a [Tap],
     /// Blocks `0..blocks.len()` cover outputs `0..BLOCK · blocks.len()` (all reading inside the row);
-    /// the outputs after them are computed one by one.
+    /// the outputs after them are computed one by one. Empty without AVX2.
+    #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
     blocks: Vec<Block>,
-    avx2: bool,
 }
 
 impl<'a> ColumnPlan<'a> {
     /// The plan of `taps` over rows of `source` pixels.
+    #[cfg_attr(not(all(target_arch = "x86_64", feature = "cpu")), allow(unused_variables))]
     pub(super) fn new(taps: &'a [Tap], source: usize) -> Self {
-        let mut blocks = Vec::with_capacity(taps.len() / BLOCK);
-        for chunk in taps.chunks_exact(BLOCK) {
-            let base = chunk[0].low;
-            // Taps are monotone: the last output's `high` is the block's farthest byte.
-            let span = chunk[BLOCK - 1].high - base;
-            if span >= 16 || base + 16 > source {
-                break;
-            }
-            let mut block = Block {
-                base,
-                low: [-128; 2 * BLOCK],
-                high: [-128; 2 * BLOCK],
-                weights: [[0; BLOCK]; 2],
-            };
-            for (i, tap) in chunk.iter().enumerate() {
-                block.low[2 * i] = (tap.low - base) as i8;
-                block.high[2 * i] = (tap.high - base) as i8;
-                block.weights[0][i] = (256 - tap.weight) as u16;
-                block.weights[1][i] = tap.weight as u16;
-            }
-            blocks.push(block);
-        }
         Self {
             taps,
-            blocks,
-            avx2: avx2(),
+            #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+            blocks: if std::arch::is_x86_feature_detected!("avx2") {
+                blocks(taps, source)
+            } else {
+                Vec::new()
+            },
         }
     }
 
     /// `line[X] = pixels[low] (256 - fx) + pixels[high] fx` for every output column `X`.
     pub(super) fn interpolate(&self, pixels: &[u8], line: &mut [u16]) {
-        let mut done = 0;
         #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
-        if self.avx2 {
-            // SAFETY: `avx2` is set only when the CPU reports AVX2.
+        let done = {
+            // SAFETY: blocks are made only when the CPU reports AVX2 (`new`).
             unsafe { x86::blocks(&self.blocks, pixels, line) };
-            done = BLOCK * self.blocks.len();
-        }
+            BLOCK * self.blocks.len()
+        };
+        #[cfg(not(all(target_arch = "x86_64", feature = "cpu")))]
+        let done = 0;
         for (value, tap) in line[done..].iter_mut().zip(&self.taps[done..]) {
             let fx = tap.weight as u32;
             *value = (pixels[tap.low] as u32 * (256 - fx) + pixels[tap.high] as u32 * fx) as u16;
@@ -85,11 +71,32 @@ impl<'a> ColumnPlan<'a> {
     }
 }
 
-fn avx2() -> bool {
-    #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
-    return std::arch::is_x86_feature_detected!("avx2");
-    #[cfg(not(all(target_arch = "x86_64", feature = "cpu")))]
-    false
+/// The blocks of `taps` over rows of `source` pixels, as long as they read inside the row.
+#[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+fn blocks(taps: &[Tap], source: usize) -> Vec<Block> {
+    let mut blocks = Vec::with_capacity(taps.len() / BLOCK);
+    for chunk in taps.chunks_exact(BLOCK) {
+        let base = chunk[0].low;
+        // Taps are monotone: the last output's `high` is the block's farthest byte.
+        let span = chunk[BLOCK - 1].high - base;
+        if span >= 16 || base + 16 > source {
+            break;
+        }
+        let mut block = Block {
+            base,
+            low: [-128; 2 * BLOCK],
+            high: [-128; 2 * BLOCK],
+            weights: [[0; BLOCK]; 2],
+        };
+        for (i, tap) in chunk.iter().enumerate() {
+            block.low[2 * i] = (tap.low - base) as i8;
+            block.high[2 * i] = (tap.high - base) as i8;
+            block.weights[0][i] = (256 - tap.weight) as u16;
+            block.weights[1][i] = tap.weight as u16;
+        }
+        blocks.push(block);
+    }
+    blocks
 }
 
 #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
@@ -148,7 +155,8 @@ mod tests {
                     let want = pixels[tap.low] as u32 * (256 - fx) + pixels[tap.high] as u32 * fx;
                     assert_eq!(got as u32, want, "step {step} source {source} x {x}");
                 }
-                if source >= 40 && plan.avx2 {
+                #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
+                if source >= 40 && std::arch::is_x86_feature_detected!("avx2") {
                     assert!(!plan.blocks.is_empty(), "step {step} source {source}");
                 }
             }

@@ -91,8 +91,8 @@ pub fn window_bits(
 /// With [`DescriptorConfig::smoothing`], the windows sample [`smooth`]`(img)` instead of `img` (which
 /// frames fit does not change: the smoothed image has the same size). Each keypoint goes through the
 /// fast kernels of `cpu/optimized.rs` (the same integers as [`sample_window`] and [`window_bits`],
-/// tested equal), into one window buffer per worker; weights other than 0/1 use [`window_bits`]
-/// itself.
+/// tested equal), into one window buffer per worker, of which only the rows some triplet reads with
+/// a nonzero weight are sampled; weights other than 0/1 use [`window_bits`] itself.
 pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfig) -> Described {
     let width = config.width;
     let per = width.words();

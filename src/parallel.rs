@@ -21,15 +21,19 @@ pub(crate) fn threads() -> usize {
 #[cfg(not(feature = "cpu"))]
 mod sequential {
     use std::ops::Range;
-    use std::slice::{ChunksExactMut, ChunksMut, Iter, IterMut};
+    use std::slice::{Chunks, ChunksExactMut, ChunksMut, Iter, IterMut};
 
     pub(crate) trait ParallelSlice<T> {
         fn par_iter(&self) -> Iter<'_, T>;
+        fn par_chunks(&self, size: usize) -> Chunks<'_, T>;
     }
 
     impl<T> ParallelSlice<T> for [T] {
         fn par_iter(&self) -> Iter<'_, T> {
             self.iter()
+        }
+        fn par_chunks(&self, size: usize) -> Chunks<'_, T> {
+            self.chunks(size)
         }
     }
 

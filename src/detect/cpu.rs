@@ -2,6 +2,7 @@
 
 use crate::parallel::*;
 
+use super::rows::{LANES, RowKernel};
 use super::{DetectorConfig, FAST_ARC, FAST_CIRCLE, ORIENTATION_RADIUS, SUBPIXEL_FRAC_BITS};
 use crate::angle::{bin_degrees, direction_bin};
 use crate::gray_view::GrayView;
@@ -55,10 +56,12 @@ pub fn subpixel_offset(img: &GrayView, x: usize, y: usize) -> [i32; 2] {
     if !inside {
         return [0, 0];
     }
-    let c = fast_score(img, x, y);
+    // `fast_score_in_rows`: the same integers as `fast_score`, by sliding minima.
+    let score = |x, y| fast_score_in_rows(img, x, y);
+    let c = score(x, y);
     [
-        parabola_offset(fast_score(img, x - 1, y), c, fast_score(img, x + 1, y)),
-        parabola_offset(fast_score(img, x, y - 1), c, fast_score(img, x, y + 1)),
+        parabola_offset(score(x - 1, y), c, score(x + 1, y)),
+        parabola_offset(score(x, y - 1), c, score(x, y + 1)),
     ]
 }
 
@@ -116,7 +119,9 @@ fn may_be_corners(img: &GrayView, y: usize, xs: std::ops::Range<usize>, threshol
 }
 
 /// Score map: FAST score of each pixel inside the margin (at least 3) that is a corner, 0 elsewhere.
-/// Row-major, `width * height`.
+/// Row-major, `width * height`. Rows of at least [`LANES`] scored pixels go through the vectorised
+/// row kernel (`detect/rows.rs`, the same integers); narrower ones through the quick test and
+/// [`arc_score`] pixel by pixel.
 pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
     let (w, h) = (img.width(), img.height());
     let t = threshold as i32;
@@ -126,12 +131,16 @@ pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
     if w <= 2 * margin || h <= 2 * margin {
         return scores;
     }
+    let kernel = RowKernel::detect();
     scores
         .par_chunks_mut(w)
         .enumerate()
         .skip(margin)
         .take(h - 2 * margin)
         .for_each_init(Vec::new, |candidates, (y, row)| {
+            if w - 2 * margin >= LANES {
+                return kernel.score_row(img, y, margin..w - margin, threshold, &mut row[margin..w - margin]);
+            }
             candidates.resize(w - 2 * margin, false);
             may_be_corners(img, y, margin..w - margin, threshold, candidates);
             for (i, _) in candidates.iter().enumerate().filter(|&(_, &c)| c) {
@@ -146,30 +155,28 @@ pub fn score_map(img: &GrayView, threshold: u8, margin: usize) -> Vec<u8> {
 }
 
 /// Corners that survive 3x3 non-maximum suppression (ties go to the first in raster order), as
-/// `(x, y, score)` in raster order.
+/// `(x, y, score)` in raster order. Rows are tested [`LANES`] pixels at a time (`detect/rows.rs`),
+/// the few pixels left at a row's end one by one.
 pub fn suppress_non_maxima(scores: &[u8], width: usize, height: usize) -> Vec<(u32, u32, u8)> {
-    // Score maps are mostly zeros: rows are scanned a block at a time and empty blocks skipped.
-    const BLOCK: usize = 32;
+    let kernel = RowKernel::detect();
     (1..height.saturating_sub(1))
         .into_par_iter()
         .flat_map_iter(|y| {
             let above = &scores[(y - 1) * width..y * width];
             let here = &scores[y * width..(y + 1) * width];
             let below = &scores[(y + 1) * width..(y + 2) * width];
-            let inner = 1..width.saturating_sub(1);
-            inner
-                .clone()
-                .step_by(BLOCK)
-                .filter(move |&start| here[start..(start + BLOCK).min(inner.end)].iter().any(|&s| s != 0))
-                .flat_map(move |start| start..(start + BLOCK).min(width - 1))
-                .filter_map(move |x| {
-                    let s = here[x];
-                    let earlier = [above[x - 1], above[x], above[x + 1], here[x - 1]];
-                    let later = [here[x + 1], below[x - 1], below[x], below[x + 1]];
-                    let kept =
-                        s > 0 && earlier.iter().all(|&n| s > n) && later.iter().all(|&n| s >= n);
-                    kept.then_some((x as u32, y as u32, s))
-                })
+            let mut kept = Vec::new();
+            let mut keep = |x: usize| kept.push((x as u32, y as u32, here[x]));
+            let tail = kernel.suppress_row([above, here, below], &mut keep);
+            for x in tail {
+                let s = here[x];
+                let earlier = [above[x - 1], above[x], above[x + 1], here[x - 1]];
+                let later = [here[x + 1], below[x - 1], below[x], below[x + 1]];
+                if s > 0 && earlier.iter().all(|&n| s > n) && later.iter().all(|&n| s >= n) {
+                    keep(x);
+                }
+            }
+            kept
         })
         .collect()
 }
@@ -198,25 +205,75 @@ pub fn harris_response(img: &GrayView, x: usize, y: usize) -> i64 {
     25 * (a * b - c * c) - (a + b) * (a + b)
 }
 
-/// Intensity-centroid moments `(m10, m01)` over the orientation disc around `(x, y)`.
-pub fn centroid_moments(img: &GrayView, x: usize, y: usize) -> (i64, i64) {
-    let r = ORIENTATION_RADIUS;
-    let (mut m10, mut m01) = (0i64, 0i64);
-    for dy in -r..=r {
-        let row = img.row((y as i32 + dy) as usize);
-        let mut dx_sum = 0i64;
-        let mut sum = 0i64;
-        for dx in -r..=r {
-            if dx * dx + dy * dy <= r * r {
-                let v = row[(x as i32 + dx) as usize] as i64;
-                dx_sum += dx as i64 * v;
-                sum += v;
-            }
+/// The orientation disc's radius as an index.
+const DISC_RADIUS: usize = ORIENTATION_RADIUS as usize;
+
+/// Lanes of one disc row: its `2 r + 1 = 31` pixels and a lane of weight 0.
+const DISC_LANES: usize = 32;
+const _: () = assert!(2 * DISC_RADIUS < DISC_LANES);
+
+/// The rows of the orientation disc: `DISC_ROWS[|dy|][dx + r]` is 1 where `dx² + dy² <= r²`, else 0
+/// (0 in the last lane).
+static DISC_ROWS: [[i16; DISC_LANES]; DISC_RADIUS + 1] = disc_rows();
+
+const fn disc_rows() -> [[i16; DISC_LANES]; DISC_RADIUS + 1] {
+    let r = DISC_RADIUS as i32;
+    let mut rows = [[0; DISC_LANES]; DISC_RADIUS + 1];
+    let mut dy = 0;
+    while dy <= r {
+        let mut dx = -r;
+        while dx <= r {
+            rows[dy as usize][(dx + r) as usize] = (dx * dx + dy * dy <= r * r) as i16;
+            dx += 1;
         }
-        m10 += dx_sum;
-        m01 += dy as i64 * sum;
+        dy += 1;
     }
-    (m10, m01)
+    rows
+}
+
+/// `dx` of each lane of a disc row.
+static DISC_DX: [i16; DISC_LANES] = {
+    let mut dx = [0; DISC_LANES];
+    let mut i = 0;
+    while i < DISC_LANES {
+        dx[i] = i as i16 - DISC_RADIUS as i16;
+        i += 1;
+    }
+    dx
+};
+
+/// The `2 r + 1` pixels of row `y` around `x`, and a 0.
+#[inline(always)]
+fn disc_span(img: &GrayView, x: usize, y: usize) -> [u8; DISC_LANES] {
+    let mut span = [0u8; DISC_LANES];
+    span[..2 * DISC_RADIUS + 1].copy_from_slice(&img.row(y)[x - DISC_RADIUS..=x + DISC_RADIUS]);
+    span
+}
+
+/// Intensity-centroid moments `(m10, m01)` over the orientation disc around `(x, y)`.
+///
+/// Rows `y - dy` and `y + dy` are taken together over the whole width of the disc, each pixel times
+/// its 0/1 disc weight, in 32 lanes of 16-bit values (`dx (a + b)` and `dy (b - a)` are at most
+/// `15 · 510` in magnitude) summed per lane in 32 bits and added up at the end: the same integer sums
+/// as pixel by pixel, in another order, in code the compiler vectorises.
+pub fn centroid_moments(img: &GrayView, x: usize, y: usize) -> (i64, i64) {
+    let span = |row: usize| disc_span(img, x, row);
+    let (mut m10, mut m01) = ([0i32; DISC_LANES], [0i32; DISC_LANES]);
+    let centre = span(y);
+    for i in 0..DISC_LANES {
+        m10[i] += (DISC_DX[i] * centre[i] as i16 * DISC_ROWS[0][i]) as i32;
+    }
+    for (dy, weights) in DISC_ROWS.iter().enumerate().skip(1) {
+        let (above, below) = (span(y - dy), span(y + dy));
+        let dx = &DISC_DX;
+        for i in 0..DISC_LANES {
+            let (a, b) = (above[i] as i16 * weights[i], below[i] as i16 * weights[i]);
+            m10[i] += (dx[i] * (a + b)) as i32;
+            m01[i] += (dy as i16 * (b - a)) as i32;
+        }
+    }
+    let total = |lanes: [i32; DISC_LANES]| lanes.iter().map(|&v| v as i64).sum::<i64>();
+    (total(m10), total(m01))
 }
 
 /// The angle of the keypoint at `(x, y)`: the intensity centroid's direction bin, in degrees.
@@ -232,8 +289,14 @@ pub fn detect_unoriented(img: &GrayView, config: &DetectorConfig) -> Vec<KeyPoin
     let margin = config.margin();
     let scores = score_map(img, config.threshold, margin);
     let mut corners = suppress_non_maxima(&scores, img.width(), img.height());
-    corners.sort_unstable_by(|a, b| b.2.cmp(&a.2).then(a.1.cmp(&b.1)).then(a.0.cmp(&b.0)));
-    corners.truncate(config.max_keypoints);
+    // Score descending, then raster order: a total order (positions are unique), so keeping the
+    // first `max_keypoints` by a partition and sorting only those gives the full sort's prefix.
+    let order = |a: &(u32, u32, u8), b: &(u32, u32, u8)| b.2.cmp(&a.2).then(a.1.cmp(&b.1)).then(a.0.cmp(&b.0));
+    if corners.len() > config.max_keypoints {
+        corners.select_nth_unstable_by(config.max_keypoints, order);
+        corners.truncate(config.max_keypoints);
+    }
+    corners.sort_unstable_by(order);
     corners
         .iter()
         .map(|&(x, y, score)| KeyPoint {
@@ -288,6 +351,32 @@ mod tests {
             let ring: [i32; 16] =
                 std::array::from_fn(|_| (lcg(&mut state) % spread) as i32 - (spread / 2) as i32);
             assert_eq!(arc_score(&ring), plain(&ring), "{ring:?}");
+        }
+    }
+
+    #[test]
+    fn centroid_moments_equal_the_plain_disc_sums() {
+        let (w, h) = (61, 47);
+        let mut state = 5;
+        for levels in [2u64, 256] {
+            let pixels: Vec<u8> = (0..w * h).map(|_| (lcg(&mut state) % levels * 255 / (levels - 1)) as u8).collect();
+            let img = GrayView::new(&pixels, w, h, w).unwrap();
+            let r = ORIENTATION_RADIUS;
+            for y in r as usize..h - r as usize {
+                for x in r as usize..w - r as usize {
+                    let (mut m10, mut m01) = (0i64, 0i64);
+                    for dy in -r..=r {
+                        for dx in -r..=r {
+                            if dx * dx + dy * dy <= r * r {
+                                let v = img.at((x as i32 + dx) as usize, (y as i32 + dy) as usize) as i64;
+                                m10 += dx as i64 * v;
+                                m01 += dy as i64 * v;
+                            }
+                        }
+                    }
+                    assert_eq!(centroid_moments(&img, x, y), (m10, m01), "({x}, {y})");
+                }
+            }
         }
     }
 

@@ -28,6 +28,7 @@
 //! image at any angle, so detection never produces a keypoint that description skips.
 
 pub mod cpu;
+mod rows;
 
 use crate::error::{Error, Result};
 use crate::gray_view::GrayView;

@@ -2,6 +2,7 @@
 
 use crate::parallel::*;
 
+use super::along_x::ColumnPlan;
 use super::{LevelKeypoint, Plan, Pyramid, STEP_FRAC_BITS, downscaled, source_position};
 use crate::describe::{self, DescriptorConfig};
 use crate::detect::{self, DetectorConfig, Ranking, Subpixel};
@@ -12,14 +13,14 @@ use crate::gray_view::GrayView;
 /// Where one output coordinate reads: the lower neighbour, the upper one (clamped to the last pixel)
 /// and the 8-bit weight of the upper one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Tap {
-    low: usize,
-    high: usize,
-    weight: i32,
+pub(super) struct Tap {
+    pub(super) low: usize,
+    pub(super) high: usize,
+    pub(super) weight: i32,
 }
 
 /// The taps of the `n` output coordinates of a side of `source` pixels.
-fn taps(n: usize, source: usize, step: i64) -> Vec<Tap> {
+pub(super) fn taps(n: usize, source: usize, step: i64) -> Vec<Tap> {
     (0..n)
         .map(|i| {
             let p8 = (source_position(i, step) + 128) >> 8;
@@ -33,9 +34,18 @@ fn taps(n: usize, source: usize, step: i64) -> Vec<Tap> {
         .collect()
 }
 
+/// Output rows per parallel task of [`downscale`]: within a band, source rows interpolated along
+/// `x` are reused by the next output row.
+const BAND: usize = 16;
+
 /// One level down: `floor(W · 2^16 / step)` x `floor(H · 2^16 / step)` pixels, each the bilinear sample
 /// (description's rule) of `img` at its source position. Returns the pixels (stride = width), width
 /// and height.
+///
+/// Computed in two passes with the same integers: each source row is interpolated along `x` first,
+/// `p[low] (256 - fx) + p[high] fx` (at most `255 · 256`, exact in `u16`; the reference's `upper` and
+/// `lower`; 8 columns at a time with AVX2, `pyramid/along_x.rs`), then each output row combines two such rows, `(upper (256 - fy) + lower fy + 2^15) >> 16`
+/// (vectorised). Consecutive output rows often share a source row, which is then interpolated once.
 pub fn downscale(img: &GrayView, step: i64) -> (Vec<u8>, usize, usize) {
     debug_assert!(step > 1 << STEP_FRAC_BITS && step <= 2 << STEP_FRAC_BITS);
     let (w, h) = (
@@ -48,16 +58,31 @@ pub fn downscale(img: &GrayView, step: i64) -> (Vec<u8>, usize, usize) {
     if w == 0 {
         return (out, w, h);
     }
-    out.par_chunks_mut(w)
-        .zip(rows.par_iter())
-        .for_each(|(line, row)| {
-            let (top, bottom) = (img.row(row.low), img.row(row.high));
-            let fy = row.weight;
-            for (pixel, col) in line.iter_mut().zip(&columns) {
-                let fx = col.weight;
-                let upper = top[col.low] as i32 * (256 - fx) + top[col.high] as i32 * fx;
-                let lower = bottom[col.low] as i32 * (256 - fx) + bottom[col.high] as i32 * fx;
-                *pixel = ((upper * (256 - fy) + lower * fy + (1 << 15)) >> 16) as u8;
+    let plan = ColumnPlan::new(&columns, img.width());
+    let along_x = |source: usize, line: &mut [u16]| plan.interpolate(img.row(source), line);
+    out.par_chunks_mut(w * BAND)
+        .zip(rows.par_chunks(BAND))
+        .for_each(|(lines, band)| {
+            // Two interpolated source rows and their indices: [0] the upper, [1] the lower one.
+            let mut held = [(usize::MAX, vec![0u16; w]), (usize::MAX, vec![0u16; w])];
+            for (line, row) in lines.chunks_mut(w).zip(band) {
+                if held[0].0 != row.low {
+                    if held[1].0 == row.low {
+                        held.swap(0, 1);
+                    } else {
+                        along_x(row.low, &mut held[0].1);
+                        held[0].0 = row.low;
+                    }
+                }
+                if held[1].0 != row.high {
+                    along_x(row.high, &mut held[1].1);
+                    held[1].0 = row.high;
+                }
+                let fy = row.weight as u32;
+                let (upper, lower) = (&held[0].1[..w], &held[1].1[..w]);
+                for ((pixel, &u), &l) in line.iter_mut().zip(upper).zip(lower) {
+                    *pixel = ((u as u32 * (256 - fy) + l as u32 * fy + (1 << 15)) >> 16) as u8;
+                }
             }
         });
     (out, w, h)
@@ -106,8 +131,10 @@ fn detect_levels(
         .map(|l| level_view(img, levels, plan, l))
         .collect();
     // Orientation does not take part in the selection: only the kept keypoints are oriented.
+    // The levels are independent: detected side by side (each also in parallel over its rows), so
+    // that the small levels and each level's sort keep the threads busy.
     let per_level: Vec<_> = views
-        .iter()
+        .par_iter()
         .map(|view| detect::cpu::detect_unoriented(view, &candidates))
         .collect();
     let rank = |level: usize, k: &crate::keypoint::KeyPoint| match config.ranking {
@@ -115,21 +142,27 @@ fn detect_levels(
         Ranking::Harris => detect::cpu::harris_response(&views[level], k.x as usize, k.y as usize),
     };
     let mut selected = super::select(&per_level, &plan.sizes, plan.scale_factor(), config, &rank);
-    selected.par_iter_mut().for_each(|k| {
-        let view = &views[k.level];
-        k.keypoint.angle = detect::cpu::orientation(view, k.keypoint.x as usize, k.keypoint.y as usize);
-    });
-    if config.subpixel == Subpixel::Score {
-        let offsets: Vec<[i32; 2]> = selected
-            .par_iter()
-            .map(|k| {
-                let (x, y) = (k.keypoint.x as usize, k.keypoint.y as usize);
-                detect::cpu::subpixel_offset(&views[k.level], x, y)
-            })
-            .collect();
-        for (k, offset) in selected.iter_mut().zip(offsets) {
-            k.offset = offset;
-        }
+    let subpixel = config.subpixel == Subpixel::Score;
+    // In raster order of each level, so that the discs of neighbouring keypoints, which share most
+    // of their rows, are read while those rows are in the cache; then back to selection order.
+    let mut order: Vec<(usize, u32, u32, usize)> = selected
+        .iter()
+        .enumerate()
+        .map(|(i, k)| (k.level, k.keypoint.y as u32, k.keypoint.x as u32, i))
+        .collect();
+    order.sort_unstable();
+    let found: Vec<(f32, [i32; 2])> = order
+        .par_iter()
+        .map(|&(level, y, x, _)| {
+            let (view, x, y) = (&views[level], x as usize, y as usize);
+            let angle = detect::cpu::orientation(view, x, y);
+            let offset = if subpixel { detect::cpu::subpixel_offset(view, x, y) } else { [0, 0] };
+            (angle, offset)
+        })
+        .collect();
+    for (&(.., i), (angle, offset)) in order.iter().zip(found) {
+        selected[i].keypoint.angle = angle;
+        selected[i].offset = offset;
     }
     selected
 }
@@ -158,7 +191,9 @@ pub fn detect_and_describe(
     let plan = Plan::new(pyramid, img.width(), img.height(), detector.margin());
     let levels = build_levels(img, &plan);
     let selected = detect_levels(img, &levels, &plan, detector);
+    // Each level's keypoints are described on their level, the levels side by side.
     let per_level: Vec<_> = (0..plan.sizes.len())
+        .into_par_iter()
         .map(|l| {
             let view = level_view(img, &levels, &plan, l);
             let described =

@@ -25,6 +25,7 @@
 //!   1/65536 pixel ([`crate::detect::cpu::subpixel_offset`], integer-exact), found after selection for
 //!   the kept keypoints only; orientation and descriptor stay those of the whole pixel `X`.
 
+mod along_x;
 pub mod cpu;
 mod select;
 

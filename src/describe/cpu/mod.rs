@@ -91,14 +91,15 @@ pub fn window_bits(
 /// With [`DescriptorConfig::smoothing`], the windows sample [`smooth`]`(img)` instead of `img` (which
 /// frames fit does not change: the smoothed image has the same size). Each keypoint goes through the
 /// fast kernels of `cpu/optimized.rs` (the same integers as [`sample_window`] and [`window_bits`],
-/// tested equal), into one window buffer per worker; weights other than 0/1 use [`window_bits`]
-/// itself.
+/// tested equal), into one window buffer per worker, of which only the rows some triplet reads with
+/// a nonzero weight are sampled; weights other than 0/1 use [`window_bits`] itself.
 pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfig) -> Described {
     let width = config.width;
     let per = width.words();
     let weights = config.weights.as_array().map(|w| w as i32);
     let kernels = optimized::Kernels::detect();
     let mask = optimized::pixel_mask(&weights);
+    let rows = optimized::weighted_rows(&weights, width.bits());
     let frames: Vec<Option<SamplingFrame>> = keypoints
         .iter()
         .map(|kp| Some(SamplingFrame::of(kp)).filter(|f| f.fits(img.width(), img.height())))
@@ -129,7 +130,7 @@ pub fn describe(img: &GrayView, keypoints: &[KeyPoint], config: &DescriptorConfi
                 let frame = frames[i]
                     .as_ref()
                     .expect("only fitting frames are described");
-                kernels.sample(img, frame, window);
+                kernels.sample(img, frame, rows.clone(), window);
                 match &mask {
                     Some(mask) => kernels.masked_bits(window, width, mask, out),
                     None => window_bits(window, width, &weights, out),

@@ -4,6 +4,8 @@
 //!
 //! The tests at the end check both kernels against the reference on random inputs.
 
+use std::ops::Range;
+
 use super::Window;
 use crate::describe::triplets::TRIPLETS;
 use crate::describe::{PATCH, SamplingFrame, WINDOW};
@@ -34,6 +36,22 @@ const fn offsets() -> [PatchOffsets; TRIPLETS.len()] {
     table
 }
 
+/// The window rows that the first `bits` triplets read with a nonzero weight: the rows a window
+/// must be sampled on for them (with the default weights, which leave each patch's first row out,
+/// rows 5..60). The other rows' samples are multiplied by 0 wherever they are read, so any value
+/// they hold gives the same bits.
+pub(super) fn weighted_rows(weights: &[i32; PATCH * PATCH], bits: usize) -> Range<usize> {
+    let weighted = |r: usize| weights[r * PATCH..][..PATCH].iter().any(|&w| w != 0);
+    let (Some(first), Some(last)) = ((0..PATCH).find(|&r| weighted(r)), (0..PATCH).rfind(|&r| weighted(r)))
+    else {
+        return 0..0;
+    };
+    let patch_rows = OFFSETS[..bits].iter().flatten().map(|&at| at / WINDOW);
+    let top = patch_rows.clone().min().map_or(0, |y| y + first);
+    let bottom = patch_rows.max().map_or(0, |y| y + last + 1);
+    top..bottom.max(top)
+}
+
 /// A 0/1 weight per patch pixel as a lane mask: -1 (all bits set) where the weight is 1, 0 elsewhere.
 pub(super) type PixelMask = [i16; PATCH * PATCH];
 
@@ -57,15 +75,22 @@ impl Kernels {
         Kernels::Portable
     }
 
-    /// Samples the window of a frame that fits the image: exactly [`super::sample_window`].
-    pub(super) fn sample(self, img: &GrayView, frame: &SamplingFrame, window: &mut Window) {
+    /// Samples window rows `rows` (at least; the others may be left as they were) of a frame that
+    /// fits the image: exactly [`super::sample_window`] on those rows.
+    pub(super) fn sample(
+        self,
+        img: &GrayView,
+        frame: &SamplingFrame,
+        rows: Range<usize>,
+        window: &mut Window,
+    ) {
         let Some(plan) = SamplePlan::new(img, frame) else {
             return super::sample_window(img, frame, window);
         };
         match self {
             #[cfg(all(target_arch = "x86_64", feature = "cpu"))]
-            Kernels::Avx2(avx2) => avx2.sample_window(img, &plan, window),
-            Kernels::Portable => super::portable::sample_window(img, &plan, window),
+            Kernels::Avx2(avx2) => avx2.sample_window(img, &plan, rows, window),
+            Kernels::Portable => super::portable::sample_window(img, &plan, rows, window),
         }
     }
 
@@ -280,6 +305,13 @@ mod tests {
                 .map(|bin| random_frame(&mut rng, w, h, bin))
                 .collect();
             frames.extend(edge_frames(w, h));
+            // The default keypoints: whole-pixel positions, size 40 (the AVX2 sampler's local copy).
+            frames.extend((0..ANGLE_BINS).filter(|bin| bin % 4 == shape).filter_map(|bin| {
+                let (x, y) = (30 + rng.below(w as u64 - 60), 30 + rng.below(h as u64 - 60));
+                let kp = KeyPoint::new(x as f32, y as f32).with_angle(bin as f32 / 8.0);
+                let frame = SamplingFrame::of(&KeyPoint { size: 40.0, ..kp });
+                frame.fits(w, h).then_some(frame)
+            }));
             // The fast samplers take all but the windows that reach the buffer's last row.
             let planned = frames
                 .iter()
@@ -295,7 +327,7 @@ mod tests {
                 sample_window(&img, &frame, &mut expected);
                 for kernels in all_kernels() {
                     let mut got: Window = [-1; WINDOW * WINDOW];
-                    kernels.sample(&img, &frame, &mut got);
+                    kernels.sample(&img, &frame, 0..WINDOW, &mut got);
                     assert!(got == expected, "{kernels:?} {frame:?} on {w}x{h}/{stride}");
                 }
             }
@@ -361,6 +393,19 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn weighted_rows_of_the_default_and_other_weights() {
+        let rows = |w: PatchWeights, bits| weighted_rows(&w.as_array().map(|w| w as i32), bits);
+        assert_eq!(rows(PatchWeights::latch_7x7(), 512), 5..60);
+        assert_eq!(rows(PatchWeights::uniform(), 512), 4..60);
+        // Only the last patch row weighted: the patches' tops plus 7.
+        let mut last = [0u32; 64];
+        last[63] = 1;
+        let tops = OFFSETS[..8].iter().flatten().map(|&at| at / WINDOW);
+        let (top, bottom) = (tops.clone().min().unwrap(), tops.max().unwrap());
+        assert_eq!(rows(PatchWeights::new(&last).unwrap(), 8), top + 7..bottom + 8);
     }
 
     #[test]

@@ -6,15 +6,21 @@ use super::optimized::{PatchOffsets, PixelMask, SamplePlan};
 use crate::describe::{PATCH, WINDOW};
 use crate::gray_view::GrayView;
 
-/// Exactly [`super::sample_window`] for a window with a plan, in three passes per window row: the
+/// Exactly [`super::sample_window`] on window rows `rows` for a window with a plan, in three passes per window row: the
 /// positions (vectorised), the pixel pairs (scalar loads, one bounds check per pair) and the
 /// interpolation (vectorised).
-pub(super) fn sample_window(img: &GrayView, plan: &SamplePlan, window: &mut Window) {
+pub(super) fn sample_window(
+    img: &GrayView,
+    plan: &SamplePlan,
+    rows: std::ops::Range<usize>,
+    window: &mut Window,
+) {
     let data = &img.data()[..plan.end];
     let (step, stride) = (plan.step_u, plan.stride as i32);
     let (mut offset, mut fx, mut fy) = ([0i32; WINDOW], [0i32; WINDOW], [0i32; WINDOW]);
     let mut pixels = [[0i32; WINDOW]; 4];
-    for (v, out_row) in window.chunks_exact_mut(WINDOW).enumerate() {
+    let (first, end) = (rows.start, rows.end);
+    for (v, out_row) in window.chunks_exact_mut(WINDOW).enumerate().take(end).skip(first) {
         let row = [0, 1].map(|axis| plan.start[axis] + v as i32 * plan.step_v[axis]);
         for u in 0..WINDOW {
             let (x, y) = (row[0] + u as i32 * step[0], row[1] + u as i32 * step[1]);

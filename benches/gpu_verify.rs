@@ -11,6 +11,9 @@
 #[cfg(feature = "cuda")]
 mod common;
 #[cfg(feature = "cuda")]
+#[path = "../tests/common/scene_pair.rs"]
+mod scene_pair;
+#[cfg(feature = "cuda")]
 #[path = "../tests/common/two_view.rs"]
 mod two_view;
 
@@ -26,8 +29,9 @@ fn main() {
 fn main() {
     use std::time::Instant;
 
-    use clatch::verify::{Camera, Intrinsics, VerifyConfig, ViewPair};
-    use clatch::{Backend, KeyPoint, Match, Verifier};
+    use clatch::verify::{VerifyConfig, ViewPair};
+    use clatch::{Backend, Verifier};
+    use scene_pair::ScenePair;
     use two_view::{Shape, scene};
 
     const MATCHES: usize = 850;
@@ -49,39 +53,13 @@ fn main() {
         v[v.len() / 2]
     };
     for calibrated in [false, true] {
-        struct Owned {
-            a: Vec<KeyPoint>,
-            b: Vec<KeyPoint>,
-            matches: Vec<Match>,
-            cameras: (Camera, Camera),
-        }
-        let owned: Vec<Owned> = (0..gpu_pairs as u64)
+        let owned: Vec<ScenePair> = (0..gpu_pairs as u64)
             .map(|seed| {
-                let s = scene(seed, Shape::General, MATCHES, OUTLIERS, 0.5);
-                let keypoints = |p: &[[f64; 2]]| -> Vec<KeyPoint> {
-                    p.iter()
-                        .map(|p| KeyPoint::new(p[0] as f32, p[1] as f32))
-                        .collect()
-                };
-                let camera = |(f, cx, cy): (f64, f64, f64)| {
-                    let c = Camera::new(s.width, s.height);
-                    if calibrated {
-                        c.with_intrinsics(Intrinsics::new(f, f, cx, cy))
-                    } else {
-                        c
-                    }
-                };
-                Owned {
-                    a: keypoints(&s.a),
-                    b: keypoints(&s.b),
-                    matches: (0..MATCHES as u32)
-                        .map(|i| Match {
-                            query: i,
-                            train: i,
-                            distance: 0,
-                        })
-                        .collect(),
-                    cameras: (camera(s.camera_a), camera(s.camera_b)),
+                let pair = ScenePair::new(&scene(seed, Shape::General, MATCHES, OUTLIERS, 0.5));
+                if calibrated {
+                    pair
+                } else {
+                    pair.without_intrinsics()
                 }
             })
             .collect();

@@ -5,6 +5,8 @@
 //!
 //! `cargo bench --bench verify`
 
+#[path = "../tests/common/scene_pair.rs"]
+mod scene_pair;
 #[path = "../tests/common/two_view.rs"]
 mod two_view;
 
@@ -12,9 +14,9 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use clatch::synthetic::SplitMix64;
-use clatch::verify::{Camera, Intrinsics, VerifyConfig, ViewPair, verify_pairs};
-use clatch::{KeyPoint, Match};
+use clatch::verify::{VerifyConfig, ViewPair, verify_pairs};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use scene_pair::ScenePair;
 use two_view::{Shape, scene};
 
 /// Pairs in a batch.
@@ -22,37 +24,8 @@ const PAIRS: usize = 8;
 /// Putative matches per pair.
 const MATCHES: usize = 850;
 
-/// One pair's keypoints, matches and cameras.
-struct Pair {
-    keypoints_a: Vec<KeyPoint>,
-    keypoints_b: Vec<KeyPoint>,
-    matches: Vec<Match>,
-    cameras: (Camera, Camera),
-}
-
-fn pair(seed: u64, outliers: f64) -> Pair {
-    let s = scene(seed, Shape::General, MATCHES, outliers, 0.5);
-    let keypoints = |points: &[[f64; 2]]| {
-        points
-            .iter()
-            .map(|p| KeyPoint::new(p[0] as f32, p[1] as f32))
-            .collect()
-    };
-    let camera = |(f, cx, cy): (f64, f64, f64)| {
-        Camera::new(s.width, s.height).with_intrinsics(Intrinsics::new(f, f, cx, cy))
-    };
-    Pair {
-        keypoints_a: keypoints(&s.a),
-        keypoints_b: keypoints(&s.b),
-        matches: (0..MATCHES as u32)
-            .map(|i| Match {
-                query: i,
-                train: i,
-                distance: 0,
-            })
-            .collect(),
-        cameras: (camera(s.camera_a), camera(s.camera_b)),
-    }
+fn pair(seed: u64, outliers: f64) -> ScenePair {
+    ScenePair::new(&scene(seed, Shape::General, MATCHES, outliers, 0.5))
 }
 
 fn verification(c: &mut Criterion) {
@@ -63,14 +36,13 @@ fn verification(c: &mut Criterion) {
         .sample_size(10);
     group.throughput(Throughput::Elements(PAIRS as u64));
     for outliers in [0.3, 0.5] {
-        let pairs: Vec<Pair> = (0..PAIRS as u64).map(|k| pair(100 + k, outliers)).collect();
+        let pairs: Vec<ScenePair> = (0..PAIRS as u64).map(|k| pair(100 + k, outliers)).collect();
         for calibrated in [false, true] {
             let views: Vec<ViewPair<'_>> = pairs
                 .iter()
                 .enumerate()
                 .map(|(k, p)| {
-                    let view = ViewPair::new(&p.keypoints_a, &p.keypoints_b, &p.matches)
-                        .with_key(k as u64);
+                    let view = ViewPair::new(&p.a, &p.b, &p.matches).with_key(k as u64);
                     if calibrated {
                         view.with_cameras(&p.cameras.0, &p.cameras.1)
                     } else {

@@ -6,49 +6,23 @@
 //! `cargo run --release --example verify_timing -- fingerprint`: one line of bits per pair over many
 //! random pairs (shapes, sizes, outlier shares, noise, both paths), to diff against another build.
 
+#[path = "../tests/common/scene_pair.rs"]
+mod scene_pair;
 #[path = "../tests/common/two_view.rs"]
 mod two_view;
 
 use std::time::Instant;
 
 use clatch::synthetic::SplitMix64;
-use clatch::verify::{Camera, Intrinsics, TwoViewGeometry, VerifyConfig, ViewPair};
-use clatch::{KeyPoint, Match};
+use clatch::verify::{TwoViewGeometry, VerifyConfig, ViewPair};
+use scene_pair::ScenePair;
 use two_view::{Shape, scene};
 
-struct Pair {
-    a: Vec<KeyPoint>,
-    b: Vec<KeyPoint>,
-    matches: Vec<Match>,
-    cameras: (Camera, Camera),
+fn pair(seed: u64, shape: Shape, n: usize, outliers: f64, noise: f64) -> ScenePair {
+    ScenePair::new(&scene(seed, shape, n, outliers, noise))
 }
 
-fn pair(seed: u64, shape: Shape, n: usize, outliers: f64, noise: f64) -> Pair {
-    let s = scene(seed, shape, n, outliers, noise);
-    let keypoints = |points: &[[f64; 2]]| {
-        points
-            .iter()
-            .map(|p| KeyPoint::new(p[0] as f32, p[1] as f32))
-            .collect()
-    };
-    let camera = |(f, cx, cy): (f64, f64, f64)| {
-        Camera::new(s.width, s.height).with_intrinsics(Intrinsics::new(f, f, cx, cy))
-    };
-    Pair {
-        a: keypoints(&s.a),
-        b: keypoints(&s.b),
-        matches: (0..n as u32)
-            .map(|i| Match {
-                query: i,
-                train: i,
-                distance: 0,
-            })
-            .collect(),
-        cameras: (camera(s.camera_a), camera(s.camera_b)),
-    }
-}
-
-fn view(p: &Pair, calibrated: bool, key: u64) -> ViewPair<'_> {
+fn view(p: &ScenePair, calibrated: bool, key: u64) -> ViewPair<'_> {
     let v = ViewPair::new(&p.a, &p.b, &p.matches).with_key(key);
     if calibrated {
         v.with_cameras(&p.cameras.0, &p.cameras.1)
@@ -121,7 +95,7 @@ fn main() {
         _ => {
             let reps: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(3);
             for outliers in [0.3, 0.5] {
-                let pairs: Vec<Pair> = (0..8u64)
+                let pairs: Vec<ScenePair> = (0..8u64)
                     .map(|k| pair(100 + k, Shape::General, 850, outliers, 0.5))
                     .collect();
                 for calibrated in [false, true] {

@@ -45,6 +45,7 @@ mod gpu {
     use libtest_mimic::Failed;
 
     use super::common::scale;
+    use super::common::scene_pair::ScenePair;
     use super::common::two_view::{Shape, scene};
     use super::common::verify_cases::{Case, case, differences};
 
@@ -168,28 +169,13 @@ mod gpu {
 
     fn bench_case(seed: u64, n: usize, calibrated: bool) -> Case {
         let shape = [Shape::General, Shape::Planar, Shape::Rotation][seed as usize % 3];
-        let s = scene(1000 + seed, shape, n, 0.4, 0.5);
-        let keypoints = |points: &[[f64; 2]]| -> Vec<KeyPoint> {
-            points
-                .iter()
-                .map(|p| KeyPoint::new(p[0] as f32, p[1] as f32))
-                .collect()
-        };
-        let camera = |(f, cx, cy): (f64, f64, f64)| {
-            Camera::new(s.width, s.height).with_intrinsics(Intrinsics::new(f, f, cx, cy))
-        };
+        let pair = ScenePair::new(&scene(1000 + seed, shape, n, 0.4, 0.5));
         Case {
             name: format!("bench pair {seed} ({shape:?}, calibrated {calibrated})"),
-            a: keypoints(&s.a),
-            b: keypoints(&s.b),
-            matches: (0..n as u32)
-                .map(|i| Match {
-                    query: i,
-                    train: i,
-                    distance: 0,
-                })
-                .collect(),
-            cameras: calibrated.then(|| (camera(s.camera_a), camera(s.camera_b))),
+            a: pair.a,
+            b: pair.b,
+            matches: pair.matches,
+            cameras: calibrated.then_some(pair.cameras),
             key: seed,
         }
     }

@@ -5,6 +5,7 @@ pub mod golden;
 pub mod gpu;
 pub mod reference;
 pub mod scale;
+pub mod scene_pair;
 pub mod two_view;
 pub mod verify_cases;
 

@@ -182,6 +182,14 @@ impl Extractor {
         })
     }
 
+    /// The detector settings for `image`: the budget resolved for its size
+    /// ([`DetectorConfig::budget`]) here, on the host, before any backend runs.
+    fn detector_for(&self, image: &GrayView) -> DetectorConfig {
+        self.config
+            .detector
+            .for_image(image.width(), image.height())
+    }
+
     pub(super) fn check_image(image: &GrayView) -> Result<()> {
         if image.width() < WINDOW || image.height() < WINDOW {
             return Err(Error::ImageTooSmall {
@@ -203,11 +211,10 @@ impl Extractor {
         if let Some(p) = &self.levels() {
             return self.detect_pyramid(image, p);
         }
+        let detector = self.detector_for(image);
         match self.backend {
-            Backend::Cpu => Ok(detect::cpu::detect(image, &self.config.detector)),
-            Backend::Cuda { device } => {
-                cuda::detect(&*cuda::device(device)?, image, &self.config.detector)
-            }
+            Backend::Cpu => Ok(detect::cpu::detect(image, &detector)),
+            Backend::Cuda { device } => cuda::detect(&*cuda::device(device)?, image, &detector),
         }
     }
 
@@ -267,10 +274,11 @@ impl Extractor {
     }
 
     fn detect_pyramid(&self, image: &GrayView, p: &Pyramid) -> Result<Vec<KeyPoint>> {
+        let detector = self.detector_for(image);
         match self.backend {
-            Backend::Cpu => Ok(pyramid::cpu::detect(image, &self.config.detector, p)),
+            Backend::Cpu => Ok(pyramid::cpu::detect(image, &detector, p)),
             Backend::Cuda { device } => {
-                cuda::pyramid_detect(&*cuda::device(device)?, image, &self.config.detector, p)
+                cuda::pyramid_detect(&*cuda::device(device)?, image, &detector, p)
             }
         }
     }
@@ -284,17 +292,18 @@ impl Extractor {
     pub fn detect_and_describe(&self, image: &GrayView) -> Result<Features> {
         if let Some(p) = &self.levels() {
             Self::check_image(image)?;
+            let detector = self.detector_for(image);
             return match self.backend {
                 Backend::Cpu => pyramid::cpu::detect_and_describe(
                     image,
-                    &self.config.detector,
+                    &detector,
                     &self.config.descriptor,
                     p,
                 ),
                 Backend::Cuda { device } => cuda::pyramid_detect_and_describe(
                     &*cuda::device(device)?,
                     image,
-                    &self.config.detector,
+                    &detector,
                     &self.config.descriptor,
                     p,
                 ),
@@ -360,7 +369,7 @@ impl Extractor {
                 cuda::detect_and_describe_async(
                     stream,
                     image,
-                    &self.config.detector,
+                    &self.detector_for(image),
                     &self.config.descriptor,
                     self.levels().as_ref(),
                     life,

@@ -10,12 +10,15 @@ Two kinds (EVALUATION.md, "Keypoint budgets on large images"):
   warp     A photo (resized by SCALE first, area interpolation) as image 1 and five fixed
            views of it as images 2-6: rotations, zooms and a perspective tilt about the centre
            (bilinear, black outside, the same size), the homography written exactly.
+  near     The same with five views at nearly the photo's own scale (zoom 0.95-1.1, rotations
+           up to 20 degrees, tilts up to 0.2): the case where full resolution matters most.
 
 Images are written as 8-bit gray PGM (colour converted by cv2.cvtColor, as the OpenCV script
 does), so clatch and OpenCV read the same pixels. Deterministic for one OpenCV build.
 
   python3 eval/scripts/make_large_pairs.py upscale DATA/oxford_graf 2 OUT/graf_x2
   python3 eval/scripts/make_large_pairs.py warp PHOTO.jpg 0.5 OUT/herzjesu_half
+  python3 eval/scripts/make_large_pairs.py near PHOTO.jpg 1 OUT/herzjesu_near
 
 Needs numpy and opencv-python (eval/scripts/requirements.txt).
 """
@@ -80,6 +83,8 @@ def upscale(seq, factor, out):
 # The views of `warp`: (rotation in degrees, zoom, perspective tilt: w runs from 1 - tilt to
 # 1 + tilt across the width).
 VIEWS = [(10.0, 1.0, 0.0), (0.0, 0.8, 0.0), (30.0, 1.25, 0.0), (15.0, 0.9, 0.15), (45.0, 0.6, 0.0)]
+# The views of `near`.
+VIEWS_NEAR = [(5.0, 1.0, 0.0), (10.0, 1.0, 0.1), (0.0, 1.1, 0.0), (20.0, 0.95, 0.05), (0.0, 1.0, 0.2)]
 
 
 def view_homography(w, h, degrees, zoom, tilt):
@@ -99,14 +104,14 @@ def view_homography(w, h, degrees, zoom, tilt):
     return back @ persp @ turn @ centre
 
 
-def warp(photo, scale, out):
+def warp(photo, scale, out, views=VIEWS):
     os.makedirs(out, exist_ok=True)
     img = read_gray(photo)
     if scale != 1.0:
         img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
     h, w = img.shape
     cv2.imwrite(os.path.join(out, "img1.pgm"), img)
-    for k, (degrees, zoom, tilt) in enumerate(VIEWS, start=2):
+    for k, (degrees, zoom, tilt) in enumerate(views, start=2):
         hom = view_homography(w, h, degrees, zoom, tilt)
         view = cv2.warpPerspective(
             img, hom, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0
@@ -116,10 +121,13 @@ def warp(photo, scale, out):
 
 
 def main(argv):
-    if len(argv) != 5 or argv[1] not in ("upscale", "warp"):
+    if len(argv) != 5 or argv[1] not in ("upscale", "warp", "near"):
         sys.exit(__doc__)
     kind, source, factor, out = argv[1], argv[2], float(argv[3]), argv[4]
-    (upscale if kind == "upscale" else warp)(source, factor, out)
+    if kind == "upscale":
+        upscale(source, factor, out)
+    else:
+        warp(source, factor, out, VIEWS if kind == "warp" else VIEWS_NEAR)
 
 
 if __name__ == "__main__":

@@ -22,8 +22,9 @@ use crate::pyramid::{self, Pyramid};
 /// Settings of an [`Extractor`].
 ///
 /// The default is the accurate configuration, chosen by measurement (EVALUATION.md): FAST at
-/// threshold 20 on an 8-level pyramid of factor 1.2, the 5000 keypoints shared among the levels as
-/// ORB shares them, each described over a 40-pixel window on its own level. For today's
+/// threshold 20 on an 8-level pyramid of factor 1.2, the 5000 keypoints (more on an image above one
+/// megapixel: [`DetectorConfig::budget`]) shared among the levels as ORB shares them, each described
+/// over a 40-pixel window on its own level. For today's
 /// full-resolution-only speed path, see [`ExtractorConfig::single_scale`].
 ///
 /// ```
@@ -77,7 +78,8 @@ impl Default for ExtractorConfig {
 
 impl ExtractorConfig {
     /// The single-scale speed preset: full resolution only, 64-pixel windows, the strongest
-    /// keypoints anywhere (the defaults before the pyramid became the default). About 2.5x less
+    /// keypoints anywhere, 5000 whatever the image's size (the defaults before the pyramid became
+    /// the default). About 2.5x less
     /// work per image on the CPU, and far fewer correct matches under scale and viewpoint change.
     pub fn single_scale() -> Self {
         Self {
@@ -85,6 +87,7 @@ impl ExtractorConfig {
                 keypoint_size: crate::KeyPoint::DEFAULT_SIZE,
                 level_budget: crate::LevelBudget::Global,
                 subpixel: crate::Subpixel::None,
+                budget_pixels: None,
                 ..DetectorConfig::default()
             },
             descriptor: DescriptorConfig::default(),

@@ -219,7 +219,7 @@ mod tests {
         let error = "orb".parse::<LevelBudget>().unwrap_err();
         assert_eq!(
             error.to_string(),
-            r#"level_budget must be one of "global", "geometric", got "orb""#
+            r#"level_budget must be one of "global", "geometric", "area", got "orb""#
         );
     }
 }

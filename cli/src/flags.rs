@@ -55,8 +55,9 @@ pub struct DetectArgs {
     /// 1, and 8 for `colmap`, so that textured corners of a photo cannot take every keypoint).
     #[arg(long, value_name = "GRID", value_parser = clap::value_parser!(u32).range(1..=64))]
     pub grid: Option<u32>,
-    /// How --max-keypoints is shared among pyramid levels: `global` (the strongest of all levels) or
-    /// `geometric` (ORB's shares, each level's in proportion to its scale; the default).
+    /// How --max-keypoints is shared among pyramid levels: `global` (the strongest of all levels),
+    /// `geometric` (ORB's shares, each level's in proportion to its scale; the default) or `area`
+    /// (each level's in proportion to its pixels).
     #[arg(long, value_parser = names::named::<LevelBudget>())]
     pub level_budget: Option<LevelBudget>,
     /// What orders corners when the strongest are kept: `fast` (the FAST score) or `harris` (ORB's

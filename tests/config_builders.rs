@@ -106,7 +106,11 @@ fn the_budget_follows_the_image_only_where_set() {
             .with_detector(detector)
             .with_pyramid(pyramid);
         let extractor = Extractor::new(Backend::Cpu, config).unwrap();
-        extractor.detect_and_describe(&image).unwrap().keypoints.len()
+        extractor
+            .detect_and_describe(&image)
+            .unwrap()
+            .keypoints
+            .len()
     };
     for pyramid in [Some(Pyramid::DEFAULT), None] {
         assert_eq!(count(detector.clone(), pyramid), 20);
@@ -115,7 +119,10 @@ fn the_budget_follows_the_image_only_where_set() {
         assert_eq!(count(grown.clone(), pyramid), 80);
         // At most 4 times max_keypoints.
         assert_eq!(grown.with_budget_pixels(Some(1000)).budget(w, h), 80);
-        assert_eq!(count(detector.clone().with_budget_pixels(Some(1000)), pyramid), 80);
+        assert_eq!(
+            count(detector.clone().with_budget_pixels(Some(1000)), pyramid),
+            80
+        );
     }
 }
 

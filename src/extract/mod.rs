@@ -297,12 +297,9 @@ impl Extractor {
             Self::check_image(image)?;
             let detector = self.detector_for(image);
             return match self.backend {
-                Backend::Cpu => pyramid::cpu::detect_and_describe(
-                    image,
-                    &detector,
-                    &self.config.descriptor,
-                    p,
-                ),
+                Backend::Cpu => {
+                    pyramid::cpu::detect_and_describe(image, &detector, &self.config.descriptor, p)
+                }
                 Backend::Cuda { device } => cuda::pyramid_detect_and_describe(
                     &*cuda::device(device)?,
                     image,

@@ -38,12 +38,14 @@ fn main() {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
-    // `base` with another threshold and keypoint cap.
+    // `base` with another threshold and keypoint cap, the same at every image size (the budget
+    // that grows above a megapixel would turn the 20k cap of the large photo into 80k).
     let with = |mut base: ExtractorConfig, threshold: u8, max_keypoints: usize| {
         base.detector = base
             .detector
             .with_threshold(threshold)
-            .with_max_keypoints(max_keypoints);
+            .with_max_keypoints(max_keypoints)
+            .with_budget_pixels(None);
         base
     };
     let single = |threshold, max| with(ExtractorConfig::single_scale(), threshold, max);

@@ -173,6 +173,7 @@ named_option!(crate::Ranking, "ranking", {
 named_option!(crate::LevelBudget, "level_budget", {
     crate::LevelBudget::Global => "global": "The strongest keypoints of all levels together",
     crate::LevelBudget::Geometric => "geometric": "ORB's geometric shares per level",
+    crate::LevelBudget::Area => "area": "Shares in proportion to each level's pixels",
 });
 
 named_option!(crate::Smoothing, "smoothing", {
@@ -209,7 +210,7 @@ mod tests {
     fn every_option_reads_back_what_it_writes() {
         round_trips::<Subpixel>(&["none", "score"]);
         round_trips::<Ranking>(&["fast", "harris"]);
-        round_trips::<LevelBudget>(&["global", "geometric"]);
+        round_trips::<LevelBudget>(&["global", "geometric", "area"]);
         round_trips::<Smoothing>(&["none", "binomial3", "binomial5"]);
     }
 
@@ -218,7 +219,7 @@ mod tests {
         let error = "orb".parse::<LevelBudget>().unwrap_err();
         assert_eq!(
             error.to_string(),
-            r#"level_budget must be one of "global", "geometric", got "orb""#
+            r#"level_budget must be one of "global", "geometric", "area", got "orb""#
         );
     }
 }

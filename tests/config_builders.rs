@@ -41,6 +41,7 @@ fn each_detector_method_sets_its_field_only() {
     let cases = [
         ("threshold", base.clone().with_threshold(33)),
         ("max_keypoints", base.clone().with_max_keypoints(123)),
+        ("budget_pixels", base.clone().with_budget_pixels(None)),
         ("keypoint_size", base.clone().with_keypoint_size(24.0)),
         ("grid", base.clone().with_grid(5)),
         (
@@ -56,6 +57,7 @@ fn each_detector_method_sets_its_field_only() {
         fields!(
             threshold,
             max_keypoints,
+            budget_pixels,
             keypoint_size,
             grid,
             level_budget,
@@ -66,6 +68,7 @@ fn each_detector_method_sets_its_field_only() {
     let all = base
         .with_threshold(33)
         .with_max_keypoints(123)
+        .with_budget_pixels(Some(640 * 480))
         .with_keypoint_size(24.0)
         .with_grid(5)
         .with_level_budget(LevelBudget::Global)
@@ -84,7 +87,43 @@ fn each_detector_method_sets_its_field_only() {
         (all.level_budget, all.ranking, all.subpixel),
         (LevelBudget::Global, Ranking::Harris, Subpixel::None)
     );
+    assert_eq!(all.budget_pixels, Some(640 * 480));
     all.validate().unwrap();
+    assert!(all.with_budget_pixels(Some(0)).validate().is_err());
+}
+
+#[test]
+fn the_budget_follows_the_image_only_where_set() {
+    // 400x300 is 120000 pixels; with budget_pixels 30000 the budget is ceil(20 · 120000 / 30000)
+    // = 80 (within 4 x 20), and the textured image has more corners than that.
+    let (w, h) = (400, 300);
+    let pixels = clatch::synthetic::noise(w, h, 5).unwrap();
+    let image = clatch::GrayView::new(&pixels, w, h, w).unwrap();
+    let detector = DetectorConfig::default().with_max_keypoints(20);
+    assert_eq!(detector.budget(w, h), 20); // 2^20 pixels by default: this image keeps 20
+    let count = |detector: DetectorConfig, pyramid: Option<Pyramid>| {
+        let config = ExtractorConfig::default()
+            .with_detector(detector)
+            .with_pyramid(pyramid);
+        let extractor = Extractor::new(Backend::Cpu, config).unwrap();
+        extractor
+            .detect_and_describe(&image)
+            .unwrap()
+            .keypoints
+            .len()
+    };
+    for pyramid in [Some(Pyramid::DEFAULT), None] {
+        assert_eq!(count(detector.clone(), pyramid), 20);
+        let grown = detector.clone().with_budget_pixels(Some(30_000));
+        assert_eq!(grown.budget(w, h), 80);
+        assert_eq!(count(grown.clone(), pyramid), 80);
+        // At most 4 times max_keypoints.
+        assert_eq!(grown.with_budget_pixels(Some(1000)).budget(w, h), 80);
+        assert_eq!(
+            count(detector.clone().with_budget_pixels(Some(1000)), pyramid),
+            80
+        );
+    }
 }
 
 #[test]

@@ -353,8 +353,9 @@ fn run_with_progress_bar(plan: FolderPlan) -> Result<WrittenFolder, CliError> {
 }
 
 /// The extractor's settings: the library's grid and keypoint budget for structure from motion
-/// ([`clatch::colmap::DEFAULT_GRID`], [`clatch::colmap::DEFAULT_MAX_KEYPOINTS`]) unless `--grid` or
-/// `--max-keypoints` says otherwise.
+/// ([`clatch::colmap::DEFAULT_GRID`], [`clatch::colmap::DEFAULT_MAX_KEYPOINTS`] whatever the photo's
+/// size, as [`clatch::colmap::FolderJob::default_extractor`]) unless `--grid`, `--max-keypoints` or
+/// `--budget-pixels` says otherwise.
 fn extraction_config(
     settings: &crate::pipeline::Settings,
     args: &ColmapArgs,
@@ -368,6 +369,7 @@ fn extraction_config(
         .detect
         .max_keypoints
         .unwrap_or(clatch::colmap::DEFAULT_MAX_KEYPOINTS);
+    config.detector.budget_pixels = args.detect.budget_pixels.and_then(|b| b.0);
     config
 }
 
@@ -754,6 +756,14 @@ mod tests {
         };
         assert_eq!(budget(&[]), 8192);
         assert_eq!(budget(&["--max-keypoints", "5000"]), 5000);
+        // Whatever the photo's size, unless --budget-pixels says otherwise.
+        let grows = |extra: &[&str]| {
+            let args = colmap_args(extra);
+            let settings = crate::settings(&backend, &args.detect, None, None).unwrap();
+            extraction_config(&settings, &args).detector.budget_pixels
+        };
+        assert_eq!(grows(&[]), None);
+        assert_eq!(grows(&["--budget-pixels", "1000000"]), Some(1_000_000));
         // Every other command keeps the library's budget.
         let crate::Command::Demo(demo) = crate::Cli::try_parse_from(["clatch", "demo"])
             .unwrap()

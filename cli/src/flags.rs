@@ -29,6 +29,11 @@ pub struct DetectArgs {
     /// 8192 for `colmap`, COLMAP's own budget of SIFT features per image).
     #[arg(long, value_name = "N", value_parser = parse_positive)]
     pub max_keypoints: Option<usize>,
+    /// Budgets that follow the image: --max-keypoints is the budget of an image of up to PIXELS
+    /// pixels, a larger one keeps proportionally more (`off`: --max-keypoints for every size).
+    /// Default: the library's.
+    #[arg(long, value_name = "PIXELS|off", value_parser = parse_budget_pixels)]
+    pub budget_pixels: Option<BudgetPixels>,
     /// Side in pixels of the window each detected keypoint is described over (the 64x64 samples are
     /// spread over it): 1 to 1024. Default 40, and 64 with --single-scale.
     #[arg(long, value_name = "PIXELS", value_parser = parse_keypoint_size)]
@@ -50,8 +55,9 @@ pub struct DetectArgs {
     /// 1, and 8 for `colmap`, so that textured corners of a photo cannot take every keypoint).
     #[arg(long, value_name = "GRID", value_parser = clap::value_parser!(u32).range(1..=64))]
     pub grid: Option<u32>,
-    /// How --max-keypoints is shared among pyramid levels: `global` (the strongest of all levels) or
-    /// `geometric` (ORB's shares, each level's in proportion to its scale; the default).
+    /// How --max-keypoints is shared among pyramid levels: `global` (the strongest of all levels),
+    /// `geometric` (ORB's shares, each level's in proportion to its scale; the default) or `area`
+    /// (each level's in proportion to its pixels).
     #[arg(long, value_parser = names::named::<LevelBudget>())]
     pub level_budget: Option<LevelBudget>,
     /// What orders corners when the strongest are kept: `fast` (the FAST score) or `harris` (ORB's
@@ -106,6 +112,17 @@ pub struct CheckArgs {
     /// A match is an inlier if its reprojection error is at most this many pixels.
     #[arg(long, default_value_t = 3.0, value_name = "PIXELS", value_parser = parse_tolerance)]
     pub inlier_px: f64,
+}
+
+/// `--budget-pixels`: a pixel count, or `off` (`None`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BudgetPixels(pub Option<usize>);
+
+fn parse_budget_pixels(s: &str) -> Result<BudgetPixels, String> {
+    if s == "off" {
+        return Ok(BudgetPixels(None));
+    }
+    parse_positive(s).map(|p| BudgetPixels(Some(p)))
 }
 
 fn parse_positive(s: &str) -> Result<usize, String> {
@@ -287,6 +304,7 @@ impl DetectArgs {
             .clone()
             .with_threshold(self.threshold)
             .with_max_keypoints(self.max_keypoints.unwrap_or(detector.max_keypoints))
+            .with_budget_pixels(self.budget_pixels.map_or(detector.budget_pixels, |b| b.0))
             .with_keypoint_size(self.keypoint_size.unwrap_or(detector.keypoint_size))
             .with_grid(self.grid.unwrap_or(1) as usize)
             .with_level_budget(self.level_budget.unwrap_or(detector.level_budget))

@@ -92,7 +92,7 @@ class Extractor:
         max_keypoints: Optional[int] = None,
         keypoint_size: Optional[float] = None,
         grid: Optional[int] = None,
-        level_budget: Optional[Literal["geometric", "global"]] = None,
+        level_budget: Optional[Literal["geometric", "global", "area"]] = None,
         ranking: Optional[Literal["fast", "harris"]] = None,
         subpixel: Optional[Literal["score", "none"]] = None,
         pyramid: Union[Tuple[int, float], Literal[False], None] = None,

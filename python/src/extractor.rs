@@ -24,12 +24,14 @@ use crate::errors::{OrRaise, compute, invalid_input, wrong_type};
 /// ``None`` keeps the preset's value; given, it replaces it:
 ///
 /// - ``threshold`` (int, 1..=254, default 20): FAST threshold.
-/// - ``max_keypoints`` (int >= 1, default 5000): keep at most this many, strongest first.
+/// - ``max_keypoints`` (int >= 1, default 5000): keep at most this many, strongest first, on an
+///   image of up to one megapixel; a larger one keeps proportionally more, at most 4 times as many
+///   (the library's ``DetectorConfig::budget_pixels``; not with single_scale).
 /// - ``keypoint_size`` (float, default 40; 64 with single_scale): side of each keypoint's
 ///   descriptor window in pixels of its level.
 /// - ``grid`` (int, 1..=64, default 1): spread keypoints over a grid x grid division of the image.
-/// - ``level_budget`` (``"geometric"`` default, or ``"global"``): how max_keypoints is shared among
-///   pyramid levels.
+/// - ``level_budget`` (``"geometric"`` default, ``"global"`` or ``"area"``): how max_keypoints is
+///   shared among pyramid levels.
 /// - ``ranking`` (``"fast"`` default, or ``"harris"``): what orders corners.
 /// - ``subpixel`` (``"score"`` default, or ``"none"``): sub-pixel positions.
 /// - ``pyramid``: ``(levels, scale_factor)``, or ``False`` for full resolution only (default

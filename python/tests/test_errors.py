@@ -135,7 +135,7 @@ def test_option_and_backend_names_are_the_library_s(backend):
     e = raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Extractor(backend, smoothing="gauss"))
     assert str(e) == 'smoothing must be one of "none", "binomial3", "binomial5", got "gauss"'
     e = raises(clatch.InvalidInputError, "InvalidConfig", lambda: clatch.Extractor(backend, level_budget="orb"))
-    assert str(e) == 'level_budget must be one of "global", "geometric", got "orb"'
+    assert str(e) == 'level_budget must be one of "global", "geometric", "area", got "orb"'
     e = raises(clatch.InvalidInputError, "InvalidBackend", lambda: clatch.Matcher("gpu"))
     assert str(e) == 'backend must be one of "auto", "cpu", "cuda", "cuda:N", got "gpu"'
     chosen = {"level_budget": "global", "ranking": "harris", "subpixel": "none", "smoothing": "binomial5"}

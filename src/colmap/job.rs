@@ -195,11 +195,13 @@ impl FolderJob {
     }
 
     /// The extractor settings for structure from motion: the library's defaults with keypoints spread
-    /// over a [`DEFAULT_GRID`] grid and a budget of [`DEFAULT_MAX_KEYPOINTS`].
+    /// over a [`DEFAULT_GRID`] grid and a budget of [`DEFAULT_MAX_KEYPOINTS`] whatever the photo's
+    /// size (COLMAP's own per-image budget; the structure-from-motion figures were measured so).
     pub fn default_extractor() -> ExtractorConfig {
         let mut config = ExtractorConfig::default();
         config.detector.grid = DEFAULT_GRID;
         config.detector.max_keypoints = DEFAULT_MAX_KEYPOINTS;
+        config.detector.budget_pixels = None;
         config
     }
 

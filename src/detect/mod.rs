@@ -91,8 +91,19 @@ pub struct DetectorConfig {
     /// FAST threshold: a corner needs nine contiguous circle pixels more than this above or below the
     /// centre. 1..=254. Default 20.
     pub threshold: u8,
-    /// Keep at most this many keypoints, the strongest first. Default 5000.
+    /// Keep at most this many keypoints, the strongest first (on an image larger than
+    /// [`DetectorConfig::budget_pixels`], proportionally more: [`DetectorConfig::budget`]). Default
+    /// 5000.
     pub max_keypoints: usize,
+    /// Budgets that follow the image: `Some(p)` makes `max_keypoints` the budget of an image of up
+    /// to `p` pixels and gives a larger image `ceil(max_keypoints · pixels / p)`, at most 4 times
+    /// `max_keypoints` ([`DetectorConfig::budget`]); `None` keeps `max_keypoints` for every size.
+    /// Default [`DetectorConfig::DEFAULT_BUDGET_PIXELS`] (one megapixel, 2^20 pixels): with the
+    /// default 5000, an image of up to 1024x1024 keeps 5000 keypoints, a 1712x1368 one 11,168, one
+    /// of 4 megapixels or more 20,000. Measured on large pairs (EVALUATION.md, "Keypoint budgets on
+    /// large images"): a fixed budget leaves too few keypoints at full resolution once the levels
+    /// share it. [`crate::ExtractorConfig::single_scale`] and the `colmap` settings keep `None`.
+    pub budget_pixels: Option<usize>,
     /// `size` given to detected keypoints: the side of their descriptor window in pixels. Default
     /// [`DetectorConfig::DEFAULT_KEYPOINT_SIZE`] (40): with the default pyramid, smaller windows
     /// match more keypoints under viewpoint change than the 64 of [`crate::KeyPoint::DEFAULT_SIZE`]
@@ -177,6 +188,11 @@ pub enum LevelBudget {
     /// keypoints leave goes to the strongest of the others. The default.
     #[default]
     Geometric,
+    /// As [`LevelBudget::Geometric`], but each level's share is proportional to its pixel count
+    /// (about `scale_factor^-2l`): the same density of keypoints on every level, so full resolution
+    /// keeps a larger part (integer shares: `floor(budget · A_l / A) - floor(budget · A_{l-1} / A)`,
+    /// `A_l` the pixels of levels `0..=l`, `A` of all).
+    Area,
 }
 
 impl Default for DetectorConfig {
@@ -184,6 +200,7 @@ impl Default for DetectorConfig {
         Self {
             threshold: 20,
             max_keypoints: 5000,
+            budget_pixels: Some(Self::DEFAULT_BUDGET_PIXELS),
             keypoint_size: Self::DEFAULT_KEYPOINT_SIZE,
             grid: 1,
             level_budget: LevelBudget::Geometric,
@@ -197,12 +214,24 @@ impl DetectorConfig {
     /// The default `keypoint_size` of detected keypoints.
     pub const DEFAULT_KEYPOINT_SIZE: f32 = 40.0;
 
+    /// The default [`DetectorConfig::budget_pixels`]: one megapixel (1024x1024), so images of up to
+    /// that size keep `max_keypoints` as before budgets followed the image.
+    pub const DEFAULT_BUDGET_PIXELS: usize = 1 << 20;
+
+    /// The most [`DetectorConfig::budget`] grows a budget: 4 times `max_keypoints`, so that the
+    /// matching work (quadratic in the keypoints for brute force) stays within 16 times that of a
+    /// small image.
+    pub const MAX_BUDGET_GROWTH: usize = 4;
+
     with_methods! {
         /// The same settings with this FAST threshold ([`DetectorConfig::threshold`]).
         with_threshold => threshold: u8;
         /// The same settings keeping at most this many keypoints
         /// ([`DetectorConfig::max_keypoints`]).
         with_max_keypoints => max_keypoints: usize;
+        /// The same settings with budgets that follow the image this way
+        /// ([`DetectorConfig::budget_pixels`]).
+        with_budget_pixels => budget_pixels: Option<usize>;
         /// The same settings with this window side for detected keypoints
         /// ([`DetectorConfig::keypoint_size`]).
         with_keypoint_size => keypoint_size: f32;
@@ -234,6 +263,13 @@ impl DetectorConfig {
                 reason: "must be at least 1",
             });
         }
+        if self.budget_pixels == Some(0) {
+            return Err(Error::InvalidConfig {
+                field: "budget_pixels",
+                value: "0".into(),
+                reason: "must be at least 1 pixel",
+            });
+        }
         if !(1..=MAX_GRID).contains(&self.grid) {
             return Err(Error::InvalidConfig {
                 field: "grid",
@@ -246,6 +282,44 @@ impl DetectorConfig {
             value: self.keypoint_size.to_string(),
             reason,
         })
+    }
+
+    /// The keypoint budget of a `width` x `height` image: `max_keypoints`, or on an image of more than
+    /// [`DetectorConfig::budget_pixels`] pixels `ceil(max_keypoints · width · height /
+    /// budget_pixels)`, at most [`DetectorConfig::MAX_BUDGET_GROWTH`] times `max_keypoints`. Integer
+    /// arithmetic on the host: every backend keeps the same number.
+    ///
+    /// ```
+    /// use clatch::DetectorConfig;
+    ///
+    /// let config = DetectorConfig::default(); // 5000 keypoints up to 2^20 pixels
+    /// assert_eq!(config.budget(1024, 1024), 5000); // one megapixel: max_keypoints
+    /// assert_eq!(config.budget(640, 480), 5000); // smaller images keep max_keypoints
+    /// assert_eq!(config.budget(2048, 1024), 10000);
+    /// assert_eq!(config.budget(1712, 1368), 11168); // ceil(5000 · 2342016 / 1048576) = ceil(11167.6)
+    /// assert_eq!(config.budget(5616, 3744), 20000); // 20 megapixels: 4 x max_keypoints
+    /// assert_eq!(config.with_budget_pixels(None).budget(5616, 3744), 5000);
+    /// ```
+    pub fn budget(&self, width: usize, height: usize) -> usize {
+        let pixels = width as u128 * height as u128;
+        match self.budget_pixels {
+            Some(p) if p > 0 && pixels > p as u128 => {
+                let grown = (self.max_keypoints as u128 * pixels).div_ceil(p as u128);
+                let most = self.max_keypoints.saturating_mul(Self::MAX_BUDGET_GROWTH);
+                usize::try_from(grown).map_or(most, |g| g.min(most))
+            }
+            _ => self.max_keypoints,
+        }
+    }
+
+    /// These settings for a `width` x `height` image: `max_keypoints` replaced by
+    /// [`DetectorConfig::budget`], so that both backends detect and select with one number.
+    pub(crate) fn for_image(&self, width: usize, height: usize) -> DetectorConfig {
+        DetectorConfig {
+            max_keypoints: self.budget(width, height),
+            budget_pixels: None,
+            ..self.clone()
+        }
     }
 
     /// Whether keypoints are chosen by more than the plain top-N, or their positions refined (then

@@ -22,8 +22,9 @@ use crate::pyramid::{self, Pyramid};
 /// Settings of an [`Extractor`].
 ///
 /// The default is the accurate configuration, chosen by measurement (EVALUATION.md): FAST at
-/// threshold 20 on an 8-level pyramid of factor 1.2, the 5000 keypoints shared among the levels as
-/// ORB shares them, each described over a 40-pixel window on its own level. For today's
+/// threshold 20 on an 8-level pyramid of factor 1.2, the 5000 keypoints (more on an image above one
+/// megapixel: [`DetectorConfig::budget`]) shared among the levels as ORB shares them, each described
+/// over a 40-pixel window on its own level. For today's
 /// full-resolution-only speed path, see [`ExtractorConfig::single_scale`].
 ///
 /// ```
@@ -77,7 +78,8 @@ impl Default for ExtractorConfig {
 
 impl ExtractorConfig {
     /// The single-scale speed preset: full resolution only, 64-pixel windows, the strongest
-    /// keypoints anywhere (the defaults before the pyramid became the default). About 2.5x less
+    /// keypoints anywhere, 5000 whatever the image's size (the defaults before the pyramid became
+    /// the default). About 2.5x less
     /// work per image on the CPU, and far fewer correct matches under scale and viewpoint change.
     pub fn single_scale() -> Self {
         Self {
@@ -85,6 +87,7 @@ impl ExtractorConfig {
                 keypoint_size: crate::KeyPoint::DEFAULT_SIZE,
                 level_budget: crate::LevelBudget::Global,
                 subpixel: crate::Subpixel::None,
+                budget_pixels: None,
                 ..DetectorConfig::default()
             },
             descriptor: DescriptorConfig::default(),
@@ -182,6 +185,14 @@ impl Extractor {
         })
     }
 
+    /// The detector settings for `image`: the budget resolved for its size
+    /// ([`DetectorConfig::budget`]) here, on the host, before any backend runs.
+    fn detector_for(&self, image: &GrayView) -> DetectorConfig {
+        self.config
+            .detector
+            .for_image(image.width(), image.height())
+    }
+
     pub(super) fn check_image(image: &GrayView) -> Result<()> {
         if image.width() < WINDOW || image.height() < WINDOW {
             return Err(Error::ImageTooSmall {
@@ -203,11 +214,10 @@ impl Extractor {
         if let Some(p) = &self.levels() {
             return self.detect_pyramid(image, p);
         }
+        let detector = self.detector_for(image);
         match self.backend {
-            Backend::Cpu => Ok(detect::cpu::detect(image, &self.config.detector)),
-            Backend::Cuda { device } => {
-                cuda::detect(&*cuda::device(device)?, image, &self.config.detector)
-            }
+            Backend::Cpu => Ok(detect::cpu::detect(image, &detector)),
+            Backend::Cuda { device } => cuda::detect(&*cuda::device(device)?, image, &detector),
         }
     }
 
@@ -267,10 +277,11 @@ impl Extractor {
     }
 
     fn detect_pyramid(&self, image: &GrayView, p: &Pyramid) -> Result<Vec<KeyPoint>> {
+        let detector = self.detector_for(image);
         match self.backend {
-            Backend::Cpu => Ok(pyramid::cpu::detect(image, &self.config.detector, p)),
+            Backend::Cpu => Ok(pyramid::cpu::detect(image, &detector, p)),
             Backend::Cuda { device } => {
-                cuda::pyramid_detect(&*cuda::device(device)?, image, &self.config.detector, p)
+                cuda::pyramid_detect(&*cuda::device(device)?, image, &detector, p)
             }
         }
     }
@@ -284,17 +295,15 @@ impl Extractor {
     pub fn detect_and_describe(&self, image: &GrayView) -> Result<Features> {
         if let Some(p) = &self.levels() {
             Self::check_image(image)?;
+            let detector = self.detector_for(image);
             return match self.backend {
-                Backend::Cpu => pyramid::cpu::detect_and_describe(
-                    image,
-                    &self.config.detector,
-                    &self.config.descriptor,
-                    p,
-                ),
+                Backend::Cpu => {
+                    pyramid::cpu::detect_and_describe(image, &detector, &self.config.descriptor, p)
+                }
                 Backend::Cuda { device } => cuda::pyramid_detect_and_describe(
                     &*cuda::device(device)?,
                     image,
-                    &self.config.detector,
+                    &detector,
                     &self.config.descriptor,
                     p,
                 ),
@@ -360,7 +369,7 @@ impl Extractor {
                 cuda::detect_and_describe_async(
                     stream,
                     image,
-                    &self.config.detector,
+                    &self.detector_for(image),
                     &self.config.descriptor,
                     self.levels().as_ref(),
                     life,

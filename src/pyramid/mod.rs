@@ -31,7 +31,7 @@ mod select;
 
 pub use select::{LevelKeypoint, fast_rank, of_level, select};
 #[cfg(feature = "internals")]
-pub use select::level_shares;
+pub use select::{area_shares, level_shares};
 
 use crate::descriptor::{DescriptorSet, DescriptorWidth};
 use crate::error::{Error, Result};

@@ -55,6 +55,27 @@ pub fn level_shares(budget: usize, levels: usize, scale_factor: f64) -> Vec<usiz
     shares
 }
 
+/// Each level's share of `budget` under [`LevelBudget::Area`]: in proportion to the level's pixels
+/// `w_l · h_l` of `sizes`, level `l` getting `floor(budget · A_l / A) - floor(budget · A_{l-1} / A)`
+/// with `A_l` the pixels of levels `0..=l` and `A` all of them, so the shares add up to `budget`.
+/// Integer arithmetic, the same for every backend.
+pub fn area_shares(budget: usize, sizes: &[(usize, usize)]) -> Vec<usize> {
+    let pixels: Vec<u128> = sizes.iter().map(|&(w, h)| w as u128 * h as u128).collect();
+    let all: u128 = pixels.iter().sum::<u128>().max(1);
+    let mut shares = Vec::with_capacity(sizes.len());
+    let (mut up_to, mut given) = (0u128, 0usize);
+    for p in pixels {
+        up_to += p;
+        let cumulative = (budget as u128 * up_to / all) as usize;
+        shares.push(cumulative - given);
+        given = cumulative;
+    }
+    if let (Some(last), true) = (shares.last_mut(), given < budget) {
+        *last += budget - given; // only when every level is empty
+    }
+    shares
+}
+
 /// Keeps at most `budget` of `candidates` (in selection order) spread over a `grid` x `grid`
 /// division of the image (a keypoint's cell is found on its own level, `sizes[level]`, so a cell is
 /// the same part of the scene on every level): each cell first keeps its strongest
@@ -127,8 +148,11 @@ pub fn select(
     let mut keep = vec![false; all.len()];
     match config.level_budget {
         LevelBudget::Global => spread(&all, sizes, config.grid, budget, &mut keep),
-        LevelBudget::Geometric => {
-            let shares = level_shares(budget, per_level.len(), scale_factor);
+        LevelBudget::Geometric | LevelBudget::Area => {
+            let shares = match config.level_budget {
+                LevelBudget::Area => area_shares(budget, &sizes[..per_level.len()]),
+                _ => level_shares(budget, per_level.len(), scale_factor),
+            };
             for (level, &share) in shares.iter().enumerate() {
                 let (index, of_level): (Vec<usize>, Vec<LevelKeypoint>) = all
                     .iter()
@@ -202,6 +226,19 @@ mod tests {
         for n in 0..20 {
             assert_eq!(level_shares(n, 8, 1.2).iter().sum::<usize>(), n);
         }
+    }
+
+    #[test]
+    fn area_shares_follow_the_pixels_and_add_up() {
+        // 10000, 2500 and 625 pixels of 13125: floor(100 · 10000 / 13125) = floor(76.2) = 76, then
+        // floor(100 · 12500 / 13125) = floor(95.2) = 95 gives 19, and the last 5.
+        assert_eq!(area_shares(100, &[(100, 100), (50, 50), (25, 25)]), vec![76, 19, 5]);
+        assert_eq!(area_shares(5000, &[(800, 640)]), vec![5000]);
+        // Tiny budgets and empty levels never hand out more (or less) than there is.
+        for n in 0..20 {
+            assert_eq!(area_shares(n, &[(9, 7), (7, 6), (6, 5)]).iter().sum::<usize>(), n);
+        }
+        assert_eq!(area_shares(7, &[(0, 0), (0, 0)]), vec![0, 7]);
     }
 
     #[test]

@@ -72,10 +72,13 @@ pub fn banner() -> Option<String> {
 pub const SANITIZER_KEYPOINTS: usize = 300;
 
 /// `config` in a normal run; under `CLATCH_TEST_SCALE=sanitizer` the same settings with the
-/// keypoint budget capped at [`SANITIZER_KEYPOINTS`]. Give the CPU and the GPU the same result.
+/// keypoint budget capped at [`SANITIZER_KEYPOINTS`] on images of every size (the budget's growth
+/// with the image area, `DetectorConfig::budget_pixels`, turned off). Give the CPU and the GPU the
+/// same result.
 pub fn budget(mut config: clatch::ExtractorConfig) -> clatch::ExtractorConfig {
     if sanitizer() {
         config.detector.max_keypoints = config.detector.max_keypoints.min(SANITIZER_KEYPOINTS);
+        config.detector.budget_pixels = None;
     }
     config
 }

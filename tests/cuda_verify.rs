@@ -38,8 +38,7 @@ fn trials() -> Vec<Trial> {
 #[cfg(feature = "cuda")]
 mod gpu {
     use clatch::verify::{
-        Camera, Intrinsics, NeighbourConsistency, TwoViewGeometry, VerifyConfig, ViewPair,
-        verify_pairs,
+        Camera, Intrinsics, TwoViewGeometry, VerifyConfig, ViewPair, verify_pairs,
     };
     use clatch::{Backend, KeyPoint, Match, Verifier};
     use libtest_mimic::Failed;
@@ -47,7 +46,7 @@ mod gpu {
     use super::common::scale;
     use super::common::scene_pair::ScenePair;
     use super::common::two_view::{Shape, scene};
-    use super::common::verify_cases::{Case, case, differences};
+    use super::common::verify_cases::{Case, case, differences, other_configs};
 
     const GPU: Backend = Backend::Cuda { device: 0 };
 
@@ -129,22 +128,7 @@ mod gpu {
 
     pub fn other_settings() -> Result<(), Failed> {
         let cases = cases(3, scale::pick(510, 30), scale::pick(usize::MAX, 30));
-        let configs = [
-            VerifyConfig::default()
-                .with_neighbour_consistency(Some(NeighbourConsistency::default())),
-            VerifyConfig::default()
-                .with_planar_keeps_homography_inliers(false)
-                .with_seed(99)
-                .with_max_error(1.0),
-            VerifyConfig::default()
-                .with_min_num_inliers(4)
-                .with_min_num_trials(0)
-                .with_max_num_trials(50)
-                .with_confidence(0.9),
-            VerifyConfig::default()
-                .with_detect_watermark(false)
-                .with_min_inlier_ratio(0.6),
-        ];
+        let configs = other_configs();
         let mut compared = 0;
         for config in &configs {
             compared += compare(&cases, config)?;

@@ -2,14 +2,14 @@
 //! CPU reference (`clatch::verify::verify_pairs`) on generated pairs: every field bit for bit.
 
 use clatch::synthetic::SplitMix64;
-use clatch::verify::{NeighbourConsistency, VerifyConfig, ViewPair, verify_pairs};
+use clatch::verify::{VerifyConfig, ViewPair, verify_pairs};
 
 #[path = "../../tests/common/two_view.rs"]
 mod two_view;
 #[path = "../../tests/common/verify_cases.rs"]
 mod verify_cases;
 
-use verify_cases::{Case, case, differences};
+use verify_cases::{Case, case, differences, other_configs};
 
 /// Compares both on `cases` under `config`; panics with the first difference.
 fn compare(cases: &[Case], config: &VerifyConfig) -> usize {
@@ -44,18 +44,7 @@ fn every_generated_pair_is_bit_identical_to_the_cpu_reference() {
 #[test]
 fn other_settings_are_bit_identical_too() {
     let cases: Vec<Case> = (0..300).map(|i| case(2, i)).collect();
-    let configs = [
-        VerifyConfig::default().with_neighbour_consistency(Some(NeighbourConsistency::default())),
-        VerifyConfig::default()
-            .with_planar_keeps_homography_inliers(false)
-            .with_seed(99)
-            .with_max_error(1.0),
-        VerifyConfig::default()
-            .with_min_num_inliers(4)
-            .with_min_num_trials(0)
-            .with_max_num_trials(50)
-            .with_confidence(0.9),
-    ];
+    let configs = other_configs();
     for config in &configs {
         compare(&cases, config);
     }

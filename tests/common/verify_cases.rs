@@ -5,7 +5,9 @@
 //! cameras and intrinsics, duplicate matches, shuffled keypoint indices, huge coordinates.
 #![allow(dead_code)]
 
-use clatch::verify::{Camera, Intrinsics, TwoViewGeometry, ViewPair};
+use clatch::verify::{
+    Camera, Intrinsics, NeighbourConsistency, TwoViewGeometry, VerifyConfig, ViewPair,
+};
 use clatch::{KeyPoint, Match};
 
 use super::two_view::{Rng, Shape, scene};
@@ -171,4 +173,25 @@ pub fn differences(want: &TwoViewGeometry, got: &TwoViewGeometry) -> (usize, Opt
         )
     });
     (differing.len(), first)
+}
+
+/// Settings other than the default that every twin is compared under: the neighbour rule on, a
+/// planar pair's F inliers, another seed and threshold, few trials and a low confidence, the
+/// watermark test off with a higher inlier ratio.
+pub fn other_configs() -> Vec<VerifyConfig> {
+    vec![
+        VerifyConfig::default().with_neighbour_consistency(Some(NeighbourConsistency::default())),
+        VerifyConfig::default()
+            .with_planar_keeps_homography_inliers(false)
+            .with_seed(99)
+            .with_max_error(1.0),
+        VerifyConfig::default()
+            .with_min_num_inliers(4)
+            .with_min_num_trials(0)
+            .with_max_num_trials(50)
+            .with_confidence(0.9),
+        VerifyConfig::default()
+            .with_detect_watermark(false)
+            .with_min_inlier_ratio(0.6),
+    ]
 }

@@ -3,14 +3,14 @@
 //! any grouping and order), write those bytes too; every refusal comes before any work and leaves
 //! nothing behind, and a run that fails keeps the old database.
 
-use std::ops::ControlFlow;
+use std::ops::{ControlFlow, Range};
 use std::path::{Path, PathBuf};
 
 use clatch::colmap::{
-    ColmapError, FolderCamera, FolderJob, FolderProgress, FolderStage, Overwrite, PhotoRef,
-    PinholeCamera, extract_photos, match_photo_pairs,
+    ColmapError, FolderCamera, FolderJob, FolderOutput, FolderPlan, FolderProgress, FolderStage,
+    Overwrite, PhotoRef, PinholeCamera, extract_photos, match_photo_pairs,
 };
-use clatch::{Backend, Extractor, Matcher};
+use clatch::{Backend, DescriptorSet, Extractor, Matcher};
 
 const PHOTOS: usize = 4;
 const PAIRS: usize = PHOTOS * (PHOTOS - 1) / 2;
@@ -72,6 +72,40 @@ fn bytes(path: &Path) -> Vec<u8> {
     std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
+/// Extracts the plan's photos group by group, as workers would, and adds them to `output` in the
+/// folder's order, with their descriptors (`described`, which guided matching needs) or without;
+/// returns every photo's descriptors.
+fn extract_in_groups<const N: usize>(
+    job: &FolderJob,
+    plan: &FolderPlan,
+    output: &mut FolderOutput,
+    groups: [Range<usize>; N],
+    described: bool,
+) -> Vec<DescriptorSet> {
+    let extractor = Extractor::new(job.backend, job.extractor_config()).unwrap();
+    let folder = plan.folder();
+    let mut descriptors = Vec::new();
+    for group in groups {
+        let (photos, _) = extract_photos(
+            &extractor,
+            (&folder.paths[group.clone()], &folder.names[group]),
+            &job.limits,
+            job.refinement,
+            &|_| {},
+        )
+        .unwrap();
+        for (photo, set) in photos {
+            if described {
+                output.add_described_photo(&photo, &set).unwrap();
+            } else {
+                output.add_photo(&photo).unwrap();
+            }
+            descriptors.push(set);
+        }
+    }
+    descriptors
+}
+
 #[test]
 fn a_folder_written_twice_gives_identical_bytes() {
     let dir = workdir("twice");
@@ -120,24 +154,8 @@ fn the_stages_run_apart_write_the_single_run_s_bytes() {
         .with_workspace(dir.join("apart-colmap"));
     let plan = job.plan().unwrap();
     let mut output = plan.open_output().unwrap();
-    let extractor = Extractor::new(job.backend, job.extractor_config()).unwrap();
-    let folder = plan.folder();
-    let mut descriptors = Vec::new();
-    for group in [0..3, 3..PHOTOS] {
-        let (photos, _) = extract_photos(
-            &extractor,
-            (&folder.paths[group.clone()], &folder.names[group]),
-            &job.limits,
-            job.refinement,
-            &|_| {},
-        )
-        .unwrap();
-        for (photo, set) in photos {
-            // The default run matches verified pairs again under their geometry: it needs them.
-            output.add_described_photo(&photo, &set).unwrap();
-            descriptors.push(set);
-        }
-    }
+    // The default run matches verified pairs again under their geometry: it needs the descriptors.
+    let descriptors = extract_in_groups(&job, &plan, &mut output, [0..3, 3..PHOTOS], true);
     let matcher = Matcher::new(Backend::Cpu, job.matching.clone()).unwrap();
     let pairs = plan.pairs().to_vec();
     let mut found = vec![Vec::new(); pairs.len()];
@@ -578,27 +596,7 @@ fn guided_matching_adds_true_inliers_and_its_stages_apart_write_the_same_bytes()
         let job = job(if described { "apart.db" } else { "bare.db" });
         let plan = job.plan().unwrap();
         let mut output = plan.open_output().unwrap();
-        let extractor = Extractor::new(job.backend, job.extractor_config()).unwrap();
-        let folder = plan.folder();
-        let mut descriptors = Vec::new();
-        for group in [0..1, 1..PHOTOS] {
-            let (photos, _) = extract_photos(
-                &extractor,
-                (&folder.paths[group.clone()], &folder.names[group]),
-                &job.limits,
-                job.refinement,
-                &|_| {},
-            )
-            .unwrap();
-            for (photo, set) in photos {
-                if described {
-                    output.add_described_photo(&photo, &set).unwrap();
-                } else {
-                    output.add_photo(&photo).unwrap();
-                }
-                descriptors.push(set);
-            }
-        }
+        let descriptors = extract_in_groups(&job, &plan, &mut output, [0..1, 1..PHOTOS], described);
         let matcher = Matcher::new(Backend::Cpu, job.matching.clone()).unwrap();
         let pairs = plan.pairs().to_vec();
         let found = match_photo_pairs(&matcher, |i| descriptors.get(i), &pairs).unwrap();

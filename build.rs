@@ -7,8 +7,7 @@
 //! - assembles that PTX into native code for every GPU architecture the nvcc knows from Turing (sm_75) up,
 //!   or for those `CUDA_COMPUTE_CAP` lists (`build/archs.rs`), one ptxas per file and architecture, side
 //!   by side (`build/parallel.rs`), and keeps ptxas's resource report (`OUT_DIR/ptxas-report.txt`);
-//! - packs each file's native code, its portable PTX and the newest architecture's PTX into a fatbin,
-//!   which is what the library loads: the driver picks the native code of the GPU at hand (no JIT), and
+//! - packs each file's native code and its portable PTX into a fatbin, which is what the library loads: the driver picks the native code of the GPU at hand (no JIT), and
 //!   JIT-compiles the PTX only on a GPU newer than the list, or one a narrowed list leaves out;
 //! - writes `kernels.rs` (the PTX as string constants, the fatbins, the architectures) and `clatch_h.rs`
 //!   (bindgen of `kernels/clatch.h`) into OUT_DIR.

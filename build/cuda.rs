@@ -28,18 +28,8 @@ struct Source {
 }
 
 impl Source {
-    /// The architecture of its second PTX, for the newest GPU it is built for and any GPU newer still,
-    /// if that is newer than its portable PTX.
-    fn newest(&self) -> Option<u32> {
-        self.native.last().copied().filter(|&a| a > self.ptx_arch)
-    }
-
-    fn ptx(&self, out: &Path, arch: u32) -> PathBuf {
-        if arch == self.ptx_arch {
-            out.join(format!("{}.ptx", self.stem))
-        } else {
-            out.join(format!("{}.compute_{arch}.ptx", self.stem))
-        }
+    fn ptx(&self, out: &Path) -> PathBuf {
+        out.join(format!("{}.ptx", self.stem))
     }
 
     fn cubin(&self, out: &Path, arch: u32) -> PathBuf {
@@ -106,47 +96,41 @@ pub fn build() {
     let sources = sources(&paths, &native);
     let threads = parallel::threads();
 
-    // 1. The front end, once per file (and again for its newest architecture): PTX.
+    // 1. The front end, once per file, for the file's PTX architecture only. Up to Hopper it writes the
+    // same PTX whatever it targets; for Blackwell targets (compute_100 and up) nvcc 13.0's front end
+    // takes minutes and gigabytes on kernels/verify.cu (over 10 minutes and 2 GB for compute_121, where
+    // compute_75 takes 20 s and 0.3 GB), so no file is ever compiled for one.
     let mut front = Vec::new();
     for source in &sources {
-        for arch in std::iter::once(source.ptx_arch).chain(source.newest()) {
-            let mut nvcc = Command::new(&nvcc);
-            nvcc.args(NVCC_FLAGS)
-                .args(["-ptx", &format!("-arch=compute_{arch}"), "-I"])
-                .arg(kernels)
-                .arg(&source.path)
-                .arg("-o")
-                .arg(source.ptx(&out, arch));
-            // The front end's work grows with the source it reads.
-            let size = with_headers(&source.path)
-                .iter()
-                .map(|f| fs::metadata(f).map_or(0, |m| m.len()))
-                .sum();
-            front.push((size, nvcc));
-        }
+        let mut nvcc = Command::new(&nvcc);
+        nvcc.args(NVCC_FLAGS)
+            .args(["-ptx", &format!("-arch=compute_{}", source.ptx_arch), "-I"])
+            .arg(kernels)
+            .arg(&source.path)
+            .arg("-o")
+            .arg(source.ptx(&out));
+        // The front end's work grows with the source it reads.
+        let size = with_headers(&source.path)
+            .iter()
+            .map(|f| fs::metadata(f).map_or(0, |m| m.len()))
+            .sum();
+        front.push((size, nvcc));
     }
     parallel::run_all(longest_first(front), threads);
 
-    // 2. ptxas, once per file and architecture: native code from the portable PTX, or for the newest
-    // architecture from its own. Up to Hopper the front end writes the same PTX whatever it targets, so
-    // this is the code `nvcc -arch=sm_NN` gives (sm_90's is byte for byte the code of the sm_90-only
-    // build); from Blackwell on it tunes its output a little, and the code here is what the driver's
-    // JIT would make of the portable PTX, without the wait.
+    // 2. ptxas, once per file and architecture: native code from the portable PTX, the code the driver's
+    // JIT would make of it, without the wait (sm_90's is byte for byte the code of an sm_90-only nvcc
+    // build).
     let mut back = Vec::new();
     for source in &sources {
         for &arch in &source.native {
-            let from = if Some(arch) == source.newest() {
-                arch
-            } else {
-                source.ptx_arch
-            };
             let mut nvcc = Command::new(&nvcc);
             nvcc.args(NVCC_FLAGS)
                 .args(["-cubin", &format!("-arch=sm_{arch}"), "-Xptxas", "-v"])
-                .arg(source.ptx(&out, from))
+                .arg(source.ptx(&out))
                 .arg("-o")
                 .arg(source.cubin(&out, arch));
-            let ptx = fs::metadata(source.ptx(&out, from)).map_or(0, |m| m.len());
+            let ptx = fs::metadata(source.ptx(&out)).map_or(0, |m| m.len());
             back.push((ptx, ((source.stem.clone(), arch), nvcc)));
         }
     }
@@ -159,8 +143,8 @@ pub fn build() {
     // The report reads file by file, architecture by architecture, whatever order the jobs ran in.
     reports.sort_by(|a, b| a.0.cmp(&b.0));
 
-    // 3. One fatbin per file: its native code, its portable PTX (any GPU the driver knows, JIT-compiled)
-    // and the newest architecture's PTX (the one a GPU newer than every listed architecture picks).
+    // 3. One fatbin per file: its native code and its portable PTX (for any GPU the list leaves out or
+    // newer than all of it, JIT-compiled by the driver).
     // Every image is compressed (LZ4): the native code of a dozen architectures, with its line tables,
     // is about 80 MB uncompressed.
     let mut pack = Vec::new();
@@ -180,12 +164,11 @@ pub fn build() {
                 source.cubin(&out, arch).display()
             ));
         }
-        for arch in std::iter::once(source.ptx_arch).chain(source.newest()) {
-            fatbin.arg(format!(
-                "--image3=kind=ptx,sm={arch},file={}",
-                source.ptx(&out, arch).display()
-            ));
-        }
+        fatbin.arg(format!(
+            "--image3=kind=ptx,sm={},file={}",
+            source.ptx_arch,
+            source.ptx(&out).display()
+        ));
         pack.push(fatbin);
     }
     parallel::run_all(pack, threads);
@@ -193,9 +176,6 @@ pub fn build() {
     for source in &sources {
         for &arch in &source.native {
             let _ = fs::remove_file(source.cubin(&out, arch));
-        }
-        if let Some(arch) = source.newest() {
-            let _ = fs::remove_file(source.ptx(&out, arch));
         }
     }
 
